@@ -1,0 +1,16 @@
+//! Host simulator of the elevator: the nominal plant of the seed paper (5-DOF
+//! ropes, car, counterweight and sheave; PMSM; averaged inverter; sensors)
+//! closed around the drive core of `shared`, and the analysis of what it
+//! records.
+//!
+//! Data flows one way: config -> plant <-> controller -> recording ->
+//! analysis. The plant never knows which controller drives it.
+
+pub mod analysis;
+pub mod closed_loop;
+pub mod plant;
+pub mod plots;
+pub mod recording;
+
+/// The rig description (re-exported from `rig-config`).
+pub use rig_config as config;

@@ -1,0 +1,380 @@
+//! The drive controller: one [`Controller::step`] per PWM period.
+//!
+//! Inputs are exactly what the firmware reads from the hardware (phase-current
+//! and DC-bus ADC codes, the encoder counter, a microsecond time stamp);
+//! outputs are what it writes (three PWM compare values, PWM enable, brake).
+//! Nothing here knows whether it runs on the chip or in the simulator.
+//!
+//! Travel sequence: `Idle` -> `PreTorque` (brake applied, q current ramps to
+//! the out-of-balance torque of Eqn 4) -> `BrakeLift` (brake released,
+//! position held) -> `Travel` (S-curve) -> `Hold` (position held at the
+//! landing) -> `BrakeSet` (brake applied, torque kept) -> `Idle` (PWM off).
+//! Any fault latches `Tripped`: PWM off, brake applied, until [`Controller::reset`].
+
+use crate::config::{Direction, DriveConfig};
+use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
+use crate::fixed::{q16, Q16};
+use crate::park_clarke::Abc;
+use crate::profile::{ProfileError, SCurve};
+use crate::speed_estimator::SpeedEstimator;
+use crate::speed_loop::{equivalent_inertia_kg_m2, out_of_balance_torque_nm, SpeedLoop};
+use crate::supervisor::{Fault, Supervisor, SupervisorLimits};
+use crate::trig::Angle;
+
+/// Duration of the pre-torque ramp with the brake applied, s.
+pub const PRE_TORQUE_S: f32 = 0.2;
+/// Time allowed for the brake to lift before the profile starts, s.
+pub const BRAKE_LIFT_S: f32 = 0.15;
+/// Position hold at the landing before the brake is set, s.
+pub const HOLD_S: f32 = 0.3;
+/// Time allowed for the brake to set before the PWM is switched off, s.
+pub const BRAKE_SET_S: f32 = 0.2;
+/// Position-loop gain on the car position error, 1/s.
+pub const POSITION_GAIN_PER_S: f32 = 2.0;
+
+/// What the firmware reads in one PWM period.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SensorFrame {
+    /// ADC codes of the phase currents a, b, c (mid-scale is 0 A).
+    pub phase_current_codes: [u16; 3],
+    /// Free-running quadrature counter (wraps modulo 2^32), counts.
+    pub encoder_count: u32,
+    /// ADC code of the DC-bus voltage.
+    pub dc_bus_code: u16,
+    /// Time stamp of the sample (wraps modulo 2^32), microseconds.
+    pub time_us: u32,
+}
+
+/// Drive state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DriveState {
+    /// PWM off, brake applied, waiting for a travel command.
+    Idle,
+    /// Brake applied, torque building up to the holding torque.
+    PreTorque,
+    /// Brake released, holding the start position.
+    BrakeLift,
+    /// Following the S-curve.
+    Travel,
+    /// Holding the landing position.
+    Hold,
+    /// Brake applied, torque kept while it sets.
+    BrakeSet,
+    /// A fault is latched: PWM off, brake applied.
+    Tripped(Fault),
+}
+
+/// Values for logging and recordings, in the units named.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Telemetry {
+    /// Measured d current, A.
+    pub id_a: f32,
+    /// Measured q current, A.
+    pub iq_a: f32,
+    /// q-current reference, A.
+    pub iq_ref_a: f32,
+    /// Estimated shaft speed, rad/s (positive: car up).
+    pub speed_radps: f32,
+    /// Shaft speed reference, rad/s (positive: car up).
+    pub speed_ref_radps: f32,
+    /// Reference speed of a sheave-edge point, m/s (positive: car up).
+    pub ref_speed_mps: f32,
+    /// Shaft angle since power-up from the encoder, rad.
+    pub angle_rad: f32,
+    /// Feed-forward torque (Eqn 4 plus inertia), N m.
+    pub torque_ff_nm: f32,
+    /// Torque demand of the speed loop including feed-forward, N m.
+    pub torque_ref_nm: f32,
+}
+
+/// What the firmware writes in one PWM period.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControlOutput {
+    /// Timer compare values of phases a, b, c, counts (0..=period).
+    pub pwm_compare: [u16; 3],
+    /// Gate drivers enabled; false is the safe state (all switches off).
+    pub pwm_enabled: bool,
+    /// Brake released; false (the fail-safe default) applies the brake.
+    pub brake_released: bool,
+    /// State after this step.
+    pub state: DriveState,
+    /// Logged values.
+    pub telemetry: Telemetry,
+}
+
+/// A travel request with the load weighing of the car.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TravelCommand {
+    /// Car direction.
+    pub direction: Direction,
+    /// Travel distance, m (> 0).
+    pub distance_m: f32,
+    /// Car mass from the load weighing, kg.
+    pub m_car_kg: f32,
+    /// Counterweight-side rope length at the start, m.
+    pub lw_start_m: f32,
+}
+
+/// Why a travel command was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CommandError {
+    /// The drive is not idle (travelling or tripped).
+    NotIdle,
+    /// Distance or limits do not give a profile.
+    Profile(ProfileError),
+    /// The travel would take `lw` outside `(0, l_t)` or the car mass is not positive.
+    OutOfRange,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Travel {
+    command: TravelCommand,
+    profile: SCurve,
+    start_counts: i64,
+    /// Holding torque at the start (Eqn 4), N m.
+    holding_torque_nm: f32,
+    inertia_kg_m2: f32,
+}
+
+/// The drive controller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Controller {
+    config: DriveConfig,
+    current_loop: CurrentLoop,
+    speed_loop: SpeedLoop,
+    estimator: SpeedEstimator,
+    supervisor: Supervisor,
+    state: DriveState,
+    travel: Option<Travel>,
+    state_ticks: u32,
+    step_count: u32,
+    last_time_us: Option<u32>,
+    iq_ref: Q16,
+    telemetry: Telemetry,
+    current_lsb_a: Q16,
+    dc_bus_v_per_code: Q16,
+    speed_divider: u32,
+}
+
+impl Controller {
+    /// A controller in `Idle` for the drive described by `config`.
+    pub fn new(config: &DriveConfig) -> Self {
+        let rated = config.rated_shaft_speed_radps();
+        let overspeed = config.overspeed_factor * rated;
+        let counts_per_step = overspeed / core::f32::consts::TAU * config.encoder_counts_per_rev as f32 / config.current_loop_hz;
+        let limits = SupervisorLimits {
+            overcurrent_a: q16(config.overcurrent_trip_a),
+            current_sum_a: q16(config.current_sum_limit_a),
+            overspeed_radps: q16(overspeed),
+            dc_bus_under_v: q16(config.dc_bus_undervoltage_v),
+            dc_bus_over_v: q16(config.dc_bus_overvoltage_v),
+            adc_max_code: config.adc_max_code(),
+            // Four times the over-speed increment, plus quantisation.
+            max_counts_per_step: (4.0 * counts_per_step) as i32 + 2,
+            max_step_interval_us: (2.5e6 / config.current_loop_hz) as u32,
+        };
+        Self {
+            config: *config,
+            current_loop: CurrentLoop::new(CurrentLoopParams::from_config(config)),
+            speed_loop: SpeedLoop::new(config, equivalent_inertia_kg_m2(config, config.m_cw_kg)),
+            estimator: SpeedEstimator::new(config.speed_loop_hz, config.speed_estimator_bandwidth_hz, config.encoder_counts_per_rev),
+            supervisor: Supervisor::new(limits),
+            state: DriveState::Idle,
+            travel: None,
+            state_ticks: 0,
+            step_count: 0,
+            last_time_us: None,
+            iq_ref: Q16::ZERO,
+            telemetry: Telemetry::default(),
+            current_lsb_a: q16(config.current_lsb_a()),
+            dc_bus_v_per_code: q16(config.dc_bus_sense_full_scale_v / config.adc_max_code() as f32),
+            speed_divider: config.speed_loop_divider(),
+        }
+    }
+
+    /// Current state.
+    pub fn state(&self) -> DriveState {
+        self.state
+    }
+
+    /// Starts a travel; accepted only in `Idle`.
+    pub fn command_travel(&mut self, command: TravelCommand) -> Result<(), CommandError> {
+        if self.state != DriveState::Idle {
+            return Err(CommandError::NotIdle);
+        }
+        let c = &self.config;
+        let lw_end = command.lw_start_m + command.direction.sign() * command.distance_m;
+        let inside = |lw: f32| lw > 0.0 && lw < c.rope_total_length_m;
+        if !(inside(command.lw_start_m) && inside(lw_end)) || !(command.m_car_kg > 0.0) {
+            return Err(CommandError::OutOfRange);
+        }
+        let profile = SCurve::plan(command.distance_m, c.rated_speed_mps, c.max_accel_mps2, c.max_jerk_mps3)
+            .map_err(CommandError::Profile)?;
+        let inertia_kg_m2 = equivalent_inertia_kg_m2(c, command.m_car_kg);
+        self.speed_loop = SpeedLoop::new(c, inertia_kg_m2);
+        self.travel = Some(Travel {
+            command,
+            profile,
+            start_counts: self.estimator.position_counts(),
+            holding_torque_nm: out_of_balance_torque_nm(c, command.m_car_kg, command.lw_start_m),
+            inertia_kg_m2,
+        });
+        self.enter(DriveState::PreTorque);
+        Ok(())
+    }
+
+    /// Clears a latched fault (explicit operator action); back to `Idle`.
+    pub fn reset(&mut self) {
+        self.supervisor.reset();
+        self.enter(DriveState::Idle);
+        self.travel = None;
+    }
+
+    fn enter(&mut self, state: DriveState) {
+        self.state = state;
+        self.state_ticks = 0;
+    }
+
+    fn state_time_s(&self) -> f32 {
+        self.state_ticks as f32 / self.config.speed_loop_hz
+    }
+
+    fn electrical_angle(&self) -> Angle {
+        let cpr = self.config.encoder_counts_per_rev.max(1) as i64;
+        let mechanical = self.estimator.position_counts().rem_euclid(cpr) as u64;
+        let electrical = mechanical * self.config.pole_pairs as u64 % cpr as u64;
+        ((electrical << 32) / cpr as u64) as u32
+    }
+
+    /// One PWM period.
+    pub fn step(&mut self, frame: &SensorFrame) -> ControlOutput {
+        if let Some(last) = self.last_time_us {
+            // Modular difference of a wrapping microsecond timer.
+            self.supervisor.check_step_interval(frame.time_us.wrapping_sub(last));
+        }
+        self.last_time_us = Some(frame.time_us);
+
+        let codes = frame.phase_current_codes;
+        let zero = self.config.adc_zero_code();
+        let currents = codes.map(|code| current_from_code(code, zero, self.current_lsb_a));
+        self.supervisor.check_currents(codes, currents);
+        let dc_bus_v = Q16::saturating_from_num(frame.dc_bus_code).saturating_mul(self.dc_bus_v_per_code);
+        self.supervisor.check_dc_bus(dc_bus_v);
+        let delta = self.estimator.count(frame.encoder_count);
+        self.supervisor.check_encoder_step(delta);
+
+        if self.step_count % self.speed_divider == 0 {
+            self.speed_tick();
+        }
+        self.step_count = self.step_count.wrapping_add(1);
+
+        if let Some(fault) = self.supervisor.fault() {
+            if self.state != DriveState::Tripped(fault) {
+                self.enter(DriveState::Tripped(fault));
+                self.current_loop.reset();
+                self.speed_loop.reset();
+                self.iq_ref = Q16::ZERO;
+            }
+        }
+
+        let pwm_enabled = matches!(
+            self.state,
+            DriveState::PreTorque | DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet
+        );
+        let brake_released = matches!(self.state, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold);
+        let mut pwm_compare = [0u16; 3];
+        if pwm_enabled {
+            let speed_e = self.estimator.speed_radps().saturating_mul_int(self.config.pole_pairs as i32);
+            let out = self.current_loop.step(
+                Abc { a: currents[0], b: currents[1], c: currents[2] },
+                self.electrical_angle(),
+                speed_e,
+                self.iq_ref,
+                dc_bus_v,
+            );
+            pwm_compare = out.compare;
+            self.telemetry.id_a = out.current.d.to_num();
+            self.telemetry.iq_a = out.current.q.to_num();
+        } else {
+            self.current_loop.reset();
+            self.telemetry.id_a = 0.0;
+            self.telemetry.iq_a = 0.0;
+        }
+        self.telemetry.iq_ref_a = self.iq_ref.to_num();
+        self.telemetry.angle_rad = self.estimator.angle_rad();
+        ControlOutput { pwm_compare, pwm_enabled, brake_released, state: self.state, telemetry: self.telemetry }
+    }
+
+    /// Speed-loop period: estimator, over-speed check, sequence, q-current reference.
+    fn speed_tick(&mut self) {
+        self.estimator.update();
+        let speed = self.estimator.speed_radps();
+        self.supervisor.check_speed(speed);
+        self.state_ticks = self.state_ticks.saturating_add(1);
+        self.telemetry.speed_radps = speed.to_num();
+
+        let Some(travel) = self.travel else {
+            self.iq_ref = Q16::ZERO;
+            self.telemetry.speed_ref_radps = 0.0;
+            self.telemetry.ref_speed_mps = 0.0;
+            return;
+        };
+        let c = self.config;
+        let r = c.sheave_radius_m;
+        let sign = travel.command.direction.sign();
+        let kt = c.torque_constant_nm_per_a();
+        let t = self.state_time_s();
+
+        // Reference in the car-up coordinate: position (m), speed (m/s), accel (m/s^2).
+        let (position_ref, speed_ref, accel_ref) = match self.state {
+            DriveState::Travel => {
+                let p = travel.profile.at(t);
+                (sign * p.position_m, sign * p.speed_mps, sign * p.accel_mps2)
+            }
+            DriveState::Hold | DriveState::BrakeSet => (sign * travel.profile.distance_m(), 0.0, 0.0),
+            _ => (0.0, 0.0, 0.0),
+        };
+        let moved_counts = self.estimator.position_counts().saturating_sub(travel.start_counts);
+        let position_m = moved_counts as f32 * core::f32::consts::TAU / c.encoder_counts_per_rev as f32 * r;
+        let lw_m = travel.command.lw_start_m + position_m;
+        let torque_ff = out_of_balance_torque_nm(&c, travel.command.m_car_kg, lw_m) + travel.inertia_kg_m2 * accel_ref / r;
+        let speed_ref_radps = (speed_ref + POSITION_GAIN_PER_S * (position_ref - position_m)) / r;
+
+        self.telemetry.torque_ff_nm = torque_ff;
+        self.telemetry.speed_ref_radps = speed_ref_radps;
+        self.telemetry.ref_speed_mps = speed_ref;
+
+        match self.state {
+            DriveState::PreTorque => {
+                let ramp = (t / PRE_TORQUE_S).min(1.0);
+                let torque = travel.holding_torque_nm * ramp;
+                self.telemetry.torque_ref_nm = torque;
+                self.iq_ref = q16(torque / kt);
+                if t >= PRE_TORQUE_S {
+                    self.speed_loop.reset();
+                    self.enter(DriveState::BrakeLift);
+                }
+            }
+            DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet => {
+                let (torque, iq) = self.speed_loop.step(q16(speed_ref_radps), speed, q16(torque_ff));
+                self.telemetry.torque_ref_nm = torque.to_num();
+                self.iq_ref = iq;
+                let next = match self.state {
+                    DriveState::BrakeLift if t >= BRAKE_LIFT_S => Some(DriveState::Travel),
+                    DriveState::Travel if t >= travel.profile.duration_s() => Some(DriveState::Hold),
+                    DriveState::Hold if t >= HOLD_S => Some(DriveState::BrakeSet),
+                    DriveState::BrakeSet if t >= BRAKE_SET_S => Some(DriveState::Idle),
+                    _ => None,
+                };
+                if let Some(next) = next {
+                    self.enter(next);
+                    if next == DriveState::Idle {
+                        self.travel = None;
+                        self.iq_ref = Q16::ZERO;
+                    }
+                }
+            }
+            DriveState::Idle | DriveState::Tripped(_) => self.iq_ref = Q16::ZERO,
+        }
+    }
+}

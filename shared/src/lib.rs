@@ -1,0 +1,30 @@
+//! The drive core of the elevator: fixed-point vector control of the PMSM,
+//! the jerk-limited travel profile, the speed loop with the out-of-balance
+//! feed-forward of the paper (Eqn 4) and the fault supervisor.
+//!
+//! The same code runs on the STM32G474 and in `host-sim`, bit for bit: the
+//! 16 kHz path is integer/fixed-point (`fixed` crate, saturating), the rest
+//! uses only IEEE-754 `f32` add, subtract, multiply and divide, which are
+//! correctly rounded on both targets. No `f32::sin`, no `sqrt` from a libm.
+//!
+//! Equation numbers refer to Arrasate et al., "Measurement and simulation of
+//! machine-borne vertical vibration in elevator systems" (the seed paper).
+#![no_std]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod config;
+pub mod controller;
+pub mod current_loop;
+pub mod fixed;
+pub mod park_clarke;
+pub mod pi;
+pub mod profile;
+pub mod speed_estimator;
+pub mod speed_loop;
+pub mod supervisor;
+pub mod svpwm;
+pub mod trig;
+
+pub use config::DriveConfig;
+pub use controller::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
