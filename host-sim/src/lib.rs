@@ -9,8 +9,8 @@
 pub mod analysis;
 pub mod closed_loop;
 pub mod plant;
-pub mod plots;
-pub mod recording;
+// pub mod plots;
+// pub mod recording;
 
 /// The rig description (re-exported from `rig-config`).
 pub use rig_config as config;

@@ -9,8 +9,11 @@
 //! `v_q = R i_q + L_q di_q/dt + w_e (L_d i_d + psi)`,
 //!
 //! -> voltage limit (d first, then q within the circle `V_dc/sqrt(3)`)
-//! -> inverse Park at the angle advanced by 1.5 periods (the applied voltage
-//! acts one period later and for one period) -> space-vector modulation.
+//! -> inverse Park at the angle advanced by one period -> space-vector
+//! modulation. Timing: the currents are sampled at the centre of a
+//! centre-aligned PWM period; the new compare values load at the next
+//! counter underflow, half a period later, and act for one period, whose
+//! centre is one period after the sample.
 //! PI gains by pole-zero cancellation: `Kp = L wc`, `Ki = R wc`.
 
 use crate::config::DriveConfig;
@@ -50,8 +53,8 @@ impl CurrentLoopParams {
         let wc = core::f32::consts::TAU * config.current_loop_bandwidth_hz;
         let ts = config.current_period_s();
         let gains = |l: f32| PiGains { kp: q16(l * wc), ki_ts: q16(config.stator_resistance_ohm * wc * ts) };
-        // 1.5 periods of rotation at 1 rad/s, as a binary angle (2^32 per turn).
-        let advance = 1.5 * ts / core::f32::consts::TAU * 4_294_967_296.0;
+        // One period of rotation at 1 rad/s, as a binary angle (2^32 per turn).
+        let advance = ts / core::f32::consts::TAU * 4_294_967_296.0;
         Self {
             d_gains: gains(config.ld_h),
             q_gains: gains(config.lq_h),
@@ -113,7 +116,7 @@ impl CurrentLoop {
         let v_q = self.q_pi.update(sub(iq_ref, current.q), ff_q, -v_q_max, v_q_max);
         let voltage = Dq { d: v_d, q: v_q };
 
-        // The voltage acts over the next period: advance the angle by 1.5 Ts.
+        // The voltage acts centred one period later: advance the angle by Ts.
         let advance = (speed_e_radps.to_bits() as i64).saturating_mul(p.advance_per_radps) >> 16;
         let (sin_out, cos_out) = sin_cos(angle.wrapping_add(advance as i32 as u32));
         // 1/V_dc in Q2.30 (V_dc >= 1 V): one division per period.
