@@ -13,6 +13,7 @@ use shared::{Controller, DriveState, TravelCommand};
 
 use crate::config::RigConfig;
 use crate::plant::{Plant, PlantInputs, PlantObservation};
+use crate::recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta};
 
 /// One travel to simulate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,7 +54,11 @@ pub struct SimOptions {
 impl SimOptions {
     /// Defaults for `rig`: step `Ts/4`, the rig's sample rate, 0.5 s tail.
     pub fn for_rig(rig: &RigConfig) -> Self {
-        Self { max_step_s: 0.25 / rig.control.current_loop_hz, sample_rate_hz: rig.measurement.sample_rate_hz, tail_s: 0.5 }
+        Self {
+            max_step_s: 0.25 / rig.control.current_loop_hz,
+            sample_rate_hz: rig.measurement.sample_rate_hz,
+            tail_s: 0.5,
+        }
     }
 }
 
@@ -246,4 +251,52 @@ fn record(run: &mut TravelRun, t: f64, o: &PlantObservation, output: &shared::Co
     run.shaft_speed_radps.push(o.shaft_speed_radps);
     run.lw_m.push(o.counterweight_side_length_m);
     run.drive_state.push(state_code(output.state));
+}
+
+impl TravelRun {
+    /// The run as a recording in the measurement format: the required and
+    /// optional columns of the format, then the simulator's own columns
+    /// (`motor_torque_nm`, `ripple_torque_nm`, `shaft_speed_true_radps`,
+    /// `lw_m`, `drive_state`), which readers keep and ignore.
+    pub fn to_recording(&self, spec: &TravelSpec, m_cw_kg: f64, description: String) -> Recording {
+        use crate::recording as rec;
+        let columns = vec![
+            Column::new(rec::TIME_S, self.time_s.clone()),
+            Column::new(rec::ACC_CAR, self.acc_car_mps2.clone()),
+            Column::new(rec::ACC_CW, self.acc_cw_mps2.clone()),
+            Column::new(rec::I_A, self.phase_currents_a[0].clone()),
+            Column::new(rec::I_B, self.phase_currents_a[1].clone()),
+            Column::new(rec::I_C, self.phase_currents_a[2].clone()),
+            Column::new(rec::SPEED, self.speed_radps.clone()),
+            Column::new(rec::ANGLE, self.angle_rad.clone()),
+            Column::new(rec::REF_SPEED, self.ref_speed_mps.clone()),
+            Column::new("motor_torque_nm", self.motor_torque_nm.clone()),
+            Column::new("ripple_torque_nm", self.ripple_torque_nm.clone()),
+            Column::new("shaft_speed_true_radps", self.shaft_speed_radps.clone()),
+            Column::new("lw_m", self.lw_m.clone()),
+            Column::new("drive_state", self.drive_state.clone()),
+        ];
+        Recording {
+            meta: RecordingMeta {
+                kind: RecordingKind::Travel {
+                    m_car_kg: spec.m_car_kg,
+                    m_cw_kg,
+                    direction: match spec.direction {
+                        Direction::Up => CarDirection::Up,
+                        Direction::Down => CarDirection::Down,
+                    },
+                    lw_start_m: spec.lw_start_m,
+                    lw_end_m: spec.lw_end_m,
+                },
+                sample_rate_hz: self.sample_rate_hz,
+                description: Some(description),
+            },
+            columns,
+        }
+    }
+
+    /// Duration of the recording, s.
+    pub fn duration_s(&self) -> f64 {
+        self.time_s.len() as f64 / self.sample_rate_hz
+    }
 }

@@ -7,10 +7,11 @@
 //! analysis. The plant never knows which controller drives it.
 
 pub mod analysis;
+pub mod cli;
 pub mod closed_loop;
 pub mod plant;
-// pub mod plots;
-// pub mod recording;
+pub mod plots;
+pub mod recording;
 
 /// The rig description (re-exported from `rig-config`).
 pub use rig_config as config;

@@ -276,8 +276,8 @@ impl Checker<'_> {
 impl RigConfig {
     /// Parses and validates rig TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let config: RigConfig =
-            toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.to_string() })?;
+        let config: RigConfig = toml::from_str(text)
+            .map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.to_string() })?;
         config.validate(origin)?;
         Ok(config)
     }
@@ -316,7 +316,10 @@ impl RigConfig {
         if m.rope_lumping != "all-at-midpoint" {
             return Err(ConfigError::Parse {
                 path: origin.to_string(),
-                message: format!("field `[mechanics].rope_lumping` = {:?}: expected \"all-at-midpoint\"", m.rope_lumping),
+                message: format!(
+                    "field `[mechanics].rope_lumping` = {:?}: expected \"all-at-midpoint\"",
+                    m.rope_lumping
+                ),
             });
         }
         let t = &self.travel;
@@ -363,7 +366,13 @@ impl RigConfig {
                 expected: "a whole divisor of current_loop_hz".to_string(),
             });
         }
-        c.within("[control].current_loop_bandwidth_hz", co.current_loop_bandwidth_hz, 0.0, co.current_loop_hz / 8.0, true)?;
+        c.within(
+            "[control].current_loop_bandwidth_hz",
+            co.current_loop_bandwidth_hz,
+            0.0,
+            co.current_loop_hz / 8.0,
+            true,
+        )?;
         c.within("[control].speed_loop_bandwidth_hz", co.speed_loop_bandwidth_hz, 0.0, co.speed_loop_hz / 20.0, true)?;
         c.within(
             "[control].speed_estimator_bandwidth_hz",
@@ -465,7 +474,10 @@ mod tests {
     fn out_of_range_names_field_and_range() {
         let text = EMBEDDED_RIG_TOML.replace("sheave_radius_m = 0.065", "sheave_radius_m = -0.065");
         let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
-        assert!(err.contains("bad.toml") && err.contains("[mechanics].sheave_radius_m") && err.contains("(0, 10]"), "{err}");
+        assert!(
+            err.contains("bad.toml") && err.contains("[mechanics].sheave_radius_m") && err.contains("(0, 10]"),
+            "{err}"
+        );
         let text = EMBEDDED_RIG_TOML.replace("lw_high_m = 7.6", "lw_high_m = 9.0");
         let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
         assert!(err.contains("[travel].lw_high_m"), "{err}");

@@ -161,7 +161,8 @@ impl Controller {
     pub fn new(config: &DriveConfig) -> Self {
         let rated = config.rated_shaft_speed_radps();
         let overspeed = config.overspeed_factor * rated;
-        let counts_per_step = overspeed / core::f32::consts::TAU * config.encoder_counts_per_rev as f32 / config.current_loop_hz;
+        let counts_per_step =
+            overspeed / core::f32::consts::TAU * config.encoder_counts_per_rev as f32 / config.current_loop_hz;
         let limits = SupervisorLimits {
             overcurrent_a: q16(config.overcurrent_trip_a),
             current_sum_a: q16(config.current_sum_limit_a),
@@ -177,7 +178,11 @@ impl Controller {
             config: *config,
             current_loop: CurrentLoop::new(CurrentLoopParams::from_config(config)),
             speed_loop: SpeedLoop::new(config, equivalent_inertia_kg_m2(config, config.m_cw_kg)),
-            estimator: SpeedEstimator::new(config.speed_loop_hz, config.speed_estimator_bandwidth_hz, config.encoder_counts_per_rev),
+            estimator: SpeedEstimator::new(
+                config.speed_loop_hz,
+                config.speed_estimator_bandwidth_hz,
+                config.encoder_counts_per_rev,
+            ),
             supervisor: Supervisor::new(limits),
             state: DriveState::Idle,
             travel: None,
@@ -205,7 +210,8 @@ impl Controller {
         let c = &self.config;
         let lw_end = command.lw_start_m + command.direction.sign() * command.distance_m;
         let inside = |lw: f32| lw > 0.0 && lw < c.rope_total_length_m;
-        if !(inside(command.lw_start_m) && inside(lw_end)) || !(command.m_car_kg > 0.0) {
+        let positive_mass = command.m_car_kg > 0.0 && command.m_car_kg.is_finite();
+        if !inside(command.lw_start_m) || !inside(lw_end) || !positive_mass {
             return Err(CommandError::OutOfRange);
         }
         let profile = SCurve::plan(command.distance_m, c.rated_speed_mps, c.max_accel_mps2, c.max_jerk_mps3)
@@ -279,7 +285,11 @@ impl Controller {
 
         let pwm_enabled = matches!(
             self.state,
-            DriveState::PreTorque | DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet
+            DriveState::PreTorque
+                | DriveState::BrakeLift
+                | DriveState::Travel
+                | DriveState::Hold
+                | DriveState::BrakeSet
         );
         let brake_released = matches!(self.state, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold);
         let mut pwm_compare = [0u16; 3];
@@ -337,7 +347,8 @@ impl Controller {
         let moved_counts = self.estimator.position_counts().saturating_sub(travel.start_counts);
         let position_m = moved_counts as f32 * core::f32::consts::TAU / c.encoder_counts_per_rev as f32 * r;
         let lw_m = travel.command.lw_start_m + position_m;
-        let torque_ff = out_of_balance_torque_nm(&c, travel.command.m_car_kg, lw_m) + travel.inertia_kg_m2 * accel_ref / r;
+        let torque_ff =
+            out_of_balance_torque_nm(&c, travel.command.m_car_kg, lw_m) + travel.inertia_kg_m2 * accel_ref / r;
         let speed_ref_radps = (speed_ref + POSITION_GAIN_PER_S * (position_ref - position_m)) / r;
 
         self.telemetry.torque_ff_nm = torque_ff;

@@ -100,7 +100,14 @@ impl CurrentLoop {
 
     /// One period: phase currents (A), electrical angle, electrical speed
     /// (rad/s), q-current reference (A) and measured DC bus (V).
-    pub fn step(&mut self, phase: Abc, angle: Angle, speed_e_radps: Q16, iq_ref: Q16, dc_bus_v: Q16) -> CurrentLoopOutput {
+    pub fn step(
+        &mut self,
+        phase: Abc,
+        angle: Angle,
+        speed_e_radps: Q16,
+        iq_ref: Q16,
+        dc_bus_v: Q16,
+    ) -> CurrentLoopOutput {
         let p = &self.params;
         let (sin, cos) = sin_cos(angle);
         let current = park(clarke(phase), sin, cos);
@@ -120,7 +127,8 @@ impl CurrentLoop {
         let advance = (speed_e_radps.to_bits() as i64).saturating_mul(p.advance_per_radps) >> 16;
         let (sin_out, cos_out) = sin_cos(angle.wrapping_add(advance as i32 as u32));
         // 1/V_dc in Q2.30 (V_dc >= 1 V): one division per period.
-        let inverse_dc_bus = Q30::from_bits((((1i64 << 46) + (dc_bus.to_bits() as i64 / 2)) / dc_bus.to_bits() as i64) as i32);
+        let inverse_dc_bus =
+            Q30::from_bits((((1i64 << 46) + (dc_bus.to_bits() as i64 / 2)) / dc_bus.to_bits() as i64) as i32);
         let duties = duty_cycles(inverse_park(voltage, sin_out, cos_out), inverse_dc_bus);
         CurrentLoopOutput { compare: compare_values(duties, p.period_counts), current, voltage }
     }
@@ -131,4 +139,3 @@ impl CurrentLoop {
 pub fn current_from_code(code: u16, zero_code: u16, lsb_a: Q16) -> Q16 {
     mul(Q16::saturating_from_num(code as i32 - zero_code as i32), lsb_a)
 }
-

@@ -48,37 +48,24 @@ pub struct Dq {
 /// Clarke transform of three phase values, amplitude invariant.
 pub fn clarke(abc: Abc) -> AlphaBeta {
     let two_a = add(abc.a, abc.a);
-    AlphaBeta {
-        alpha: mul(sub(sub(two_a, abc.b), abc.c), ONE_THIRD),
-        beta: mul(sub(abc.b, abc.c), INV_SQRT3),
-    }
+    AlphaBeta { alpha: mul(sub(sub(two_a, abc.b), abc.c), ONE_THIRD), beta: mul(sub(abc.b, abc.c), INV_SQRT3) }
 }
 
 /// Inverse Clarke transform (zero-sequence free).
 pub fn inverse_clarke(ab: AlphaBeta) -> Abc {
     let half_alpha = mul(ab.alpha, HALF);
     let beta_part = mul(ab.beta, SQRT3_HALF);
-    Abc {
-        a: ab.alpha,
-        b: sub(beta_part, half_alpha),
-        c: sub(Q16::ZERO, add(half_alpha, beta_part)),
-    }
+    Abc { a: ab.alpha, b: sub(beta_part, half_alpha), c: sub(Q16::ZERO, add(half_alpha, beta_part)) }
 }
 
 /// Park transform with the sine and cosine of the electrical angle.
 pub fn park(ab: AlphaBeta, sin: Q16, cos: Q16) -> Dq {
-    Dq {
-        d: add(mul(ab.alpha, cos), mul(ab.beta, sin)),
-        q: sub(mul(ab.beta, cos), mul(ab.alpha, sin)),
-    }
+    Dq { d: add(mul(ab.alpha, cos), mul(ab.beta, sin)), q: sub(mul(ab.beta, cos), mul(ab.alpha, sin)) }
 }
 
 /// Inverse Park transform with the sine and cosine of the electrical angle.
 pub fn inverse_park(dq: Dq, sin: Q16, cos: Q16) -> AlphaBeta {
-    AlphaBeta {
-        alpha: sub(mul(dq.d, cos), mul(dq.q, sin)),
-        beta: add(mul(dq.d, sin), mul(dq.q, cos)),
-    }
+    AlphaBeta { alpha: sub(mul(dq.d, cos), mul(dq.q, sin)), beta: add(mul(dq.d, sin), mul(dq.q, cos)) }
 }
 
 #[cfg(test)]

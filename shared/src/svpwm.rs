@@ -44,7 +44,7 @@ mod tests {
         // 57 V (just under 100/sqrt(3)) in several directions on a 100 V bus.
         let inverse_dc = Q30::from_num(0.01);
         for k in 0..12 {
-            let theta = k as f64 * 0.5236 + 0.1;
+            let theta = k as f64 * core::f64::consts::FRAC_PI_6 + 0.1;
             let v = AlphaBeta { alpha: q16((57.0 * theta.cos()) as f32), beta: q16((57.0 * theta.sin()) as f32) };
             let d = duty_cycles(v, inverse_dc);
             let abc = inverse_clarke(v);

@@ -83,10 +83,7 @@ fn q30_to_q16(value: i32) -> Q16 {
 
 /// (sin, cos) of a binary angle, dimensionless Q16.16.
 pub fn sin_cos(angle: Angle) -> (Q16, Q16) {
-    (
-        q30_to_q16(sine_q30(angle)),
-        q30_to_q16(sine_q30(angle.wrapping_add(QUARTER_TURN))),
-    )
+    (q30_to_q16(sine_q30(angle)), q30_to_q16(sine_q30(angle.wrapping_add(QUARTER_TURN))))
 }
 
 /// Binary angle of `radians` (any real value, reduced modulo 2 pi), for

@@ -50,9 +50,8 @@ impl Chain {
     /// positive lifts the car); with the brake engaged the sheave is held.
     pub fn acceleration_mps2(&self, state: &ChainState, shaft_torque_nm: f64, brake_engaged: bool) -> [f64; DOF] {
         let p = &self.params;
-        let lw = self
-            .counterweight_side_length_m(state)
-            .clamp(MIN_ROPE_LENGTH_M, p.rope_total_length_m - MIN_ROPE_LENGTH_M);
+        let lw =
+            self.counterweight_side_length_m(state).clamp(MIN_ROPE_LENGTH_M, p.rope_total_length_m - MIN_ROPE_LENGTH_M);
         let masses = p.masses_kg(lw);
         let k = p.stiffness_matrix(lw);
         let c = p.damping_kg_per_s();
@@ -75,8 +74,10 @@ impl Chain {
         let masses = self.params.masses_kg(lw);
         let k = self.params.stiffness_matrix(lw);
         let kinetic: f64 = (0..DOF).map(|i| 0.5 * masses[i] * state.velocity_mps[i].powi(2)).sum();
-        let elastic: f64 =
-            (0..DOF).flat_map(|i| (0..DOF).map(move |j| (i, j))).map(|(i, j)| 0.5 * state.position_m[i] * k[i][j] * state.position_m[j]).sum();
+        let elastic: f64 = (0..DOF)
+            .flat_map(|i| (0..DOF).map(move |j| (i, j)))
+            .map(|(i, j)| 0.5 * state.position_m[i] * k[i][j] * state.position_m[j])
+            .sum();
         kinetic + elastic
     }
 }

@@ -18,20 +18,23 @@ pub struct Modes {
 /// Natural modes of `params` with counterweight-side rope length `lw_m`.
 ///
 /// Solved as the symmetric problem `M^-1/2 K M^-1/2 v = w^2 v` (M is
-/// diagonal), `u = M^-1/2 v`. Round-off eigenvalues below zero (the rigid
-/// mode) are reported as 0 Hz.
+/// diagonal), `u = M^-1/2 v`. Eigenvalues below 1e-12 of the largest (the
+/// rigid mode, which is 0 up to round-off) are reported as exactly 0 Hz.
 pub fn natural_modes(params: &ChainParams, lw_m: f64) -> Modes {
     let masses = params.masses_kg(lw_m);
     let k = params.stiffness_matrix(lw_m);
     let inv_sqrt_m: [f64; DOF] = masses.map(|m| 1.0 / m.sqrt());
     let a = SMatrix::<f64, DOF, DOF>::from_fn(|i, j| k[i][j] * inv_sqrt_m[i] * inv_sqrt_m[j]);
     let eigen = SymmetricEigen::new(a);
+    // Eigenvalues this far below the largest are round-off of the rigid mode.
+    let round_off = 1e-12 * eigen.eigenvalues.iter().copied().fold(0.0f64, f64::max);
     let mut order: Vec<usize> = (0..DOF).collect();
     order.sort_by(|&x, &y| eigen.eigenvalues[x].total_cmp(&eigen.eigenvalues[y]));
     let mut frequencies_hz = [0.0; DOF];
     let mut shapes = [[0.0; DOF]; DOF];
     for (mode, &column) in order.iter().enumerate() {
-        let lambda = eigen.eigenvalues[column].max(0.0);
+        let lambda = eigen.eigenvalues[column];
+        let lambda = if lambda < round_off { 0.0 } else { lambda };
         frequencies_hz[mode] = lambda.sqrt() / std::f64::consts::TAU;
         let mut shape = [0.0; DOF];
         for (i, value) in shape.iter_mut().enumerate() {

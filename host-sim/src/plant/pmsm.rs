@@ -38,7 +38,8 @@ impl PmsmParams {
     /// at electrical speed `omega_e` (rad/s).
     pub fn current_derivative(&self, id_a: f64, iq_a: f64, vd_v: f64, vq_v: f64, omega_e_radps: f64) -> (f64, f64) {
         let did = (vd_v - self.resistance_ohm * id_a + omega_e_radps * self.lq_h * iq_a) / self.ld_h;
-        let diq = (vq_v - self.resistance_ohm * iq_a - omega_e_radps * (self.ld_h * id_a + self.flux_linkage_wb)) / self.lq_h;
+        let diq =
+            (vq_v - self.resistance_ohm * iq_a - omega_e_radps * (self.ld_h * id_a + self.flux_linkage_wb)) / self.lq_h;
         (did, diq)
     }
 

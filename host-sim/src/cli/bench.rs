@@ -1,0 +1,52 @@
+//! `host-sim bench`: how fast closed-loop travels simulate.
+
+use std::time::Instant;
+
+use clap::Args;
+use shared::config::Direction;
+
+use super::default_car_mass_kg;
+use crate::closed_loop::{simulate_travel, SimOptions, TravelSpec};
+use crate::config::RigConfig;
+
+/// Options of `bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// Number of travels to time (alternating up and down).
+    #[arg(long, default_value_t = 4)]
+    pub repeat: usize,
+}
+
+/// Runs `bench`: times full travels of the heaviest car and reports the
+/// ratio of simulated to wall-clock time.
+pub fn run(rig: &RigConfig, args: &BenchArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.repeat >= 1, "--repeat = {} is out of range: expected at least 1", args.repeat);
+    let m_car = default_car_mass_kg(rig);
+    let options = SimOptions::for_rig(rig);
+    let mut ratios = Vec::new();
+    for k in 0..args.repeat {
+        let direction = if k % 2 == 0 { Direction::Up } else { Direction::Down };
+        let spec = TravelSpec::full_travel(rig, m_car, direction);
+        let started = Instant::now();
+        let run = simulate_travel(rig, &spec, &options, None)?;
+        let wall = started.elapsed().as_secs_f64();
+        let ratio = run.duration_s() / wall;
+        println!(
+            "travel {} ({direction:?}): {:.2} s simulated in {wall:.3} s = {ratio:.1}x real time",
+            k + 1,
+            run.duration_s()
+        );
+        ratios.push(ratio);
+    }
+    ratios.sort_by(f64::total_cmp);
+    println!(
+        "closed-loop travel, m_car = {m_car} kg, step {:.3e} s, {} Hz recording: median {:.1}x real time (min {:.1}x, max {:.1}x) on {} thread",
+        options.max_step_s,
+        options.sample_rate_hz,
+        ratios[ratios.len() / 2],
+        ratios[0],
+        ratios[ratios.len() - 1],
+        1
+    );
+    Ok(())
+}

@@ -1,0 +1,75 @@
+//! Command-line interface: one file per command.
+
+pub mod bench;
+pub mod modes;
+pub mod travel;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+
+use crate::config::RigConfig;
+
+/// Elevator drive simulator: the nominal 5-DOF plant of Arrasate et al.
+/// closed around the fixed-point drive core that also runs on the STM32G474.
+#[derive(Debug, Parser)]
+#[command(name = "host-sim", version, about, long_about = None)]
+pub struct Cli {
+    /// Rig description (TOML); default: the embedded configs/rig.toml.
+    #[arg(long, global = true, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Natural frequencies and mode shapes (Eqn 10) against the
+    /// counterweight-side rope length (paper Fig. 5).
+    Modes(modes::ModesArgs),
+    /// One closed-loop travel written as a recording, with plots of the
+    /// high-passed car acceleration (Fig. 7) and its spectrogram (Fig. 6/8).
+    Travel(travel::TravelArgs),
+    /// Measures how fast travels simulate (ratio to real time).
+    Bench(bench::BenchArgs),
+}
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    let rig = load_rig(cli.config.as_deref())?;
+    match cli.command {
+        Command::Modes(args) => modes::run(&rig, &args),
+        Command::Travel(args) => travel::run(&rig, &args),
+        Command::Bench(args) => bench::run(&rig, &args),
+    }
+}
+
+/// The rig from `path`, or the embedded default.
+pub fn load_rig(path: Option<&Path>) -> anyhow::Result<RigConfig> {
+    Ok(match path {
+        Some(path) => RigConfig::load(path)?,
+        None => RigConfig::embedded_default()?,
+    })
+}
+
+/// Checks a command-line value: finite and inside `(lo, hi)` (exclusive).
+pub fn check_open_range(flag: &str, value: f64, lo: f64, hi: f64) -> anyhow::Result<()> {
+    if value.is_finite() && value > lo && value < hi {
+        Ok(())
+    } else {
+        anyhow::bail!("{flag} = {value} is out of range: expected a finite value in ({lo}, {hi})")
+    }
+}
+
+/// Creates the output directory.
+pub fn create_out_dir(dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))
+}
+
+/// The default car mass of `rig`: the heaviest car of `[mechanics].m_car_kg`.
+pub fn default_car_mass_kg(rig: &RigConfig) -> f64 {
+    rig.mechanics.m_car_kg.iter().copied().fold(rig.mechanics.m_cw_kg, f64::max)
+}

@@ -1,0 +1,119 @@
+//! `host-sim modes`: Eqn 10 over the travel (paper Fig. 5).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+
+use super::{check_open_range, create_out_dir, default_car_mass_kg};
+use crate::config::RigConfig;
+use crate::plant::modes::natural_modes;
+use crate::plant::rope::{ChainParams, COORDINATE_NAMES, DOF};
+use crate::plots::{line_plot, Series};
+
+/// Options of `modes`.
+#[derive(Debug, Args)]
+pub struct ModesArgs {
+    /// Car mass, kg (default: the heaviest car of the rig).
+    #[arg(long = "m-car", value_name = "KG")]
+    pub m_car_kg: Option<f64>,
+    /// Smallest counterweight-side rope length, m (default: 0.1).
+    #[arg(long = "lw-from", value_name = "M")]
+    pub lw_from_m: Option<f64>,
+    /// Largest counterweight-side rope length, m (default: l_t - 0.1).
+    #[arg(long = "lw-to", value_name = "M")]
+    pub lw_to_m: Option<f64>,
+    /// Step of the rope length, m.
+    #[arg(long = "lw-step", value_name = "M", default_value_t = 0.05)]
+    pub lw_step_m: f64,
+    /// Output directory.
+    #[arg(long, value_name = "DIR", default_value = "out/modes")]
+    pub out: PathBuf,
+}
+
+/// Runs `modes`: writes `modes.csv`, `mode_shapes.csv`, `modes.png` and
+/// `modes_0-128hz.png`.
+pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
+    let total = rig.mechanics.rope_total_length_m;
+    let m_car = args.m_car_kg.unwrap_or_else(|| default_car_mass_kg(rig));
+    check_open_range("--m-car", m_car, 0.0, 1.0e5)?;
+    let lw_from = args.lw_from_m.unwrap_or(0.1);
+    let lw_to = args.lw_to_m.unwrap_or(total - 0.1);
+    check_open_range("--lw-from", lw_from, 0.0, total)?;
+    check_open_range("--lw-to", lw_to, lw_from, total)?;
+    check_open_range("--lw-step", args.lw_step_m, 0.0, total)?;
+    create_out_dir(&args.out)?;
+
+    let chain = ChainParams::from_rig(rig, m_car);
+    let count = ((lw_to - lw_from) / args.lw_step_m + 1e-9).floor() as usize + 1;
+    // Lengths on the step grid, rounded so that e.g. 4.0 prints as 4.
+    let lengths: Vec<f64> = (0..count).map(|i| ((lw_from + i as f64 * args.lw_step_m) * 1e9).round() / 1e9).collect();
+    let modes: Vec<_> = lengths.iter().map(|&lw| natural_modes(&chain, lw)).collect();
+
+    let csv_path = args.out.join("modes.csv");
+    let mut csv = std::io::BufWriter::new(
+        std::fs::File::create(&csv_path).with_context(|| format!("cannot write {}", csv_path.display()))?,
+    );
+    writeln!(csv, "lw_m,f1_hz,f2_hz,f3_hz,f4_hz,f5_hz")?;
+    for (lw, m) in lengths.iter().zip(&modes) {
+        let f = m.frequencies_hz;
+        writeln!(csv, "{lw},{},{},{},{},{}", f[0], f[1], f[2], f[3], f[4])?;
+    }
+    csv.flush()?;
+
+    let shapes_path = args.out.join("mode_shapes.csv");
+    let mut shapes = std::io::BufWriter::new(
+        std::fs::File::create(&shapes_path).with_context(|| format!("cannot write {}", shapes_path.display()))?,
+    );
+    writeln!(shapes, "lw_m,mode,f_hz,{}", COORDINATE_NAMES.map(|n| format!("u_{n}")).join(","))?;
+    for (lw, m) in lengths.iter().zip(&modes) {
+        for mode in 0..DOF {
+            let u = m.shapes[mode].map(|v| v.to_string()).join(",");
+            writeln!(shapes, "{lw},{},{},{u}", mode + 1, m.frequencies_hz[mode])?;
+        }
+    }
+    shapes.flush()?;
+
+    let series = |max_hz: f64| -> Vec<Series> {
+        (1..DOF)
+            .filter(|&k| modes.iter().any(|m| m.frequencies_hz[k] <= max_hz))
+            .map(|k| {
+                let (x, y): (Vec<f64>, Vec<f64>) = lengths
+                    .iter()
+                    .zip(&modes)
+                    .map(|(&lw, m)| (lw, if m.frequencies_hz[k] <= max_hz { m.frequencies_hz[k] } else { f64::NAN }))
+                    .unzip();
+                Series::new(format!("f{}", k + 1), x, y)
+            })
+            .collect()
+    };
+    let title = format!("Natural frequencies (Eqn 10), m_car = {m_car} kg, m_cw = {} kg", rig.mechanics.m_cw_kg);
+    line_plot(
+        &args.out.join("modes.png"),
+        &title,
+        "counterweight-side rope length lw [m]",
+        "frequency [Hz]",
+        &series(f64::INFINITY),
+    )?;
+    let band = rig.measurement.spectrogram_band_hz[1];
+    line_plot(
+        &args.out.join(format!("modes_0-{band}hz.png")),
+        &format!("{title}, 0-{band} Hz"),
+        "counterweight-side rope length lw [m]",
+        "frequency [Hz]",
+        &series(band),
+    )?;
+
+    println!("m_car = {m_car} kg: natural frequencies at {} rope lengths from {lw_from} to {lw_to} m", lengths.len());
+    println!("{:>8} {:>9} {:>9} {:>9} {:>9} {:>9}", "lw [m]", "f1 [Hz]", "f2 [Hz]", "f3 [Hz]", "f4 [Hz]", "f5 [Hz]");
+    let stride = (lengths.len() / 12).max(1);
+    for (i, (lw, m)) in lengths.iter().zip(&modes).enumerate() {
+        if i % stride == 0 || (lw - 4.0).abs() < 1e-9 || i + 1 == lengths.len() {
+            let f = m.frequencies_hz;
+            println!("{lw:8.3} {:9.2} {:9.2} {:9.2} {:9.2} {:9.2}", f[0], f[1], f[2], f[3], f[4]);
+        }
+    }
+    println!("wrote {}, {} and plots in {}", csv_path.display(), shapes_path.display(), args.out.display());
+    Ok(())
+}

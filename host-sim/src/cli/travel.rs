@@ -1,0 +1,172 @@
+//! `host-sim travel`: one closed-loop travel, its recording and plots.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use shared::config::Direction;
+
+use super::{check_open_range, create_out_dir, default_car_mass_kg};
+use crate::analysis::{highpass_zero_phase, stft_spectrogram};
+use crate::closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
+use crate::config::RigConfig;
+use crate::plant::modes::natural_modes;
+use crate::plant::rope::{ChainParams, DOF};
+use crate::plots::{line_plot, spectrogram_plot, Series};
+use crate::recording::write::write_recording;
+
+/// Car direction on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum DirectionArg {
+    /// Car up (lw grows).
+    Up,
+    /// Car down (lw shrinks).
+    Down,
+}
+
+/// Options of `travel`.
+#[derive(Debug, Args)]
+pub struct TravelArgs {
+    /// Car mass, kg (default: the heaviest car of the rig).
+    #[arg(long = "m-car", value_name = "KG")]
+    pub m_car_kg: Option<f64>,
+    /// Car direction.
+    #[arg(long, value_enum, default_value_t = DirectionArg::Up)]
+    pub direction: DirectionArg,
+    /// Counterweight-side rope length at the start, m (default: the rig's travel range).
+    #[arg(long = "lw-start", value_name = "M")]
+    pub lw_start_m: Option<f64>,
+    /// Counterweight-side rope length at the end, m (default: the rig's travel range).
+    #[arg(long = "lw-end", value_name = "M")]
+    pub lw_end_m: Option<f64>,
+    /// Longest integration step, s (default: a quarter of a PWM period).
+    #[arg(long = "max-step", value_name = "S")]
+    pub max_step_s: Option<f64>,
+    /// Spectrogram window, s.
+    #[arg(long = "spectrogram-window", value_name = "S", default_value_t = 2.0)]
+    pub spectrogram_window_s: f64,
+    /// Recording stem (default: travel_<direction>_m<mass>).
+    #[arg(long)]
+    pub stem: Option<String>,
+    /// Output directory (the dataset).
+    #[arg(long, value_name = "DIR", default_value = "out/travel")]
+    pub out: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Runs `travel`.
+pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
+    let total = rig.mechanics.rope_total_length_m;
+    let m_car = args.m_car_kg.unwrap_or_else(|| default_car_mass_kg(rig));
+    check_open_range("--m-car", m_car, 0.0, 1.0e5)?;
+    let direction = match args.direction {
+        DirectionArg::Up => Direction::Up,
+        DirectionArg::Down => Direction::Down,
+    };
+    let mut spec = TravelSpec::full_travel(rig, m_car, direction);
+    if let Some(lw) = args.lw_start_m {
+        check_open_range("--lw-start", lw, 0.0, total)?;
+        spec.lw_start_m = lw;
+    }
+    if let Some(lw) = args.lw_end_m {
+        check_open_range("--lw-end", lw, 0.0, total)?;
+        spec.lw_end_m = lw;
+    }
+    let mut options = SimOptions::for_rig(rig);
+    if let Some(step) = args.max_step_s {
+        check_open_range("--max-step", step, 0.0, 0.5 / rig.control.current_loop_hz + 1e-15)?;
+        options.max_step_s = step;
+    }
+    check_open_range("--spectrogram-window", args.spectrogram_window_s, 0.0, 60.0)?;
+    create_out_dir(&args.out)?;
+
+    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {percent:>3}% {elapsed_precise} eta {eta}")?
+            .progress_chars("=> "),
+    );
+    bar.set_message("simulating");
+    let started = Instant::now();
+    let run = simulate_travel(rig, &spec, &options, Some(&bar))?;
+    let wall = started.elapsed().as_secs_f64();
+    println!(
+        "simulated {:.2} s of travel (m_car = {m_car} kg, {direction:?}, lw {} -> {} m) in {wall:.2} s: {:.1}x real time",
+        run.duration_s(),
+        spec.lw_start_m,
+        spec.lw_end_m,
+        run.duration_s() / wall
+    );
+
+    let stem = args
+        .stem
+        .clone()
+        .unwrap_or_else(|| format!("travel_{}_m{m_car}", if direction == Direction::Up { "up" } else { "down" }));
+    let recording = run.to_recording(
+        &spec,
+        rig.mechanics.m_cw_kg,
+        format!("host-sim closed-loop travel, nominal plant, step {:.3e} s", options.max_step_s),
+    );
+    let (toml_path, csv_path) = write_recording(&args.out, &stem, &recording)?;
+    println!("recording: {} and {}", toml_path.display(), csv_path.display());
+    plots(rig, &spec, &run, args, &stem)?;
+    Ok(())
+}
+
+fn plots(rig: &RigConfig, spec: &TravelSpec, run: &TravelRun, args: &TravelArgs, stem: &str) -> anyhow::Result<()> {
+    let fs = run.sample_rate_hz;
+    let highpass_hz = rig.measurement.highpass_hz;
+    let filtered = highpass_zero_phase(&run.acc_car_mps2, fs, highpass_hz)?;
+    let hp_path = args.out.join(format!("{stem}_acc_car_hp.png"));
+    line_plot(
+        &hp_path,
+        &format!("Car acceleration, high-passed at {highpass_hz} Hz (paper Fig. 7), m_car = {} kg", spec.m_car_kg),
+        "time [s]",
+        "acceleration [m/s^2]",
+        &[Series::new("car (simulated)", run.time_s.clone(), filtered.clone())],
+    )?;
+
+    let [band_lo, band_hi] = rig.measurement.spectrogram_band_hz;
+    let spectrogram = stft_spectrogram(&filtered, fs, args.spectrogram_window_s, 0.9, band_hi)?;
+    let chain = ChainParams::from_rig(rig, spec.m_car_kg);
+    let modes_over_time: Vec<[f64; DOF]> = spectrogram
+        .times_s
+        .iter()
+        .map(|t| {
+            let index = ((t * fs) as usize).min(run.lw_m.len() - 1);
+            natural_modes(&chain, run.lw_m[index]).frequencies_hz
+        })
+        .collect();
+    let overlays: Vec<Series> = (1..DOF)
+        .filter(|&k| modes_over_time.iter().any(|f| f[k] >= band_lo && f[k] <= band_hi))
+        .map(|k| {
+            let y = modes_over_time.iter().map(|f| if f[k] <= band_hi { f[k] } else { f64::NAN }).collect();
+            Series::new(format!("model f{}", k + 1), spectrogram.times_s.clone(), y)
+        })
+        .collect();
+    let spectrogram_path = args.out.join(format!("{stem}_spectrogram.png"));
+    spectrogram_plot(
+        &spectrogram_path,
+        &format!("Car acceleration spectrogram (STFT, {} s window), dB re 1 (m/s^2)^2/Hz", args.spectrogram_window_s),
+        &spectrogram,
+        &overlays,
+        None,
+    )?;
+
+    let drive_path = args.out.join(format!("{stem}_drive.png"));
+    let r = rig.mechanics.sheave_radius_m;
+    line_plot(
+        &drive_path,
+        "Drive: reference and estimated sheave-edge speed",
+        "time [s]",
+        "speed [m/s]",
+        &[
+            Series::new("reference", run.time_s.clone(), run.ref_speed_mps.clone()),
+            Series::new("encoder estimate", run.time_s.clone(), run.speed_radps.iter().map(|w| w * r).collect()),
+        ],
+    )?;
+    println!("plots: {}, {}, {}", hp_path.display(), spectrogram_path.display(), drive_path.display());
+    Ok(())
+}
