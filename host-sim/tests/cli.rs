@@ -1,0 +1,82 @@
+//! The `host-sim` binary as a user runs it: outputs, and clear errors for
+//! bad flags and bad rig files.
+
+use std::process::Command;
+
+fn host_sim() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+#[test]
+fn modes_writes_the_csv_with_the_paper_frequencies_at_lw_4m() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = host_sim().args(["modes", "--m-car", "70.5", "--out"]).arg(dir.path()).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(dir.path().join("modes.csv")).unwrap();
+    assert_eq!(csv.lines().next().unwrap(), "lw_m,f1_hz,f2_hz,f3_hz,f4_hz,f5_hz");
+    let row: Vec<f64> = csv
+        .lines()
+        .find(|l| l.starts_with("4,"))
+        .expect("a row at lw = 4 m")
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    for (got, quoted) in row[1..].iter().zip([0.0, 10.6, 17.5, 224.8, 258.7]) {
+        assert!((got - quoted).abs() <= 0.005 * quoted, "{row:?}");
+    }
+    for png in ["modes.png", "modes_0-128hz.png"] {
+        let bytes = std::fs::read(dir.path().join(png)).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    }
+}
+
+#[test]
+fn travel_writes_a_recording_in_the_measurement_format_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = host_sim()
+        .args(["travel", "--quiet", "--m-car", "45.5", "--direction", "down", "--lw-start", "4.2", "--lw-end", "3.4"])
+        .args(["--stem", "short", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let meta: toml::Table = std::fs::read_to_string(dir.path().join("short.toml")).unwrap().parse().unwrap();
+    assert_eq!(meta["format"].as_str(), Some("elevator-measurement/1"));
+    assert_eq!(meta["kind"].as_str(), Some("travel"));
+    assert_eq!(meta["direction"].as_str(), Some("down"));
+    assert_eq!(meta["sample_rate_hz"].as_float(), Some(16384.0));
+    let mut reader = csv::Reader::from_path(dir.path().join("short.csv")).unwrap();
+    let header = reader.headers().unwrap().clone();
+    for column in ["time_s", "acc_car_mps2", "i_a_A", "i_b_A", "i_c_A", "speed_radps", "angle_rad", "ref_speed_mps"] {
+        assert!(header.iter().any(|h| h == column), "missing {column}");
+    }
+    let rows = reader.records().count();
+    assert!(rows > 16384, "{rows} samples");
+    for suffix in ["acc_car_hp", "spectrogram", "drive"] {
+        assert!(dir.path().join(format!("short_{suffix}.png")).exists(), "{suffix}");
+    }
+}
+
+#[test]
+fn bad_flags_and_bad_rig_files_name_what_is_wrong() {
+    let out = host_sim().args(["modes", "--m-car", "-3"]).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--m-car") && err.contains("(0, 100000)"), "{err}");
+
+    let out = host_sim().args(["travel", "--lw-start", "9.5"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--lw-start") && err.contains("8.6"), "{err}");
+
+    let out = host_sim().args(["travel", "--direction", "up", "--lw-start", "5", "--lw-end", "4"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("lw grows"), "{err}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("rig.toml");
+    let text = rig_config::EMBEDDED_RIG_TOML.replace("rope_ea_n = 1.0e6", "rope_ea_n = 0.0");
+    std::fs::write(&bad, text).unwrap();
+    let out = host_sim().arg("--config").arg(&bad).args(["modes"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("rig.toml") && err.contains("[mechanics].rope_ea_n"), "{err}");
+}
