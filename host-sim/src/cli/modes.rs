@@ -16,16 +16,16 @@ use crate::plots::{line_plot, Series};
 #[derive(Debug, Args)]
 pub struct ModesArgs {
     /// Car mass, kg (default: the heaviest car of the rig).
-    #[arg(long = "m-car", value_name = "KG")]
+    #[arg(long = "m-car", value_name = "KG", allow_negative_numbers = true)]
     pub m_car_kg: Option<f64>,
     /// Smallest counterweight-side rope length, m (default: 0.1).
-    #[arg(long = "lw-from", value_name = "M")]
+    #[arg(long = "lw-from", value_name = "M", allow_negative_numbers = true)]
     pub lw_from_m: Option<f64>,
     /// Largest counterweight-side rope length, m (default: l_t - 0.1).
-    #[arg(long = "lw-to", value_name = "M")]
+    #[arg(long = "lw-to", value_name = "M", allow_negative_numbers = true)]
     pub lw_to_m: Option<f64>,
     /// Step of the rope length, m.
-    #[arg(long = "lw-step", value_name = "M", default_value_t = 0.05)]
+    #[arg(long = "lw-step", value_name = "M", default_value_t = 0.05, allow_negative_numbers = true)]
     pub lw_step_m: f64,
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "out/modes")]

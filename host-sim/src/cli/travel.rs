@@ -29,19 +29,19 @@ pub enum DirectionArg {
 #[derive(Debug, Args)]
 pub struct TravelArgs {
     /// Car mass, kg (default: the heaviest car of the rig).
-    #[arg(long = "m-car", value_name = "KG")]
+    #[arg(long = "m-car", value_name = "KG", allow_negative_numbers = true)]
     pub m_car_kg: Option<f64>,
     /// Car direction.
     #[arg(long, value_enum, default_value_t = DirectionArg::Up)]
     pub direction: DirectionArg,
     /// Counterweight-side rope length at the start, m (default: the rig's travel range).
-    #[arg(long = "lw-start", value_name = "M")]
+    #[arg(long = "lw-start", value_name = "M", allow_negative_numbers = true)]
     pub lw_start_m: Option<f64>,
     /// Counterweight-side rope length at the end, m (default: the rig's travel range).
-    #[arg(long = "lw-end", value_name = "M")]
+    #[arg(long = "lw-end", value_name = "M", allow_negative_numbers = true)]
     pub lw_end_m: Option<f64>,
     /// Longest integration step, s (default: a quarter of a PWM period).
-    #[arg(long = "max-step", value_name = "S")]
+    #[arg(long = "max-step", value_name = "S", allow_negative_numbers = true)]
     pub max_step_s: Option<f64>,
     /// Spectrogram window, s.
     #[arg(long = "spectrogram-window", value_name = "S", default_value_t = 2.0)]
