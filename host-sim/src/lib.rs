@@ -6,6 +6,8 @@
 //! Data flows one way: config -> plant <-> controller -> recording ->
 //! analysis. The plant never knows which controller drives it.
 
+#![warn(missing_docs)]
+
 pub mod analysis;
 pub mod cli;
 pub mod closed_loop;

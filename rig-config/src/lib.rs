@@ -6,6 +6,8 @@
 //! physical range is refused with the file, the `[section].field` and the
 //! accepted range.
 
+#![warn(missing_docs)]
+
 use std::path::Path;
 
 use serde::Deserialize;

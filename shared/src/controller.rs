@@ -389,3 +389,138 @@ impl Controller {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::supervisor::Fault;
+
+    /// The reference rig's drive parameters (as `configs/rig.toml` gives them).
+    fn rig() -> DriveConfig {
+        DriveConfig {
+            pole_pairs: 6,
+            stator_resistance_ohm: 1.2,
+            ld_h: 0.015,
+            lq_h: 0.015,
+            flux_linkage_wb: 0.45,
+            max_current_a: 20.0,
+            overcurrent_trip_a: 30.0,
+            dc_bus_nominal_v: 100.0,
+            pwm_hz: 16000.0,
+            pwm_period_counts: 5312,
+            current_sense_full_scale_a: 50.0,
+            adc_bits: 12,
+            dc_bus_sense_full_scale_v: 200.0,
+            encoder_counts_per_rev: 16384,
+            current_loop_hz: 16000.0,
+            speed_loop_hz: 2000.0,
+            current_loop_bandwidth_hz: 1000.0,
+            speed_loop_bandwidth_hz: 5.0,
+            speed_estimator_bandwidth_hz: 25.0,
+            m_cw_kg: 33.0,
+            rope_total_length_m: 8.6,
+            rope_mass_per_length_kg_per_m: 0.095,
+            sheave_inertia_kg_m2: 0.3385,
+            sheave_radius_m: 0.065,
+            gravity_mps2: 9.81,
+            rated_speed_mps: 0.4,
+            max_accel_mps2: 0.5,
+            max_jerk_mps3: 1.0,
+            overspeed_factor: 1.25,
+            dc_bus_undervoltage_v: 70.0,
+            dc_bus_overvoltage_v: 130.0,
+            current_sum_limit_a: 5.0,
+        }
+    }
+
+    /// A healthy idle frame at step `k`: zero currents, 100 V bus.
+    fn frame(k: u32) -> SensorFrame {
+        SensorFrame {
+            phase_current_codes: [2048; 3],
+            encoder_count: 0,
+            dc_bus_code: 2048, // 100.0 V on a 200 V / 4095 scale
+            time_us: k * 62 + k / 2,
+        }
+    }
+
+    fn travel() -> TravelCommand {
+        TravelCommand { direction: Direction::Up, distance_m: 1.0, m_car_kg: 70.5, lw_start_m: 2.0 }
+    }
+
+    #[test]
+    fn idle_is_safe_and_a_command_builds_holding_torque_with_the_brake_applied() {
+        let mut c = Controller::new(&rig());
+        let out = c.step(&frame(0));
+        assert_eq!(out.state, DriveState::Idle);
+        assert!(!out.pwm_enabled && !out.brake_released);
+        c.command_travel(travel()).unwrap();
+        assert_eq!(c.command_travel(travel()), Err(CommandError::NotIdle));
+        let mut last = out;
+        for k in 1..3200 {
+            last = c.step(&frame(k));
+        }
+        // Just before the end of the 0.2 s ramp (3199 of 3200 steps): the q
+        // reference is within a ramp step of Eqn 4 / Kt, brake still applied.
+        let expected = out_of_balance_torque_nm(&rig(), 70.5, 2.0) / rig().torque_constant_nm_per_a();
+        assert!(last.pwm_enabled && !last.brake_released, "{last:?}");
+        assert!(
+            (last.telemetry.iq_ref_a - expected).abs() < 0.005 * expected,
+            "{} vs {expected}",
+            last.telemetry.iq_ref_a
+        );
+    }
+
+    #[test]
+    fn an_over_current_trips_in_the_same_step_and_latches_until_reset() {
+        let mut c = Controller::new(&rig());
+        c.step(&frame(0));
+        c.command_travel(travel()).unwrap();
+        for k in 1..100 {
+            c.step(&frame(k));
+        }
+        let mut bad = frame(100);
+        bad.phase_current_codes = [2048 + 1300, 2048 - 650, 2048 - 650]; // 31.7 A on phase a
+        let out = c.step(&bad);
+        assert_eq!(out.state, DriveState::Tripped(Fault::OverCurrent));
+        assert!(!out.pwm_enabled && !out.brake_released && out.pwm_compare == [0; 3]);
+        for k in 101..2000 {
+            let out = c.step(&frame(k));
+            assert_eq!(out.state, DriveState::Tripped(Fault::OverCurrent), "recovered by itself at step {k}");
+        }
+        assert_eq!(c.command_travel(travel()), Err(CommandError::NotIdle));
+        c.reset();
+        assert_eq!(c.step(&frame(2000)).state, DriveState::Idle);
+    }
+
+    #[test]
+    fn each_implausible_reading_trips_with_its_reason() {
+        type Spoil = fn(&mut SensorFrame);
+        let cases: [(Spoil, Fault); 5] = [
+            (|f| f.dc_bus_code = 1000, Fault::DcBusUnderVoltage),
+            (|f| f.dc_bus_code = 3000, Fault::DcBusOverVoltage),
+            (|f| f.phase_current_codes[1] = 0, Fault::CurrentSensorImplausible),
+            (|f| f.encoder_count = 500, Fault::EncoderImplausible),
+            (|f| f.time_us += 1000, Fault::DeadlineMissed),
+        ];
+        for (spoil, fault) in cases {
+            let mut c = Controller::new(&rig());
+            for k in 0..10 {
+                c.step(&frame(k));
+            }
+            let mut bad = frame(10);
+            spoil(&mut bad);
+            assert_eq!(c.step(&bad).state, DriveState::Tripped(fault));
+        }
+    }
+
+    #[test]
+    fn a_travel_outside_the_rig_is_refused() {
+        let mut c = Controller::new(&rig());
+        let mut command = travel();
+        command.distance_m = 7.0; // lw would reach 9 m > l_t
+        assert_eq!(c.command_travel(command), Err(CommandError::OutOfRange));
+        command = travel();
+        command.m_car_kg = f32::NAN;
+        assert_eq!(c.command_travel(command), Err(CommandError::OutOfRange));
+    }
+}
