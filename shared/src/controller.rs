@@ -64,6 +64,37 @@ pub enum DriveState {
     Tripped(Fault),
 }
 
+impl DriveState {
+    /// Numeric code of the state for frames and recordings: 0 idle, 1
+    /// pre-torque, 2 brake lift, 3 travel, 4 hold, 5 brake set, 100 + the
+    /// fault's reason code when tripped.
+    pub fn code(self) -> u8 {
+        match self {
+            DriveState::Idle => 0,
+            DriveState::PreTorque => 1,
+            DriveState::BrakeLift => 2,
+            DriveState::Travel => 3,
+            DriveState::Hold => 4,
+            DriveState::BrakeSet => 5,
+            DriveState::Tripped(fault) => 100 + fault.code(),
+        }
+    }
+
+    /// The state of a [`DriveState::code`], if it is one.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Some(match code {
+            0 => DriveState::Idle,
+            1 => DriveState::PreTorque,
+            2 => DriveState::BrakeLift,
+            3 => DriveState::Travel,
+            4 => DriveState::Hold,
+            5 => DriveState::BrakeSet,
+            c if c > 100 => DriveState::Tripped(Fault::from_code(c - 100)?),
+            _ => return None,
+        })
+    }
+}
+
 /// Values for logging and recordings, in the units named.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Telemetry {

@@ -16,7 +16,9 @@
 pub mod config;
 pub mod controller;
 pub mod current_loop;
+pub mod current_offset;
 pub mod fixed;
+pub mod frame;
 pub mod park_clarke;
 pub mod pi;
 pub mod profile;

@@ -31,6 +31,20 @@ impl Fault {
     pub fn code(self) -> u8 {
         self as u8
     }
+
+    /// The fault of a reason code, if it is one.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Some(match code {
+            1 => Fault::OverCurrent,
+            2 => Fault::OverSpeed,
+            3 => Fault::DcBusUnderVoltage,
+            4 => Fault::DcBusOverVoltage,
+            5 => Fault::CurrentSensorImplausible,
+            6 => Fault::EncoderImplausible,
+            7 => Fault::DeadlineMissed,
+            _ => return None,
+        })
+    }
 }
 
 /// Limits of the supervisor, in the units named.

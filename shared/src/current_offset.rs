@@ -1,0 +1,1 @@
+//! Current-sensor offset calibration at start-up (filled by the firmware work).
