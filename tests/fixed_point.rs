@@ -15,8 +15,12 @@
 //!   `|dv|`, and the zero sequence by as much again). In the linear range at
 //!   the rig's 100 V bus that is at most 39 counts of 5312 (0.7 % duty).
 //!
-//! The voltage error is the Q16.16 current and sine rounding (about 1.3e-5
-//! relative) times the proportional gain (94 V/A) and the decoupling
+//! Measured worst case over a million pseudo-random inputs (the last test):
+//! 0.07 V on `v_d`, 0.04 V on `v_q` off the limit.
+//!
+//! The voltage error is the Q16.16 rounding of the currents and products
+//! (sines and transform constants are Q2.30) times the proportional gain
+//! (94 V/A) and the decoupling
 //! `w_e L` (30 V/A at 2000 rad/s; above that it dominates, growing with
 //! speed). Beyond that speed range the loop is checked only for what must
 //! hold everywhere: no wrap, voltages on their limits, compares in range.
@@ -55,11 +59,11 @@ impl Reference {
         let dc = dc_bus.max(1.0);
         let v_max = dc / 3f64.sqrt() * 0.95;
         let pi = |error: f64, kp: f64, ff: f64, limit: f64| {
-            let integral = (r * wc * ts * error).clamp(-limit, limit);
-            let unlimited = kp * error + integral + ff;
-            let winding = (unlimited > limit && error > 0.0) || (unlimited < -limit && error < 0.0);
-            let integral = if winding { 0.0 } else { integral };
-            (kp * error + integral + ff).clamp(-limit, limit)
+            // Dynamic integrator clamping, from an empty integrator.
+            let proportional = kp * error + ff;
+            let integral =
+                (r * wc * ts * error).clamp((-limit - proportional).min(0.0), (limit - proportional).max(0.0));
+            (proportional + integral).clamp(-limit, limit)
         };
         let vd = pi(-id, ld * wc, -speed_e * lq * iq, v_max);
         let vq_max = (v_max * v_max - vd * vd).max(0.0).sqrt();
@@ -164,4 +168,34 @@ fn extreme_inputs_saturate_in_the_right_direction_and_never_wrap() {
     assert!(out.voltage.q.to_num::<f64>() > 50.0, "{out:?}");
     let out = current_loop.step(Abc { a: i0, b: i0, c: i0 }, 0, Q16::ZERO, q16(-30_000.0), q16(100.0));
     assert!(out.voltage.q.to_num::<f64>() < -50.0, "{out:?}");
+}
+
+#[test]
+fn worst_case_over_a_million_pseudo_random_inputs_is_inside_the_bound() {
+    let config = drive();
+    let mut seed = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    let (mut worst_vd, mut worst_vq) = (0.0f64, 0.0f64);
+    for _ in 0..1_000_000 {
+        let codes = [(next() % 4096) as u16, (next() % 4096) as u16, (next() % 4096) as u16];
+        let angle = next() as u32;
+        let unit = |x: u64| (x % 1_000_000) as f64 / 1_000_000.0;
+        let speed_e = representable(-2000.0 + 4000.0 * unit(next()));
+        let iq_ref = representable(-32.0 + 64.0 * unit(next()));
+        let dc_bus = representable(20.0 + 180.0 * unit(next()));
+        let (v_fixed, _) = fixed_step(&config, codes, angle, speed_e, iq_ref, dc_bus);
+        let (v_ref, _) = Reference { config }.step(codes, angle, speed_e, iq_ref, dc_bus);
+        let v_max = dc_bus / 3f64.sqrt() * 0.95;
+        worst_vd = worst_vd.max((v_fixed[0] - v_ref[0]).abs());
+        if (v_ref[0].powi(2) + v_ref[1].powi(2)).sqrt() < v_max - 2.0 * VOLTAGE_BOUND_V {
+            worst_vq = worst_vq.max((v_fixed[1] - v_ref[1]).abs());
+        }
+    }
+    println!("worst |v_d error| {worst_vd:.4} V, worst |v_q error| off the limit {worst_vq:.4} V (bound {VOLTAGE_BOUND_V} V)");
+    assert!(worst_vd <= VOLTAGE_BOUND_V && worst_vq <= VOLTAGE_BOUND_V);
 }

@@ -1,35 +1,73 @@
-//! Drive firmware of the elevator on the NUCLEO-G474RE (STM32G474RE).
+//! Drive firmware of the elevator on the NUCLEO-G474RE (STM32G474RE) with an
+//! X-NUCLEO-IHM08M1 three-phase inverter.
 //!
-//! This build brings up the clocks, the brake output and the drive core of
-//! `shared` with the rig's parameters (generated at build time from
-//! `configs/rig.toml`), and runs the controller on a timer tick. The inverter
-//! PWM (TIM1), the ADC sampling and the encoder (TIM4) come with the PWM/ADC
-//! issue; until then the bridge stays off and the brake stays applied.
+//! Peripherals (pin map and what is not verified: `board.rs`):
+//! - TIM1 (`pwm.rs`): 16 kHz centre-aligned complementary PWM, 1 us hardware
+//!   dead time, over-current break input BKIN, compare update once per
+//!   period at the counter underflow, TRGO2 at the counter peak.
+//! - ADC1/ADC2 (`adc.rs`): injected sequences of the three phase currents and
+//!   the DC bus, started by TRGO2; ADC2's end of sequence is the control
+//!   interrupt.
+//! - TIM4 (`encoder.rs`): quadrature encoder; TIM2 (`timebase.rs`): 1 MHz
+//!   time stamps; PC8: brake (low = applied); IWDG (`watchdog.rs`).
+//!
+//! The control interrupt (`control.rs`, highest priority) runs
+//! `shared::Controller::step` once per PWM period with the measured values;
+//! the speed loop, the profile and the speed observer run inside it. One
+//! Embassy task (`telemetry.rs`) logs what the interrupt queues, feeds the
+//! watchdog while the interrupt is alive and submits commands.
+//!
+//! Start-up: clocks, then the peripherals with the inverter off (MOE = 0,
+//! brake applied), then the control interrupt, which waits 10 ms for the
+//! analog front end to settle and calibrates the current-sensor offsets over
+//! 64 ms (`shared::current_offset`) with the PWM outputs DISABLED: with every
+//! switch off no phase current can flow, so the measured codes are the true
+//! zero, whereas at 50 % duty the zero holds only for a standing machine and
+//! matched legs, and the bridge would be switching before its current
+//! readings are trustworthy. (The switching noise that couples into the
+//! readings is therefore not part of the offset.) A rejected calibration
+//! latches a fault (PWM off, brake applied) and the log says why; otherwise
+//! the drive is Idle and waits for a travel command.
+//!
+//! Travel commands: the board has no host link yet, and a travel needs the
+//! car's load weighing and position, which the firmware cannot measure. So
+//! the only source is the operator, at build time:
+//! `FW_TRAVEL=up:1.0:70.5:2.0 cargo flash` (direction, distance m, car mass
+//! kg, counterweight-side rope length at the start m) starts that one travel
+//! after the calibration; without `FW_TRAVEL` the drive stays Idle and logs
+//! so. A latched fault is cleared by restarting the chip (reset button B2),
+//! which also repeats the calibration.
+//!
+//! Build and flash: `cargo flash` (alias for `cargo run -p firmware --release
+//! --target thumbv7em-none-eabihf`) from the workspace root, or `cargo run
+//! --release` inside `firmware/` (whose `.cargo/config.toml` sets the
+//! target). A plain `cargo run -p firmware --release` from the root cannot
+//! pick the target: cargo reads `.cargo/config.toml` only from the current
+//! directory upwards, a per-package target (`forced-target`) is unstable
+//! (`-Z per-package-target`), and an alias named `run` is ignored because it
+//! would shadow a built-in command.
 #![no_std]
 #![no_main]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+mod adc;
 mod board;
+mod control;
+mod encoder;
+mod pwm;
+mod telemetry;
+mod timebase;
+mod watchdog;
 
-use defmt::{info, Debug2Format};
+use defmt::{error, info};
+use defmt_rtt as _;
 use embassy_executor::Spawner;
-use embassy_stm32::gpio::Level;
 use embassy_stm32::time::Hertz;
-use embassy_time::{Duration, Instant, Ticker};
-use shared::{Controller, SensorFrame};
-use {defmt_rtt as _, panic_probe as _};
+use shared::Controller;
 
 include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
 
-/// Rate of the placeholder control tick, Hz: the current-loop rate, because
-/// `Controller::step` is one PWM period and its supervisor latches
-/// `DeadlineMissed` if steps come more than 2.5 periods apart.
-const TICK_HZ: u64 = DRIVE_CONFIG.current_loop_hz as u64;
-const _: () = assert!(
-    TICK_HZ > 0 && TICK_HZ as f32 == DRIVE_CONFIG.current_loop_hz,
-    "current_loop_hz must be a whole number of hertz"
-);
 // rig-config derives the PWM period from its own idea of the timer clock
 // (centre-aligned counting): it must be the clock this board runs TIM1 at.
 const _: () = assert!(
@@ -37,14 +75,11 @@ const _: () = assert!(
     "configs/rig.toml's pwm_timer_clock_hz does not match board::SYSCLK_HZ"
 );
 
-/// Whether this build drives the inverter. It does not: TIM1 is not set up,
-/// so the machine produces no torque and the brake must stay applied whatever
-/// the controller asks. The PWM/ADC issue removes this interlock.
-const INVERTER_PWM_RUNNING: bool = false;
-
 #[embassy_executor::main]
-async fn main(_spawner: Spawner) {
+async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(board::clock_config());
+    board::freeze_on_debug_halt();
+    let brake = board::brake_output(p.PC8);
 
     let clocks = embassy_stm32::rcc::clocks(&p.RCC);
     info!("clocks: {}", clocks);
@@ -53,57 +88,70 @@ async fn main(_spawner: Spawner) {
         "SYSCLK is not the 170 MHz the drive timing assumes"
     );
 
-    let mut brake = board::brake_output(p.PC8);
-    let mut controller = Controller::new(&DRIVE_CONFIG);
+    // DWT cycle counter: the control interrupt times itself with it.
+    let Some(mut core) = cortex_m::Peripherals::take() else {
+        defmt::panic!("Cortex-M core peripherals already taken");
+    };
+    core.DCB.enable_trace();
+    core.DWT.enable_cycle_counter();
+
+    timebase::init(p.TIM2);
+    encoder::init(p.TIM4, p.PB6, p.PB7);
+    if let Err(e) = pwm::init(p.TIM1, p.PA8, p.PA9, p.PA10, p.PC13, p.PA12, p.PB15, p.PA6) {
+        error!("TIM1 setup failed ({}): the inverter stays off", e);
+        halt();
+    }
     info!(
-        "drive core up: PWM {} Hz, current loop {} Hz, speed loop {} Hz, control tick {} Hz",
-        DRIVE_CONFIG.pwm_hz, DRIVE_CONFIG.current_loop_hz, DRIVE_CONFIG.speed_loop_hz, TICK_HZ
+        "TIM1: ARR {=u16} (PWM {=f32} Hz), dead time {=u32} ticks (DTG {=u8:#x}), ADC trigger {=u16} ticks before the peak",
+        pwm::PERIOD_COUNTS,
+        board::SYSCLK_HZ as f32 / pwm::PERIOD_CYCLES as f32,
+        pwm::DEAD_TIME_INSERTED_COUNTS,
+        pwm::DTG,
+        pwm::TRIGGER_LEAD_COUNTS
+    );
+    adc::init(p.ADC1, p.ADC2, p.PA0, p.PC1, p.PC0, p.PA1);
+
+    control::start(Controller::new(&DRIVE_CONFIG), brake);
+    info!(
+        "control interrupt running: current loop {=f32} Hz, speed loop {=f32} Hz; calibrating current offsets",
+        DRIVE_CONFIG.current_loop_hz, DRIVE_CONFIG.speed_loop_hz
     );
 
-    // PLACEHOLDER for the ADC interrupt path of the PWM/ADC issue, which will
-    // call `Controller::step` from the ADC end-of-conversion interrupt once
-    // per PWM period with measured values. Here an async ticker stands in for
-    // that interrupt. No sensor is read, and the frame says so instead of
-    // inventing measurements:
-    // - phase currents at the ADC zero-current code: the bridge is off, so no
-    //   phase current flows;
-    // - encoder count 0: the encoder is not read;
-    // - DC-bus code 0: the bus is not measured. The supervisor therefore
-    //   latches `Tripped(DcBusUnderVoltage)` at the first step: PWM off, brake
-    //   applied, which is the right state for a drive without measurements;
-    // - time: the real uptime in microseconds (wraps modulo 2^32 like the
-    //   controller expects).
-    let idle_code = DRIVE_CONFIG.adc_zero_code();
-    let mut ticker = Ticker::every(Duration::from_hz(TICK_HZ));
-    let mut ticks: u64 = 0;
+    let watchdog = watchdog::Watchdog::start(p.IWDG, control::steps());
+    spawner.spawn(defmt::unwrap!(telemetry::run(watchdog, OPERATOR_TRAVEL)));
+}
+
+/// Stops with the drive in its safe state: undefined instruction, so the
+/// HardFault handler below (and a debugger, which stops there) takes over.
+fn halt() -> ! {
+    board::force_safe_state();
+    cortex_m::asm::udf()
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    // First the inverter: TIM1 keeps switching whatever the core does.
+    board::force_safe_state();
+    error!("panic: {}", defmt::Display2Format(info));
+    halt()
+}
+
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    // defmt::panic!/assert! have printed their message already.
+    halt()
+}
+
+/// HardFault (also the end of [`halt`]): safe state, then wait for the
+/// watchdog to restart the chip (if it runs; otherwise stay here).
+#[cortex_m_rt::exception]
+#[allow(unsafe_code)]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: nothing unsafe happens here; cortex-m-rt requires the HardFault
+    // handler to be declared `unsafe fn`. It only writes TIM1's BDTR and
+    // GPIOC's BSRR through the PAC.
+    board::force_safe_state();
     loop {
-        ticker.next().await;
-
-        let frame = SensorFrame {
-            phase_current_codes: [idle_code; 3],
-            encoder_count: 0,
-            dc_bus_code: 0,
-            // Truncation is the intended wrap-around of the u32 microsecond clock.
-            time_us: Instant::now().as_micros() as u32,
-        };
-        let output = controller.step(&frame);
-
-        // Brake applied = low. Released only when the controller asks for it
-        // AND the inverter holds the load (never, in this build).
-        let release = output.brake_released && INVERTER_PWM_RUNNING;
-        brake.set_level(if release { Level::High } else { Level::Low });
-
-        ticks += 1;
-        if ticks % TICK_HZ == 0 {
-            info!(
-                "t={}s state={} pwm_enabled={} brake_released={} (pin {}) compare={}",
-                ticks / TICK_HZ,
-                Debug2Format(&output.state),
-                output.pwm_enabled,
-                output.brake_released,
-                if release { "high" } else { "low" },
-                output.pwm_compare,
-            );
-        }
+        cortex_m::asm::nop();
     }
 }

@@ -9,7 +9,7 @@
 
 use indicatif::ProgressBar;
 use shared::config::Direction;
-use shared::{Controller, DriveState, TravelCommand};
+use shared::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 
 use crate::config::RigConfig;
 use crate::plant::{Plant, PlantInputs, PlantObservation};
@@ -49,6 +49,8 @@ pub struct SimOptions {
     pub sample_rate_hz: f64,
     /// Recording after the drive is back in `Idle`, s.
     pub tail_s: f64,
+    /// Stop after this many control steps (a partial travel), if set.
+    pub max_control_steps: Option<u64>,
 }
 
 impl SimOptions {
@@ -58,6 +60,7 @@ impl SimOptions {
             max_step_s: 0.25 / rig.control.current_loop_hz,
             sample_rate_hz: rig.measurement.sample_rate_hz,
             tail_s: 0.5,
+            max_control_steps: None,
         }
     }
 }
@@ -85,6 +88,37 @@ pub enum SimError {
     /// The plant state became non-finite or a rope length left its range.
     #[error("the plant left its valid range at t = {0:.4} s")]
     Diverged(f64),
+    /// The link to a controller outside this process failed.
+    #[error("controller link: {0}")]
+    Link(String),
+}
+
+/// A drive controller the closed loop can run: the drive core in this
+/// process, or the same code on another processor behind a link.
+pub trait DriveController {
+    /// Starts a travel.
+    fn command_travel(&mut self, command: TravelCommand) -> Result<(), SimError>;
+    /// One PWM period.
+    fn step(&mut self, sensors: &SensorFrame) -> Result<ControlOutput, SimError>;
+}
+
+impl DriveController for Controller {
+    fn command_travel(&mut self, command: TravelCommand) -> Result<(), SimError> {
+        Controller::command_travel(self, command).map_err(SimError::Refused)
+    }
+
+    fn step(&mut self, sensors: &SensorFrame) -> Result<ControlOutput, SimError> {
+        Ok(Controller::step(self, sensors))
+    }
+}
+
+/// What went into and came out of the controller, step by step.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepLog {
+    /// The travel command given before the first step.
+    pub command: Option<TravelCommand>,
+    /// Sensor readings and outputs of every control step, in order.
+    pub steps: Vec<(SensorFrame, ControlOutput)>,
 }
 
 /// The samples of one simulated travel, each vector one value per
@@ -115,29 +149,31 @@ pub struct TravelRun {
     pub shaft_speed_radps: Vec<f64>,
     /// Counterweight-side rope length, m.
     pub lw_m: Vec<f64>,
-    /// Drive state code: 0 idle, 1 pre-torque, 2 brake lift, 3 travel, 4 hold, 5 brake set.
+    /// Drive state code ([`DriveState::code`]): 0 idle, 1 pre-torque, 2 brake lift, 3 travel,
+    /// 4 hold, 5 brake set, 100 + reason when tripped.
     pub drive_state: Vec<f64>,
 }
 
-/// Numeric code of a drive state for recordings.
-pub fn state_code(state: DriveState) -> f64 {
-    match state {
-        DriveState::Idle => 0.0,
-        DriveState::PreTorque => 1.0,
-        DriveState::BrakeLift => 2.0,
-        DriveState::Travel => 3.0,
-        DriveState::Hold => 4.0,
-        DriveState::BrakeSet => 5.0,
-        DriveState::Tripped(fault) => 100.0 + fault.code() as f64,
-    }
-}
-
-/// Simulates `spec` on `rig` with the drive core in the loop.
+/// Simulates `spec` on `rig` with the drive core (in this process) in the loop.
 pub fn simulate_travel(
     rig: &RigConfig,
     spec: &TravelSpec,
     options: &SimOptions,
     progress: Option<&ProgressBar>,
+) -> Result<TravelRun, SimError> {
+    let mut controller = Controller::new(&rig.drive_config());
+    simulate_travel_with(rig, spec, options, &mut controller, progress, None)
+}
+
+/// Simulates `spec` on `rig` with `controller` in the loop; `log`, if
+/// given, receives every step's inputs and outputs.
+pub fn simulate_travel_with(
+    rig: &RigConfig,
+    spec: &TravelSpec,
+    options: &SimOptions,
+    controller: &mut dyn DriveController,
+    progress: Option<&ProgressBar>,
+    mut log: Option<&mut StepLog>,
 ) -> Result<TravelRun, SimError> {
     let total = rig.mechanics.rope_total_length_m;
     let inside = |lw: f64| lw > 0.0 && lw < total;
@@ -155,16 +191,16 @@ pub fn simulate_travel(
             if spec.direction == Direction::Up { "greater" } else { "smaller" }
         )));
     }
-    let drive = rig.drive_config();
-    let mut controller = Controller::new(&drive);
-    controller
-        .command_travel(TravelCommand {
-            direction: spec.direction,
-            distance_m: distance as f32,
-            m_car_kg: spec.m_car_kg as f32,
-            lw_start_m: spec.lw_start_m as f32,
-        })
-        .map_err(SimError::Refused)?;
+    let command = TravelCommand {
+        direction: spec.direction,
+        distance_m: distance as f32,
+        m_car_kg: spec.m_car_kg as f32,
+        lw_start_m: spec.lw_start_m as f32,
+    };
+    controller.command_travel(command)?;
+    if let Some(log) = log.as_deref_mut() {
+        log.command = Some(command);
+    }
     let mut plant = Plant::new(rig, spec.m_car_kg, spec.lw_start_m);
 
     let ts = 1.0 / rig.control.current_loop_hz;
@@ -181,7 +217,11 @@ pub fn simulate_travel(
     let mut k: u64 = 0;
     loop {
         let t_k = k as f64 * ts;
-        let output = controller.step(&plant.sensor_frame());
+        let sensors = plant.sensor_frame();
+        let output = controller.step(&sensors)?;
+        if let Some(log) = log.as_deref_mut() {
+            log.steps.push((sensors, output));
+        }
         if let DriveState::Tripped(fault) = output.state {
             return Err(SimError::Tripped { time_s: t_k, fault });
         }
@@ -224,6 +264,9 @@ pub fn simulate_travel(
             return Err(SimError::Timeout(time_limit));
         }
         k += 1;
+        if options.max_control_steps.is_some_and(|max| k >= max) {
+            break;
+        }
         if let Some(bar) = progress {
             if k % 1600 == 0 {
                 bar.set_position(k.min(expected_steps));
@@ -250,7 +293,7 @@ fn record(run: &mut TravelRun, t: f64, o: &PlantObservation, output: &shared::Co
     run.ripple_torque_nm.push(o.ripple_torque_nm);
     run.shaft_speed_radps.push(o.shaft_speed_radps);
     run.lw_m.push(o.counterweight_side_length_m);
-    run.drive_state.push(state_code(output.state));
+    run.drive_state.push(output.state.code() as f64);
 }
 
 impl TravelRun {

@@ -412,6 +412,23 @@ impl RigConfig {
         counts.floor().clamp(1.0, u16::MAX as f64) as u16
     }
 
+    /// Rust source of `pub const DRIVE_CONFIG: shared::DriveConfig = ...;`
+    /// for the firmware build scripts, so that every binary runs the
+    /// controller with the values the host uses. `origin` names the rig file
+    /// in the generated comment.
+    pub fn drive_config_source(&self, origin: &str) -> String {
+        // DriveConfig is a struct of integer and f32 fields: its Debug text
+        // (`DriveConfig { pole_pairs: 6, ld_h: 0.015, .. }`) is a valid struct
+        // literal, which rustc type-checks where it is included. Validation
+        // has already refused non-finite values, which would not be literals.
+        format!(
+            "// @generated from {origin} by rig-config. Do not edit.\n\
+             /// Drive parameters of the rig, generated at build time from `{origin}`.\n\
+             pub const DRIVE_CONFIG: shared::DriveConfig = shared::{:?};\n",
+            self.drive_config()
+        )
+    }
+
     /// The drive-core parameters of this rig.
     pub fn drive_config(&self) -> DriveConfig {
         let m = &self.mechanics;
@@ -493,6 +510,15 @@ mod tests {
         let text = EMBEDDED_RIG_TOML.replace("pole_pairs = 6", "pole_pairs = \"six\"");
         let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
         assert!(err.contains("line") && err.contains("pole_pairs"), "{err}");
+    }
+
+    #[test]
+    fn generated_source_is_a_struct_literal_of_every_field() {
+        let rig = RigConfig::embedded_default().unwrap();
+        let source = rig.drive_config_source("configs/rig.toml");
+        assert!(source.contains("pub const DRIVE_CONFIG: shared::DriveConfig = shared::DriveConfig {"), "{source}");
+        assert!(source.contains("pole_pairs: 6,") && source.contains("pwm_period_counts: 5312,"), "{source}");
+        assert!(!source.contains("NaN") && !source.contains("inf"), "{source}");
     }
 
     #[test]

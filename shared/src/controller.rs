@@ -32,6 +32,12 @@ pub const BRAKE_SET_S: f32 = 0.2;
 /// Position-loop gain on the car position error, 1/s.
 pub const POSITION_GAIN_PER_S: f32 = 2.0;
 
+/// A [`Q16`] as `f32`: one integer conversion and a multiplication by a
+/// power of two (rounded to nearest like any `i32 -> f32` conversion).
+fn to_f32(value: Q16) -> f32 {
+    value.to_bits() as f32 * (1.0 / 65536.0)
+}
+
 /// What the firmware reads in one PWM period.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SensorFrame {
@@ -185,6 +191,8 @@ pub struct Controller {
     current_lsb_a: Q16,
     dc_bus_v_per_code: Q16,
     speed_divider: u32,
+    /// `2^48 / counts_per_rev`: binary angle per encoder count, Q16.
+    binary_angle_per_count_q16: u64,
 }
 
 impl Controller {
@@ -225,6 +233,7 @@ impl Controller {
             current_lsb_a: q16(config.current_lsb_a()),
             dc_bus_v_per_code: q16(config.dc_bus_sense_full_scale_v / config.adc_max_code() as f32),
             speed_divider: config.speed_loop_divider(),
+            binary_angle_per_count_q16: (1u64 << 48) / config.encoder_counts_per_rev.max(1) as u64,
         }
     }
 
@@ -276,11 +285,13 @@ impl Controller {
         self.state_ticks as f32 / self.config.speed_loop_hz
     }
 
+    /// Electrical angle of the rotor from the encoder: `p` times the
+    /// position within the revolution, as a binary angle. One 32-bit
+    /// multiply-and-remainder and one 64-bit multiply: no 64-bit division.
     fn electrical_angle(&self) -> Angle {
-        let cpr = self.config.encoder_counts_per_rev.max(1) as i64;
-        let mechanical = self.estimator.position_counts().rem_euclid(cpr) as u64;
-        let electrical = mechanical * self.config.pole_pairs as u64 % cpr as u64;
-        ((electrical << 32) / cpr as u64) as u32
+        let cpr = self.config.encoder_counts_per_rev.max(1);
+        let electrical = self.estimator.revolution_counts() * self.config.pole_pairs as u32 % cpr;
+        ((electrical as u64 * self.binary_angle_per_count_q16) >> 16) as u32
     }
 
     /// One PWM period.
@@ -334,14 +345,14 @@ impl Controller {
                 dc_bus_v,
             );
             pwm_compare = out.compare;
-            self.telemetry.id_a = out.current.d.to_num();
-            self.telemetry.iq_a = out.current.q.to_num();
+            self.telemetry.id_a = to_f32(out.current.d);
+            self.telemetry.iq_a = to_f32(out.current.q);
         } else {
             self.current_loop.reset();
             self.telemetry.id_a = 0.0;
             self.telemetry.iq_a = 0.0;
         }
-        self.telemetry.iq_ref_a = self.iq_ref.to_num();
+        self.telemetry.iq_ref_a = to_f32(self.iq_ref);
         self.telemetry.angle_rad = self.estimator.angle_rad();
         ControlOutput { pwm_compare, pwm_enabled, brake_released, state: self.state, telemetry: self.telemetry }
     }
@@ -352,7 +363,7 @@ impl Controller {
         let speed = self.estimator.speed_radps();
         self.supervisor.check_speed(speed);
         self.state_ticks = self.state_ticks.saturating_add(1);
-        self.telemetry.speed_radps = speed.to_num();
+        self.telemetry.speed_radps = to_f32(speed);
 
         let Some(travel) = self.travel else {
             self.iq_ref = Q16::ZERO;
@@ -399,7 +410,7 @@ impl Controller {
             }
             DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet => {
                 let (torque, iq) = self.speed_loop.step(q16(speed_ref_radps), speed, q16(torque_ff));
-                self.telemetry.torque_ref_nm = torque.to_num();
+                self.telemetry.torque_ref_nm = to_f32(torque);
                 self.iq_ref = iq;
                 let next = match self.state {
                     DriveState::BrakeLift if t >= BRAKE_LIFT_S => Some(DriveState::Travel),
@@ -541,6 +552,22 @@ mod tests {
             let mut bad = frame(10);
             spoil(&mut bad);
             assert_eq!(c.step(&bad).state, DriveState::Tripped(fault));
+        }
+    }
+
+    #[test]
+    fn electrical_angle_is_pole_pairs_times_the_shaft_angle() {
+        for counts_per_rev in [16_384u32, 10_000] {
+            let mut config = rig();
+            config.encoder_counts_per_rev = counts_per_rev;
+            let mut c = Controller::new(&config);
+            for raw in [0u32, 1, 1234, 16_383, 16_384, 99_999, u32::MAX - 7] {
+                c.estimator.count(raw);
+                let shaft = c.estimator.position_counts().rem_euclid(counts_per_rev as i64) as f64;
+                let turns = (shaft * 6.0 / counts_per_rev as f64).fract();
+                let got = c.electrical_angle() as f64 / 4_294_967_296.0;
+                assert!((got - turns).abs() < 1e-9, "cpr {counts_per_rev}, raw {raw}: {got} vs {turns}");
+            }
         }
     }
 

@@ -17,7 +17,7 @@
 //! PI gains by pole-zero cancellation: `Kp = L wc`, `Ki = R wc`.
 
 use crate::config::DriveConfig;
-use crate::fixed::{add, mul, q16, sqrt, sub, Q16, Q30};
+use crate::fixed::{add, mul, mul_q30, q16, sqrt, sub, Q16, Q30};
 use crate::park_clarke::{clarke, inverse_park, park, Abc, Dq, INV_SQRT3};
 use crate::pi::{Pi, PiGains};
 use crate::svpwm::{compare_values, duty_cycles};
@@ -117,18 +117,20 @@ impl CurrentLoop {
         let ff_q = mul(speed_e_radps, add(mul(p.ld_h, current.d), p.flux_linkage_wb));
 
         let dc_bus = if dc_bus_v < MIN_DC_BUS_V { MIN_DC_BUS_V } else { dc_bus_v };
-        let v_max = mul(mul(dc_bus, INV_SQRT3), MODULATION_MARGIN);
+        let v_max = mul(mul_q30(dc_bus, INV_SQRT3), MODULATION_MARGIN);
         let v_d = self.d_pi.update(sub(Q16::ZERO, current.d), ff_d, -v_max, v_max);
         let v_q_max = sqrt(sub(mul(v_max, v_max), mul(v_d, v_d)));
         let v_q = self.q_pi.update(sub(iq_ref, current.q), ff_q, -v_q_max, v_q_max);
         let voltage = Dq { d: v_d, q: v_q };
 
         // The voltage acts centred one period later: advance the angle by Ts.
-        let advance = (speed_e_radps.to_bits() as i64).saturating_mul(p.advance_per_radps) >> 16;
+        // |speed bits| < 2^31 and the gain < 2^20: the product fits i64.
+        let advance = (speed_e_radps.to_bits() as i64 * p.advance_per_radps) >> 16;
         let (sin_out, cos_out) = sin_cos(angle.wrapping_add(advance as i32 as u32));
-        // 1/V_dc in Q2.30 (V_dc >= 1 V): one division per period.
-        let inverse_dc_bus =
-            Q30::from_bits((((1i64 << 46) + (dc_bus.to_bits() as i64 / 2)) / dc_bus.to_bits() as i64) as i32);
+        // 1/V_dc in Q2.30 (V_dc >= 1 V): 2^46 / raw bits, by one IEEE-754 f32
+        // division (correctly rounded on every target, so bit-identical) and a
+        // saturating conversion; within one Q2.30 step of the exact value.
+        let inverse_dc_bus = Q30::from_bits((70_368_744_177_664.0f32 / dc_bus.to_bits() as f32) as i32);
         let duties = duty_cycles(inverse_park(voltage, sin_out, cos_out), inverse_dc_bus);
         CurrentLoopOutput { compare: compare_values(duties, p.period_counts), current, voltage }
     }

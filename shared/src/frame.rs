@@ -8,7 +8,8 @@
 //! Floating-point values travel as their IEEE-754 bits, so nothing is lost.
 
 use crate::config::Direction;
-use crate::controller::{ControlOutput, DriveState, SensorFrame, Telemetry, TravelCommand};
+use crate::controller::{CommandError, ControlOutput, DriveState, SensorFrame, Telemetry, TravelCommand};
+use crate::profile::ProfileError;
 
 /// First sync byte.
 pub const SYNC0: u8 = 0xA5;
@@ -25,13 +26,67 @@ const KIND_RESET: u8 = 0x03;
 const KIND_OUTPUT: u8 = 0x81;
 const KIND_ACK: u8 = 0x82;
 
-/// One controller step's result as the chip reports it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// One controller step's result as the chip reports it: the outputs that
+/// drive the hardware in full, the telemetry as a digest (the link is a slow
+/// UART; the host recomputes the telemetry and checks the digest).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct StepReport {
-    /// The controller's output.
-    pub output: ControlOutput,
+    /// Timer compare values of phases a, b, c, counts.
+    pub pwm_compare: [u16; 3],
+    /// Gate drivers enabled.
+    pub pwm_enabled: bool,
+    /// Brake released.
+    pub brake_released: bool,
+    /// State after the step.
+    pub state: DriveState,
+    /// [`telemetry_digest`] of the step's telemetry.
+    pub telemetry_digest: u32,
     /// Cost of the step in the chip's cycle counter ticks (SysTick), counts.
     pub cost_ticks: u32,
+}
+
+impl StepReport {
+    /// The report of `output`, with the cost of the step.
+    pub fn new(output: &ControlOutput, cost_ticks: u32) -> Self {
+        Self {
+            pwm_compare: output.pwm_compare,
+            pwm_enabled: output.pwm_enabled,
+            brake_released: output.brake_released,
+            state: output.state,
+            telemetry_digest: telemetry_digest(&output.telemetry),
+            cost_ticks,
+        }
+    }
+
+    /// Whether `output` is bit for bit the output this report describes
+    /// (telemetry through its digest; the cost is not part of the output).
+    pub fn matches(&self, output: &ControlOutput) -> bool {
+        let mut same = Self::new(output, self.cost_ticks);
+        same.cost_ticks = self.cost_ticks;
+        same == *self
+    }
+}
+
+/// FNV-1a (32-bit) of the bits of every telemetry value, in field order.
+pub fn telemetry_digest(t: &Telemetry) -> u32 {
+    let mut hash: u32 = 0x811C_9DC5;
+    for value in [
+        t.id_a,
+        t.iq_a,
+        t.iq_ref_a,
+        t.speed_radps,
+        t.speed_ref_radps,
+        t.ref_speed_mps,
+        t.angle_rad,
+        t.torque_ff_nm,
+        t.torque_ref_nm,
+    ] {
+        for byte in value.to_bits().to_le_bytes() {
+            hash ^= byte as u32;
+            hash = hash.wrapping_mul(0x0100_0193);
+        }
+    }
+    hash
 }
 
 /// A message of the PIL link.
@@ -65,6 +120,27 @@ pub enum FrameError {
     },
     /// A field holds a value no encoder writes (state, fault or direction code).
     BadField,
+}
+
+/// Reply code of a travel or reset command: 0 accepted, 1 not idle, 2 no
+/// profile for the travel, 3 travel outside the rig.
+pub fn command_result_code(result: Result<(), CommandError>) -> u8 {
+    match result {
+        Ok(()) => 0,
+        Err(CommandError::NotIdle) => 1,
+        Err(CommandError::Profile(_)) => 2,
+        Err(CommandError::OutOfRange) => 3,
+    }
+}
+
+/// The command result of a reply code (see [`command_result_code`]).
+pub fn command_result_from_code(code: u8) -> Result<(), CommandError> {
+    match code {
+        0 => Ok(()),
+        1 => Err(CommandError::NotIdle),
+        2 => Err(CommandError::Profile(ProfileError::NonPositiveLimit)),
+        _ => Err(CommandError::OutOfRange),
+    }
 }
 
 /// CRC-16/CCITT-FALSE of `bytes`, continuing from `crc` (start: 0xFFFF).
@@ -130,7 +206,7 @@ impl Reader<'_> {
 
 const SENSE_LEN: usize = 3 * 2 + 4 + 2 + 4;
 const TRAVEL_LEN: usize = 1 + 3 * 4;
-const OUTPUT_LEN: usize = 3 * 2 + 3 + 9 * 4 + 4;
+const OUTPUT_LEN: usize = 3 * 2 + 2 + 4 + 4;
 
 fn payload_len(kind: u8) -> Option<usize> {
     match kind {
@@ -173,25 +249,10 @@ pub fn encode(message: &Message, buf: &mut [u8; MAX_FRAME]) -> usize {
         }
         Message::Reset => {}
         Message::Output(r) => {
-            let o = &r.output;
-            o.pwm_compare.iter().for_each(|&c| w.u16(c));
-            w.u8(o.pwm_enabled as u8 | (o.brake_released as u8) << 1);
-            w.u8(o.state.code());
-            w.u8(0);
-            let t = &o.telemetry;
-            for v in [
-                t.id_a,
-                t.iq_a,
-                t.iq_ref_a,
-                t.speed_radps,
-                t.speed_ref_radps,
-                t.ref_speed_mps,
-                t.angle_rad,
-                t.torque_ff_nm,
-                t.torque_ref_nm,
-            ] {
-                w.f32(v);
-            }
+            r.pwm_compare.iter().for_each(|&c| w.u16(c));
+            w.u8(r.pwm_enabled as u8 | (r.brake_released as u8) << 1);
+            w.u8(r.state.code());
+            w.u32(r.telemetry_digest);
             w.u32(r.cost_ticks);
         }
         Message::Ack(code) => w.u8(*code),
@@ -225,27 +286,18 @@ fn parse(kind: u8, payload: &[u8]) -> Result<Message, FrameError> {
         KIND_OUTPUT => {
             let pwm_compare = [r.u16(), r.u16(), r.u16()];
             let flags = r.u8();
+            if flags > 0b11 {
+                return Err(FrameError::BadField);
+            }
             let state = DriveState::from_code(r.u8()).ok_or(FrameError::BadField)?;
-            let _reserved = r.u8();
-            let telemetry = Telemetry {
-                id_a: r.f32(),
-                iq_a: r.f32(),
-                iq_ref_a: r.f32(),
-                speed_radps: r.f32(),
-                speed_ref_radps: r.f32(),
-                ref_speed_mps: r.f32(),
-                angle_rad: r.f32(),
-                torque_ff_nm: r.f32(),
-                torque_ref_nm: r.f32(),
-            };
-            let output = ControlOutput {
+            Message::Output(StepReport {
                 pwm_compare,
                 pwm_enabled: flags & 1 != 0,
                 brake_released: flags & 2 != 0,
                 state,
-                telemetry,
-            };
-            Message::Output(StepReport { output, cost_ticks: r.u32() })
+                telemetry_digest: r.u32(),
+                cost_ticks: r.u32(),
+            })
         }
         KIND_ACK => Message::Ack(r.u8()),
         other => return Err(FrameError::UnknownKind(other)),
@@ -372,7 +424,7 @@ mod tests {
                 lw_start_m: 7.6,
             }),
             Message::Reset,
-            Message::Output(StepReport { output, cost_ticks: 987 }),
+            Message::Output(StepReport::new(&output, 987)),
             Message::Ack(0),
             Message::Ack(3),
         ]
@@ -408,6 +460,25 @@ mod tests {
                 assert!(decoded.contains(&Ok(message)), "bit {bit}: no recovery");
             }
         }
+    }
+
+    #[test]
+    fn a_report_matches_only_its_own_output() {
+        let output = ControlOutput {
+            pwm_compare: [10, 20, 30],
+            pwm_enabled: true,
+            brake_released: true,
+            state: DriveState::Travel,
+            telemetry: Telemetry { speed_radps: 6.15, ..Telemetry::default() },
+        };
+        let report = StepReport::new(&output, 42);
+        assert!(report.matches(&output));
+        let mut other = output;
+        other.telemetry.speed_radps = f32::from_bits(6.15f32.to_bits() + 1); // one ulp
+        assert!(!report.matches(&other));
+        other = output;
+        other.pwm_compare[2] = 31;
+        assert!(!report.matches(&other));
     }
 
     #[test]

@@ -1,11 +1,13 @@
 //! Discrete PI controller with output limits and anti-windup.
 //!
-//! `u = Kp e + x + ff`, `x <- x + Ki Ts e`, where the integrator `x` is not
-//! advanced in a step whose output saturates in the direction the error
-//! pushes (conditional integration), and is itself kept inside the output
-//! limits. Saturating fixed point throughout.
+//! `u = clamp(p + x)` with `p = Kp e + ff` and the integrator
+//! `x <- clamp(x + Ki Ts e, min(lo - p, 0), max(hi - p, 0))`: dynamic
+//! clamping, so the integrator never holds more than the output limits leave
+//! room for (no wind-up), and the output is a continuous function of the
+//! inputs (no branch that a rounding difference could flip). Saturating
+//! fixed point throughout.
 
-use crate::fixed::{add, clamp, mul, Q16};
+use crate::fixed::{add, clamp, mul, sub, Q16};
 
 /// PI gains in discrete form.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,14 +49,11 @@ impl Pi {
     /// One step: `error` (input unit), `feed_forward` and the limits `lo <= hi`
     /// (output unit). Returns the limited output.
     pub fn update(&mut self, error: Q16, feed_forward: Q16, lo: Q16, hi: Q16) -> Q16 {
-        let proportional = mul(self.gains.kp, error);
-        let candidate = clamp(add(self.integral, mul(self.gains.ki_ts, error)), lo, hi);
-        let unlimited = add(add(proportional, candidate), feed_forward);
-        let winding_up = (unlimited > hi && error > Q16::ZERO) || (unlimited < lo && error < Q16::ZERO);
-        if !winding_up {
-            self.integral = candidate;
-        }
-        clamp(add(add(proportional, self.integral), feed_forward), lo, hi)
+        let proportional = add(mul(self.gains.kp, error), feed_forward);
+        let upper = sub(hi, proportional).max(Q16::ZERO);
+        let lower = sub(lo, proportional).min(Q16::ZERO);
+        self.integral = clamp(add(self.integral, mul(self.gains.ki_ts, error)), lower, upper);
+        clamp(add(proportional, self.integral), lo, hi)
     }
 }
 

@@ -19,6 +19,9 @@ use crate::fixed::Q16;
 pub struct SpeedEstimator {
     last_count: Option<u32>,
     position_counts: i64,
+    /// Position modulo one revolution, `0..counts_per_rev`, counts.
+    revolution_counts: u32,
+    counts_per_rev: u32,
     position_estimate: I32F32,
     speed_counts_per_s: I32F32,
     ki_ts: I32F32,
@@ -37,6 +40,8 @@ impl SpeedEstimator {
         Self {
             last_count: None,
             position_counts: 0,
+            revolution_counts: 0,
+            counts_per_rev: counts_per_rev.max(1),
             position_estimate: I32F32::ZERO,
             speed_counts_per_s: I32F32::ZERO,
             ki_ts: sat(wn * wn * ts),
@@ -56,7 +61,16 @@ impl SpeedEstimator {
         };
         self.last_count = Some(raw_count);
         self.position_counts = self.position_counts.saturating_add(delta as i64);
+        // Within one revolution: no division unless the step crosses the zero mark.
+        let within = self.revolution_counts as i64 + delta as i64;
+        let cpr = self.counts_per_rev as i64;
+        self.revolution_counts = if (0..cpr).contains(&within) { within } else { within.rem_euclid(cpr) } as u32;
         delta
+    }
+
+    /// Position within the current revolution, `0..counts_per_rev`, counts.
+    pub fn revolution_counts(&self) -> u32 {
+        self.revolution_counts
     }
 
     /// Accumulated position since start, counts.
@@ -80,13 +94,30 @@ impl SpeedEstimator {
 
     /// Shaft angle travelled since start, rad.
     pub fn angle_rad(&self) -> f32 {
-        self.position_counts as f32 * self.radians_per_count.to_num::<f32>()
+        // Saturated to i32 counts (131 072 revolutions of this encoder) so the
+        // conversion is one instruction on the Cortex-M4F.
+        let counts = self.position_counts.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+        counts as f32 * self.radians_per_count.to_num::<f32>()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn revolution_position_is_the_position_modulo_one_revolution() {
+        let mut estimator = SpeedEstimator::new(2000.0, 40.0, 1000);
+        let mut raw = 0u32;
+        let mut seed = 12345u32;
+        for _ in 0..20_000 {
+            seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            let delta = (seed >> 16) as i32 % 2501 - 1250; // -1250..=1250 counts, several revolutions
+            raw = raw.wrapping_add(delta as u32);
+            estimator.count(raw);
+            assert_eq!(estimator.revolution_counts() as i64, estimator.position_counts().rem_euclid(1000));
+        }
+    }
 
     #[test]
     fn tracks_a_constant_speed_through_counter_wrap() {

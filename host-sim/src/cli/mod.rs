@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod modes;
+pub mod pil;
 pub mod travel;
 
 use std::path::{Path, PathBuf};
@@ -35,6 +36,10 @@ pub enum Command {
     Travel(travel::TravelArgs),
     /// Measures how fast travels simulate (ratio to real time).
     Bench(bench::BenchArgs),
+    /// Processor in the loop: the plant here, the drive core in QEMU's
+    /// emulated Cortex-M4F; checks every step against the host build and
+    /// reports the instructions per control step.
+    Pil(pil::PilArgs),
 }
 
 /// Runs a parsed command line.
@@ -44,6 +49,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Modes(args) => modes::run(&rig, &args),
         Command::Travel(args) => travel::run(&rig, &args),
         Command::Bench(args) => bench::run(&rig, &args),
+        Command::Pil(args) => pil::run(&rig, &args),
     }
 }
 

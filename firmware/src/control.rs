@@ -1,0 +1,428 @@
+//! The control interrupt: one `shared::Controller::step` per PWM period, in
+//! ADC2's end-of-injected-sequence interrupt (`ADC1_2`, the highest priority),
+//! and the state it shares with the telemetry task.
+//!
+//! Each period, about 1.5 us after the PWM counter peak triggered the
+//! conversions, the interrupt
+//! 1. reads the time stamp (TIM2), the encoder (TIM4) and the four injected
+//!    conversions (ADC1/ADC2 JDR1-2), and TIM1's break flag;
+//! 2. applies at most one queued command (travel or reset);
+//! 3. during start-up feeds the current-offset calibration, afterwards
+//!    steps the controller with the offset-corrected codes;
+//! 4. writes the three compares (taking effect at the next PWM valley), sets
+//!    MOE from `pwm_enabled` and drives the brake from `brake_released`
+//!    (released only while the inverter is on), unless a firmware fault is
+//!    latched;
+//! 5. measures its own duration (DWT cycle counter) and latches an overrun
+//!    if it took longer than a PWM period or if the next sequence completed
+//!    before it finished;
+//! 6. every [`RECORD_DECIMATION`]th step queues a telemetry record.
+//!
+//! Sharing: the interrupt owns the controller, inside a
+//! `critical_section::Mutex`; the task never touches it. The task and the
+//! interrupt exchange commands, events and records through `heapless`
+//! queues behind critical sections, each held for one push or pop (a few
+//! hundred cycles at most, the longest the task can delay the interrupt).
+//!
+//! Firmware faults latch on top of the controller's own supervisor: PWM off
+//! (MOE = 0), brake applied, until a reset command; a failed calibration
+//! latches until the chip restarts (there are no valid offsets to run with).
+
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use cortex_m::peripheral::DWT;
+use critical_section::{CriticalSection, Mutex};
+use embassy_stm32::gpio::{Level, Output};
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::{InterruptExt, Priority};
+use heapless::Deque;
+use shared::controller::{CommandError, Telemetry};
+use shared::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
+use shared::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
+
+use crate::adc::{self, Incomplete, Samples};
+use crate::encoder::{self, Extender};
+use crate::{pwm, timebase, DRIVE_CONFIG};
+
+/// PWM periods to wait after start before calibrating, letting the ADCs and
+/// the shunt amplifiers settle: 160 periods = 10 ms.
+pub const SETTLE_STEPS: u16 = 160;
+
+/// PWM periods averaged by the current-offset calibration: 1024 = 64 ms.
+pub const CALIBRATION_SAMPLES: u16 = 1024;
+
+/// Every how many steps the interrupt queues a telemetry record (16: 1 kHz).
+pub const RECORD_DECIMATION: u32 = 16;
+
+/// Telemetry records the queue holds: 32 ms at 1 kHz, against the task's
+/// 10 ms polling period.
+pub const RECORD_CAPACITY: usize = 32;
+
+const EVENT_CAPACITY: usize = 8;
+const COMMAND_CAPACITY: usize = 4;
+
+/// A command from the task, applied by the interrupt at its next step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Command {
+    /// Start a travel (accepted only when calibrated, fault-free and idle).
+    Travel(TravelCommand),
+    /// Clear latched faults: the controller's, and the firmware's overrun and
+    /// break latches (not a failed calibration). Refused when nothing is
+    /// latched, so that it can never stop a running travel.
+    #[allow(
+        dead_code,
+        reason = "no reset source on this board yet (the chip reset clears faults); a host link submits it"
+    )]
+    Reset,
+}
+
+/// Why a command was not applied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refusal {
+    /// Refused by the controller.
+    Controller(CommandError),
+    /// The drive is still calibrating, or a firmware fault is latched.
+    NotReady,
+    /// Reset with no fault latched.
+    NothingToReset,
+}
+
+/// A firmware-level fault, latched by the interrupt.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FirmwareFault {
+    /// A step took longer than one PWM period, CPU cycles.
+    Overrun {
+        /// Duration of that step, CPU cycles (170 per microsecond).
+        cycles: u32,
+    },
+    /// The next conversion sequence completed before the step finished.
+    TriggerOverrun,
+    /// The inverter's over-current comparator tripped TIM1's break input
+    /// (the hardware had already switched every gate off).
+    InverterBreak,
+    /// ADC1's sequence had not completed when ADC2's had.
+    AdcSequenceIncomplete,
+    /// The start-up current-offset calibration was rejected.
+    Calibration(OffsetError),
+}
+
+/// Something the task should log.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event {
+    /// The current-offset calibration passed; the drive is idle and accepts
+    /// commands.
+    Calibrated(CurrentOffsets),
+    /// A firmware fault was latched.
+    Fault(FirmwareFault),
+    /// A command was applied.
+    Applied(Command),
+    /// A command was refused.
+    Refused(Command, Refusal),
+}
+
+/// One decimated snapshot of a step, for the telemetry task.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Record {
+    /// Step number since start (wraps), PWM periods.
+    pub step: u32,
+    /// Time stamp of the step's sample, microseconds (wraps).
+    pub time_us: u32,
+    /// Controller state, `None` while calibrating or after a failed
+    /// calibration.
+    pub state: Option<DriveState>,
+    /// Latched firmware fault.
+    pub fault: Option<FirmwareFault>,
+    /// Inverter outputs on (MOE) after the step.
+    pub pwm_on: bool,
+    /// Brake released after the step.
+    pub brake_released: bool,
+    /// Phase-current codes U, V, W: offset-corrected once calibrated, raw
+    /// before, ADC codes.
+    pub phase_codes: [u16; 3],
+    /// DC-bus code, ADC code.
+    pub dc_bus_code: u16,
+    /// Extended encoder count, counts.
+    pub encoder_count: u32,
+    /// Compares written, timer ticks.
+    pub compare: [u16; 3],
+    /// Duration of the step, CPU cycles.
+    pub cycles: u32,
+    /// The controller's telemetry (all zero before it runs).
+    pub telemetry: Telemetry,
+}
+
+enum Phase {
+    Settling(u16),
+    Calibrating(OffsetCalibration),
+    Running(CurrentOffsets),
+    Failed,
+}
+
+struct Drive {
+    controller: Controller,
+    phase: Phase,
+    fault: Option<FirmwareFault>,
+    encoder: Extender,
+    brake: Output<'static>,
+    steps: u32,
+}
+
+static DRIVE: Mutex<RefCell<Option<Drive>>> = Mutex::new(RefCell::new(None));
+static RECORDS: Mutex<RefCell<Deque<Record, RECORD_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
+static EVENTS: Mutex<RefCell<Deque<Event, EVENT_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
+static COMMANDS: Mutex<RefCell<Deque<Command, COMMAND_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
+static STEPS: AtomicU32 = AtomicU32::new(0);
+static MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
+static DROPPED: AtomicU32 = AtomicU32::new(0);
+
+/// ADC code of zero phase current (mid-scale, as `DriveConfig::adc_zero_code`).
+const ZERO_CODE: u16 = 1 << (DRIVE_CONFIG.adc_bits - 1);
+
+/// Hands the controller and the brake pin to the interrupt and enables it.
+/// Call after `pwm::init` and `adc::init`; the drive then settles,
+/// calibrates and goes idle on its own.
+pub fn start(controller: Controller, brake: Output<'static>) {
+    critical_section::with(|cs| {
+        DRIVE.borrow_ref_mut(cs).replace(Drive {
+            controller,
+            phase: Phase::Settling(SETTLE_STEPS),
+            fault: None,
+            encoder: Extender::new(encoder::raw_count()),
+            brake,
+            steps: 0,
+        });
+    });
+    adc::clear_flags();
+    // The Embassy time driver's timer (TIM15) shares its vector with TIM1's
+    // break; below the control interrupt, it can never delay a step.
+    interrupt::TIM1_BRK_TIM15.set_priority(Priority::P1);
+    interrupt::ADC1_2.set_priority(Priority::P0);
+    interrupt::ADC1_2.unpend();
+    enable_control_interrupt();
+}
+
+#[allow(unsafe_code)]
+fn enable_control_interrupt() {
+    // SAFETY: unmasking ADC1_2 is sound: its handler below only touches state
+    // behind critical-section mutexes and atomics, and the registers of TIM1,
+    // TIM2, TIM4, ADC1 and ADC2, which no other code writes once `start`
+    // runs. Nothing relies on ADC1_2 staying masked (no embassy driver is
+    // bound to it).
+    unsafe { interrupt::ADC1_2.enable() };
+}
+
+/// Queues a command for the interrupt; gives it back if the queue is full.
+pub fn submit(command: Command) -> Result<(), Command> {
+    critical_section::with(|cs| COMMANDS.borrow_ref_mut(cs).push_back(command))
+}
+
+/// The oldest queued telemetry record.
+pub fn pop_record() -> Option<Record> {
+    critical_section::with(|cs| RECORDS.borrow_ref_mut(cs).pop_front())
+}
+
+/// The oldest queued event.
+pub fn pop_event() -> Option<Event> {
+    critical_section::with(|cs| EVENTS.borrow_ref_mut(cs).pop_front())
+}
+
+/// Control interrupts served since start (wraps).
+pub fn steps() -> u32 {
+    STEPS.load(Ordering::Relaxed)
+}
+
+/// Longest step since start, CPU cycles.
+pub fn max_cycles() -> u32 {
+    MAX_CYCLES.load(Ordering::Relaxed)
+}
+
+/// Records and events dropped because the task did not drain the queues.
+pub fn dropped() -> u32 {
+    DROPPED.load(Ordering::Relaxed)
+}
+
+/// The control interrupt: ADC2's end of injected sequence, once per PWM
+/// period (see the module doc).
+#[interrupt]
+fn ADC1_2() {
+    let entry_cycles = DWT::cycle_count();
+    // JEOS of ADC2 is the only enabled source of this vector.
+    if !adc::sequence_done() {
+        return;
+    }
+    let time_us = timebase::now_us();
+    let encoder_raw = encoder::raw_count();
+    let samples = adc::take();
+    let broke = pwm::break_occurred();
+    critical_section::with(|cs| match DRIVE.borrow_ref_mut(cs).as_mut() {
+        Some(drive) => drive.step(cs, entry_cycles, time_us, encoder_raw, samples, broke),
+        None => pwm::set_outputs_enabled(false),
+    });
+    STEPS.fetch_add(1, Ordering::Relaxed);
+}
+
+fn push_event(cs: CriticalSection, event: Event) {
+    if EVENTS.borrow_ref_mut(cs).push_back(event).is_err() {
+        DROPPED.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+impl Drive {
+    fn step(
+        &mut self,
+        cs: CriticalSection,
+        entry_cycles: u32,
+        time_us: u32,
+        encoder_raw: u16,
+        samples: Result<Samples, Incomplete>,
+        broke: bool,
+    ) {
+        self.steps = self.steps.wrapping_add(1);
+        let encoder_count = self.encoder.extend(encoder_raw);
+        if broke {
+            self.latch(cs, FirmwareFault::InverterBreak);
+        }
+        if let Some(command) = COMMANDS.borrow_ref_mut(cs).pop_front() {
+            self.apply(cs, command);
+        }
+
+        let (output, codes, dc_bus_code) = match samples {
+            Ok(samples) => {
+                let (output, codes) = self.sense(cs, samples, encoder_count, time_us);
+                (output, codes, samples.dc_bus_code)
+            }
+            Err(Incomplete) => {
+                self.latch(cs, FirmwareFault::AdcSequenceIncomplete);
+                (None, [0; 3], 0)
+            }
+        };
+
+        let pwm_on = self.fault.is_none() && output.is_some_and(|o| o.pwm_enabled);
+        let compare = output.map_or([0; 3], |o| o.pwm_compare);
+        pwm::set_compares(compare);
+        pwm::set_outputs_enabled(pwm_on);
+        // Fail-safe: the brake is released only while the inverter drives
+        // the machine, whatever the controller asks.
+        let brake_released = pwm_on && output.is_some_and(|o| o.brake_released);
+        self.brake.set_level(if brake_released { Level::High } else { Level::Low });
+
+        let cycles = DWT::cycle_count().wrapping_sub(entry_cycles);
+        if cycles > pwm::PERIOD_CYCLES {
+            self.latch(cs, FirmwareFault::Overrun { cycles });
+        } else if adc::sequence_done() {
+            self.latch(cs, FirmwareFault::TriggerOverrun);
+        }
+        MAX_CYCLES.fetch_max(cycles, Ordering::Relaxed);
+
+        if self.steps % RECORD_DECIMATION == 0 {
+            let record = Record {
+                step: self.steps,
+                time_us,
+                state: output.map(|o| o.state),
+                fault: self.fault,
+                pwm_on: pwm_on && self.fault.is_none(),
+                brake_released: brake_released && self.fault.is_none(),
+                phase_codes: codes,
+                dc_bus_code,
+                encoder_count,
+                compare,
+                cycles,
+                telemetry: output.map_or(Telemetry::default(), |o| o.telemetry),
+            };
+            if RECORDS.borrow_ref_mut(cs).push_back(record).is_err() {
+                DROPPED.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Start-up sequence or controller step; returns the controller's output
+    /// (if it ran) and the phase codes it saw.
+    fn sense(
+        &mut self,
+        cs: CriticalSection,
+        samples: Samples,
+        encoder_count: u32,
+        time_us: u32,
+    ) -> (Option<ControlOutput>, [u16; 3]) {
+        match &mut self.phase {
+            Phase::Settling(left) => {
+                *left = left.saturating_sub(1);
+                if *left == 0 {
+                    let limits = OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits);
+                    self.phase = Phase::Calibrating(OffsetCalibration::new(CALIBRATION_SAMPLES, limits));
+                }
+                (None, samples.phase_codes)
+            }
+            Phase::Calibrating(calibration) => {
+                calibration.push(samples.phase_codes);
+                if calibration.is_complete() {
+                    match calibration.finish() {
+                        Ok(offsets) => {
+                            self.phase = Phase::Running(offsets);
+                            push_event(cs, Event::Calibrated(offsets));
+                        }
+                        Err(error) => {
+                            self.phase = Phase::Failed;
+                            self.latch(cs, FirmwareFault::Calibration(error));
+                        }
+                    }
+                }
+                (None, samples.phase_codes)
+            }
+            Phase::Running(offsets) => {
+                let frame = SensorFrame {
+                    phase_current_codes: offsets.correct(samples.phase_codes, ZERO_CODE),
+                    encoder_count,
+                    dc_bus_code: samples.dc_bus_code,
+                    time_us,
+                };
+                (Some(self.controller.step(&frame)), frame.phase_current_codes)
+            }
+            Phase::Failed => (None, samples.phase_codes),
+        }
+    }
+
+    fn apply(&mut self, cs: CriticalSection, command: Command) {
+        let result = match command {
+            Command::Travel(travel) => {
+                if self.fault.is_some() || !matches!(self.phase, Phase::Running(_)) {
+                    Err(Refusal::NotReady)
+                } else {
+                    self.controller.command_travel(travel).map_err(Refusal::Controller)
+                }
+            }
+            Command::Reset => {
+                let controller_tripped = matches!(self.controller.state(), DriveState::Tripped(_));
+                match self.fault {
+                    Some(FirmwareFault::Calibration(_)) => Err(Refusal::NotReady),
+                    None if !controller_tripped => Err(Refusal::NothingToReset),
+                    _ => {
+                        pwm::clear_break_flag();
+                        self.fault = None;
+                        self.controller.reset();
+                        Ok(())
+                    }
+                }
+            }
+        };
+        push_event(
+            cs,
+            match result {
+                Ok(()) => Event::Applied(command),
+                Err(refusal) => Event::Refused(command, refusal),
+            },
+        );
+    }
+
+    /// Latches `fault` (the first one stays) and puts the drive in its safe
+    /// state at once.
+    fn latch(&mut self, cs: CriticalSection, fault: FirmwareFault) {
+        pwm::set_outputs_enabled(false);
+        self.brake.set_level(Level::Low);
+        if self.fault.is_none() {
+            self.fault = Some(fault);
+            push_event(cs, Event::Fault(fault));
+        }
+    }
+}

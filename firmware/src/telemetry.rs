@@ -1,0 +1,250 @@
+//! The lower-priority task: every [`POLL_MS`] it feeds the watchdog (if the
+//! control interrupt is alive), drains the interrupt's event and telemetry
+//! queues into the defmt log, and submits the operator's travel command once
+//! the drive is calibrated and idle.
+//!
+//! Log levels: events (calibration, faults, commands) and state changes at
+//! `info`/`error`, a one-line summary every [`SUMMARY_EVERY`] records
+//! (1 s) at `info`, and every record (1 kHz) at `debug`, compiled out unless
+//! `DEFMT_LOG=debug`.
+
+use defmt::{debug, error, info, warn};
+use embassy_time::{Duration, Instant, Ticker};
+use shared::controller::CommandError;
+use shared::current_offset::OffsetError;
+use shared::supervisor::Fault;
+use shared::{DriveState, TravelCommand};
+
+use crate::control::{self, Command, Event, FirmwareFault, Record, Refusal};
+use crate::watchdog::Watchdog;
+use crate::{pwm, DRIVE_CONFIG};
+
+/// Polling period of the task, ms: 10 records per poll at 1 kHz, a tenth of
+/// the watchdog timeout.
+pub const POLL_MS: u64 = 10;
+
+/// Records between two summary lines (1000 records = 1 s).
+pub const SUMMARY_EVERY: u32 = 1000;
+
+/// The task. `operator_travel` is started once, when the drive is first
+/// calibrated and idle.
+#[embassy_executor::task]
+pub async fn run(mut watchdog: Watchdog, operator_travel: Option<TravelCommand>) {
+    match operator_travel {
+        Some(travel) => info!(
+            "operator travel (FW_TRAVEL): {=str} {=f32} m, car {=f32} kg, lw at start {=f32} m; starts once calibrated and idle",
+            direction_name(travel),
+            travel.distance_m,
+            travel.m_car_kg,
+            travel.lw_start_m
+        ),
+        None => info!(
+            "no travel source: this board has no host link and no load weighing, so the drive stays Idle. \
+             Build with FW_TRAVEL=<up|down>:<distance m>:<car mass kg>:<lw at start m> for one travel"
+        ),
+    }
+
+    let mut pending_travel = operator_travel;
+    let mut calibrated = false;
+    let mut last_state: Option<DriveState> = None;
+    let mut records: u32 = 0;
+    let mut ticker = Ticker::every(Duration::from_millis(POLL_MS));
+    let mut last_poll = Instant::now();
+    let mut stalled = false;
+    loop {
+        ticker.next().await;
+        let now = Instant::now();
+        let elapsed_us = now.duration_since(last_poll).as_micros().min(u32::MAX as u64) as u32;
+        last_poll = now;
+        let fed = watchdog.feed_if_alive(control::steps(), elapsed_us);
+        if !fed && !stalled {
+            error!("control interrupt stalled: the watchdog is no longer fed and will reset the chip");
+        }
+        stalled = !fed;
+
+        while let Some(event) = control::pop_event() {
+            calibrated |= matches!(event, Event::Calibrated(_));
+            log_event(&event);
+        }
+        while let Some(record) = control::pop_record() {
+            records = records.wrapping_add(1);
+            if record.state != last_state {
+                info!("drive state: {=str} -> {=str}", state_name(last_state), state_name(record.state));
+                last_state = record.state;
+            }
+            log_record(&record, records % SUMMARY_EVERY == 0);
+        }
+
+        if calibrated && last_state == Some(DriveState::Idle) {
+            if let Some(travel) = pending_travel.take() {
+                if control::submit(Command::Travel(travel)).is_err() {
+                    pending_travel = Some(travel);
+                }
+            }
+        }
+    }
+}
+
+fn log_record(r: &Record, summary: bool) {
+    let t = &r.telemetry;
+    debug!(
+        "step {=u32} t {=u32} us state {=str} pwm {=bool} brake_released {=bool} codes {} bus {=u16} \
+         enc {=u32} cmp {} cycles {=u32} id {=f32} iq {=f32} iq_ref {=f32} speed {=f32} speed_ref {=f32} \
+         torque_ref {=f32}",
+        r.step,
+        r.time_us,
+        state_name(r.state),
+        r.pwm_on,
+        r.brake_released,
+        r.phase_codes,
+        r.dc_bus_code,
+        r.encoder_count,
+        r.compare,
+        r.cycles,
+        t.id_a,
+        t.iq_a,
+        t.iq_ref_a,
+        t.speed_radps,
+        t.speed_ref_radps,
+        t.torque_ref_nm
+    );
+    if summary {
+        info!(
+            "t {=u32} ms: {=str}, pwm {=bool}, brake released {=bool}, iq {=f32} A (ref {=f32}), speed {=f32} rad/s \
+             (ref {=f32}), bus code {=u16}, longest step {=u32} cycles of {=u32}, dropped {=u32}",
+            r.time_us / 1000,
+            state_name(r.state),
+            r.pwm_on,
+            r.brake_released,
+            t.iq_a,
+            t.iq_ref_a,
+            t.speed_radps,
+            t.speed_ref_radps,
+            r.dc_bus_code,
+            control::max_cycles(),
+            pwm::PERIOD_CYCLES,
+            control::dropped()
+        );
+    }
+}
+
+fn log_event(event: &Event) {
+    match *event {
+        Event::Calibrated(offsets) => {
+            let [u, v, w] = offsets.zero_current_codes;
+            info!(
+                "current offsets calibrated with the inverter off: zero-current codes U {=u16} V {=u16} W {=u16} \
+                 (mid-scale {=u16}); drive idle, waiting for a travel command",
+                u,
+                v,
+                w,
+                DRIVE_CONFIG.adc_zero_code()
+            );
+        }
+        Event::Fault(fault) => log_fault(fault),
+        Event::Applied(command) => info!("command applied: {=str}", command_name(&command)),
+        Event::Refused(command, refusal) => {
+            warn!("command refused: {=str}: {=str}", command_name(&command), refusal_name(refusal))
+        }
+    }
+}
+
+fn log_fault(fault: FirmwareFault) {
+    const SAFE: &str = "PWM off, brake applied, latched";
+    match fault {
+        FirmwareFault::Overrun { cycles } => error!(
+            "control step overran the PWM period: {=u32} cycles > {=u32}: {=str}",
+            cycles,
+            pwm::PERIOD_CYCLES,
+            SAFE
+        ),
+        FirmwareFault::TriggerOverrun => {
+            error!("next ADC sequence completed before the control step finished: {=str}", SAFE)
+        }
+        FirmwareFault::InverterBreak => {
+            error!("inverter over-current (TIM1 break input): gates cut by hardware; {=str}", SAFE)
+        }
+        FirmwareFault::AdcSequenceIncomplete => {
+            error!("ADC1 sequence incomplete at ADC2's end of sequence: {=str}", SAFE)
+        }
+        FirmwareFault::Calibration(error) => match error {
+            OffsetError::NotEnoughSamples { samples, required } => error!(
+                "current-offset calibration incomplete ({=u16} of {=u16} samples): {=str} until restart",
+                samples, required, SAFE
+            ),
+            OffsetError::Noisy { phase, peak_to_peak_codes } => error!(
+                "current-offset calibration failed: phase {=str} spans {=u16} codes peak to peak (limit {=u16}): \
+                 {=str} until restart",
+                phase_name(phase),
+                peak_to_peak_codes,
+                shared::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_peak_to_peak_codes,
+                SAFE
+            ),
+            OffsetError::OffsetOutOfRange { phase, zero_current_code } => error!(
+                "current-offset calibration failed: phase {=str} reads {=u16} at zero current, more than {=u16} \
+                 codes from mid-scale {=u16}: {=str} until restart",
+                phase_name(phase),
+                zero_current_code,
+                shared::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_offset_codes,
+                DRIVE_CONFIG.adc_zero_code(),
+                SAFE
+            ),
+        },
+    }
+}
+
+fn phase_name(phase: u8) -> &'static str {
+    match phase {
+        0 => "U",
+        1 => "V",
+        2 => "W",
+        _ => "?",
+    }
+}
+
+fn direction_name(travel: TravelCommand) -> &'static str {
+    match travel.direction {
+        shared::config::Direction::Up => "up",
+        shared::config::Direction::Down => "down",
+    }
+}
+
+fn command_name(command: &Command) -> &'static str {
+    match command {
+        Command::Travel(_) => "travel",
+        Command::Reset => "reset",
+    }
+}
+
+fn refusal_name(refusal: Refusal) -> &'static str {
+    match refusal {
+        Refusal::Controller(CommandError::NotIdle) => "drive not idle",
+        Refusal::Controller(CommandError::Profile(_)) => "no travel profile for that distance",
+        Refusal::Controller(CommandError::OutOfRange) => "travel outside the rig or car mass not positive",
+        Refusal::NotReady => "drive not calibrated, or a firmware fault is latched",
+        Refusal::NothingToReset => "no fault latched",
+    }
+}
+
+/// Name of a drive state for the log ("not running" while calibrating or
+/// after a failed calibration).
+fn state_name(state: Option<DriveState>) -> &'static str {
+    match state {
+        None => "not running",
+        Some(DriveState::Idle) => "Idle",
+        Some(DriveState::PreTorque) => "PreTorque",
+        Some(DriveState::BrakeLift) => "BrakeLift",
+        Some(DriveState::Travel) => "Travel",
+        Some(DriveState::Hold) => "Hold",
+        Some(DriveState::BrakeSet) => "BrakeSet",
+        Some(DriveState::Tripped(fault)) => match fault {
+            Fault::OverCurrent => "Tripped(OverCurrent)",
+            Fault::OverSpeed => "Tripped(OverSpeed)",
+            Fault::DcBusUnderVoltage => "Tripped(DcBusUnderVoltage)",
+            Fault::DcBusOverVoltage => "Tripped(DcBusOverVoltage)",
+            Fault::CurrentSensorImplausible => "Tripped(CurrentSensorImplausible)",
+            Fault::EncoderImplausible => "Tripped(EncoderImplausible)",
+            Fault::DeadlineMissed => "Tripped(DeadlineMissed)",
+        },
+    }
+}

@@ -1,0 +1,94 @@
+//! Processor-in-the-loop target: the drive core of `shared`, compiled for
+//! the Cortex-M4F exactly as for the STM32G474, on QEMU's `mps2-an386`.
+//!
+//! The host (`host-sim pil`) sends one [`Message::Sense`] frame per PWM
+//! period over UART0; the target steps the controller and answers with a
+//! [`Message::Output`] frame that carries the outputs, a digest of the
+//! telemetry and the cost of the step in SysTick ticks (processor clock, 25 MHz on this machine; under
+//! `qemu -icount shift=N` each instruction advances time by 2^N ns, so the
+//! host converts ticks to instructions). Travel and reset commands are
+//! acknowledged with [`Message::Ack`]. The frame codec is `shared::frame`,
+//! the same code the host uses.
+//!
+//! Logging: defmt over semihosting (feature `semihosting`, the default) or
+//! RTT (feature `rtt`); the controller code is the same either way.
+#![no_std]
+#![no_main]
+#![deny(unsafe_code)]
+
+mod uart;
+
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m::peripheral::SYST;
+use cortex_m_rt::entry;
+use shared::frame::{command_result_code, encode, Decoder, Message, StepReport, MAX_FRAME};
+use shared::Controller;
+
+#[cfg(feature = "rtt")]
+use defmt_rtt as _;
+#[cfg(feature = "semihosting")]
+use defmt_semihosting as _;
+
+include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
+
+/// SysTick reload: the full 24-bit range, ticks.
+const SYSTICK_RELOAD: u32 = 0x00FF_FFFF;
+
+#[entry]
+fn main() -> ! {
+    let Some(mut core) = cortex_m::Peripherals::take() else {
+        // Only reachable if something took the peripherals before main.
+        panic!("core peripherals already taken");
+    };
+    core.SYST.set_clock_source(SystClkSource::Core);
+    core.SYST.set_reload(SYSTICK_RELOAD);
+    core.SYST.clear_current();
+    core.SYST.enable_counter();
+
+    // The two SysTick reads around a step cost something themselves: measure
+    // that once with nothing between them and take it off every step.
+    let first = SYST::get_current();
+    let second = SYST::get_current();
+    let timing_overhead_ticks = first.wrapping_sub(second) & SYSTICK_RELOAD;
+
+    let mut uart = uart::Uart0::enable();
+    let mut controller = Controller::new(&DRIVE_CONFIG);
+    let mut decoder = Decoder::new();
+    let mut frame = [0u8; MAX_FRAME];
+    defmt::info!("PIL target up: PWM {} Hz, waiting for frames on UART0", DRIVE_CONFIG.pwm_hz);
+
+    loop {
+        let reply = match decoder.push(uart.read_byte()) {
+            None => continue,
+            Some(Ok(Message::Sense(sensors))) => {
+                let start = SYST::get_current();
+                let output = controller.step(&sensors);
+                let end = SYST::get_current();
+                // SysTick counts down, modulo its 24-bit reload.
+                let cost_ticks = (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
+                Message::Output(StepReport::new(&output, cost_ticks))
+            }
+            Some(Ok(Message::Travel(command))) => Message::Ack(command_result_code(controller.command_travel(command))),
+            Some(Ok(Message::Reset)) => {
+                controller.reset();
+                Message::Ack(0)
+            }
+            Some(Ok(Message::Output(_) | Message::Ack(_))) => continue,
+            Some(Err(error)) => {
+                defmt::warn!("dropped a bad frame: {}", defmt::Debug2Format(&error));
+                continue;
+            }
+        };
+        let n = encode(&reply, &mut frame);
+        uart.write_all(&frame[..n]);
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: {}", defmt::Debug2Format(info));
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}

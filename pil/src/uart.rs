@@ -1,0 +1,69 @@
+//! The CMSDK APB UART0 of the MPS2 board (as QEMU emulates it), polled.
+//!
+//! Registers at 0x4000_4000: DATA (+0x00), STATE (+0x04: bit 0 TX full,
+//! bit 1 RX full), CTRL (+0x08: bit 0 TX enable, bit 1 RX enable, bit 3 RX
+//! interrupt enable), INTCLEAR (+0x0C: bit 1 clears the RX interrupt),
+//! BAUDDIV (+0x10, at least 16 for the UART to run).
+//!
+//! Waiting for a byte sleeps in `wfi` on the RX interrupt (IRQ 0 of the
+//! MPS2) with interrupts masked (PRIMASK), so the pending interrupt only wakes
+//! the core: no handler runs. A busy poll would keep the emulated core
+//! spinning on the register and starve the emulator's I/O thread.
+#![allow(unsafe_code)]
+
+const BASE: usize = 0x4000_4000;
+const DATA: usize = BASE;
+const STATE: usize = BASE + 0x04;
+const CTRL: usize = BASE + 0x08;
+const INTCLEAR: usize = BASE + 0x0C;
+const BAUDDIV: usize = BASE + 0x10;
+/// NVIC interrupt number of the UART0 receiver on the MPS2.
+const UART0_RX_IRQ: u32 = 0;
+const NVIC_ISER0: usize = 0xE000_E100;
+const NVIC_ICPR0: usize = 0xE000_E280;
+const TX_FULL: u32 = 1 << 0;
+const RX_FULL: u32 = 1 << 1;
+
+fn read(address: usize) -> u32 {
+    // SAFETY: `address` is one of the UART0 registers above, a valid,
+    // aligned MMIO location on this machine; volatile keeps every access.
+    unsafe { core::ptr::read_volatile(address as *const u32) }
+}
+
+fn write(address: usize, value: u32) {
+    // SAFETY: as in `read`; writes to these registers have no effect on
+    // memory the program uses.
+    unsafe { core::ptr::write_volatile(address as *mut u32, value) }
+}
+
+/// UART0, polled. Only one exists; `main` creates it once.
+pub struct Uart0(());
+
+impl Uart0 {
+    /// Sets the baud divider and enables transmitter and receiver.
+    pub fn enable() -> Self {
+        cortex_m::interrupt::disable();
+        write(BAUDDIV, 16);
+        write(CTRL, 0b1011);
+        write(NVIC_ISER0, 1 << UART0_RX_IRQ);
+        Self(())
+    }
+
+    /// Waits (asleep) for and returns the next received byte.
+    pub fn read_byte(&mut self) -> u8 {
+        while read(STATE) & RX_FULL == 0 {
+            cortex_m::asm::wfi();
+            write(INTCLEAR, RX_FULL);
+            write(NVIC_ICPR0, 1 << UART0_RX_IRQ);
+        }
+        read(DATA) as u8
+    }
+
+    /// Sends `bytes`, waiting whenever the transmit buffer is full.
+    pub fn write_all(&mut self, bytes: &[u8]) {
+        for &byte in bytes {
+            while read(STATE) & TX_FULL != 0 {}
+            write(DATA, byte as u32);
+        }
+    }
+}
