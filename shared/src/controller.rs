@@ -13,7 +13,7 @@
 
 use crate::config::{Direction, DriveConfig};
 use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
-use crate::fixed::{q16, Q16};
+use crate::fixed::{mul_int, q16, Q16};
 use crate::park_clarke::Abc;
 use crate::profile::{ProfileError, SCurve};
 use crate::speed_estimator::SpeedEstimator;
@@ -306,7 +306,7 @@ impl Controller {
         let zero = self.config.adc_zero_code();
         let currents = codes.map(|code| current_from_code(code, zero, self.current_lsb_a));
         self.supervisor.check_currents(codes, currents);
-        let dc_bus_v = Q16::saturating_from_num(frame.dc_bus_code).saturating_mul(self.dc_bus_v_per_code);
+        let dc_bus_v = mul_int(frame.dc_bus_code as i32, self.dc_bus_v_per_code);
         self.supervisor.check_dc_bus(dc_bus_v);
         let delta = self.estimator.count(frame.encoder_count);
         self.supervisor.check_encoder_step(delta);
@@ -336,7 +336,8 @@ impl Controller {
         let brake_released = matches!(self.state, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold);
         let mut pwm_compare = [0u16; 3];
         if pwm_enabled {
-            let speed_e = self.estimator.speed_radps().saturating_mul_int(self.config.pole_pairs as i32);
+            let speed_e =
+                Q16::from_bits(self.estimator.speed_radps().to_bits().saturating_mul(self.config.pole_pairs as i32));
             let out = self.current_loop.step(
                 Abc { a: currents[0], b: currents[1], c: currents[2] },
                 self.electrical_angle(),

@@ -17,7 +17,7 @@
 //! PI gains by pole-zero cancellation: `Kp = L wc`, `Ki = R wc`.
 
 use crate::config::DriveConfig;
-use crate::fixed::{add, mul, mul_q30, q16, sqrt, sub, Q16, Q30};
+use crate::fixed::{add, mul, mul_int, mul_q30, q16, sqrt, sub, Q16, Q30};
 use crate::park_clarke::{clarke, inverse_park, park, Abc, Dq, INV_SQRT3};
 use crate::pi::{Pi, PiGains};
 use crate::svpwm::{compare_values, duty_cycles};
@@ -139,5 +139,5 @@ impl CurrentLoop {
 /// Phase current (A) of an ADC code, for a converter with `zero_code` at 0 A
 /// and `lsb_a` amperes per code.
 pub fn current_from_code(code: u16, zero_code: u16, lsb_a: Q16) -> Q16 {
-    mul(Q16::saturating_from_num(code as i32 - zero_code as i32), lsb_a)
+    mul_int(code as i32 - zero_code as i32, lsb_a)
 }

@@ -18,8 +18,20 @@ pub type Q30 = I2F30;
 /// Saturating `a * b` of a [`Q16`] and a [`Q30`], as [`Q16`] (rounded to nearest).
 #[inline]
 pub fn mul_q30(a: Q16, b: Q30) -> Q16 {
-    let wide = (a.to_bits() as i64 * b.to_bits() as i64 + (1 << 29)) >> 30;
-    Q16::from_bits(wide.clamp(i32::MIN as i64, i32::MAX as i64) as i32)
+    Q16::from_bits(saturate((a.to_bits() as i64 * b.to_bits() as i64 + (1 << 29)) >> 30))
+}
+
+/// `wide` limited to the `i32` range (one compare of the high word on the Cortex-M4).
+#[inline]
+fn saturate(wide: i64) -> i32 {
+    let narrow = wide as i32;
+    if narrow as i64 == wide {
+        narrow
+    } else if wide < 0 {
+        i32::MIN
+    } else {
+        i32::MAX
+    }
 }
 
 /// Converts an `f32` to [`Q16`], saturating at the range of the type; NaN maps to zero.
@@ -31,10 +43,18 @@ pub fn q16(value: f32) -> Q16 {
     }
 }
 
-/// Saturating `a * b`.
+/// Saturating `a * b`, rounded toward minus infinity: one 32x32->64-bit
+/// multiply, a shift and a clamp (the `fixed` crate's generic saturating
+/// multiply costs over ten times more on the Cortex-M4).
 #[inline]
 pub fn mul(a: Q16, b: Q16) -> Q16 {
-    a.saturating_mul(b)
+    Q16::from_bits(saturate((a.to_bits() as i64 * b.to_bits() as i64) >> 16))
+}
+
+/// `count` (a whole number, e.g. ADC codes) times `scale`, saturating.
+#[inline]
+pub fn mul_int(count: i32, scale: Q16) -> Q16 {
+    Q16::from_bits(count.saturating_mul(scale.to_bits()))
 }
 
 /// Saturating `a + b`.
@@ -75,6 +95,21 @@ pub fn sqrt(value: Q16) -> Q16 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn multiplication_matches_the_fixed_crate_and_saturates() {
+        let values = [0.0f32, 1.0, -1.0, 0.5, -2.75, 123.456, -0.000_1, 181.0, 30_000.0, -30_000.0];
+        for &a in &values {
+            for &b in &values {
+                let (a, b) = (q16(a), q16(b));
+                // The fixed crate rounds toward minus infinity too.
+                assert_eq!(mul(a, b), a.saturating_mul(b), "{a} * {b}");
+            }
+        }
+        // 4095 codes of 3200/65536 V: exactly 13 104 000 / 65536 V.
+        assert_eq!(mul_int(4095, Q16::from_bits(3200)), Q16::from_bits(13_104_000));
+        assert_eq!(mul_int(i32::MAX, Q16::ONE), Q16::MAX);
+    }
 
     #[test]
     fn saturates_instead_of_wrapping() {

@@ -24,6 +24,8 @@ pub struct SpeedEstimator {
     counts_per_rev: u32,
     position_estimate: I32F32,
     speed_counts_per_s: I32F32,
+    /// `speed_counts_per_s` in rad/s, updated with it.
+    speed_radps: Q16,
     ki_ts: I32F32,
     kp: I32F32,
     ts: I32F32,
@@ -44,6 +46,7 @@ impl SpeedEstimator {
             counts_per_rev: counts_per_rev.max(1),
             position_estimate: I32F32::ZERO,
             speed_counts_per_s: I32F32::ZERO,
+            speed_radps: Q16::ZERO,
             ki_ts: sat(wn * wn * ts),
             kp: sat(2.0 * wn),
             ts: sat(ts),
@@ -85,11 +88,12 @@ impl SpeedEstimator {
         self.speed_counts_per_s = self.speed_counts_per_s.saturating_add(self.ki_ts.saturating_mul(error));
         let rate = self.speed_counts_per_s.saturating_add(self.kp.saturating_mul(error));
         self.position_estimate = self.position_estimate.saturating_add(rate.saturating_mul(self.ts));
+        self.speed_radps = Q16::saturating_from_num(self.speed_counts_per_s.saturating_mul(self.radians_per_count));
     }
 
     /// Estimated shaft speed, rad/s (positive: car up).
     pub fn speed_radps(&self) -> Q16 {
-        Q16::saturating_from_num(self.speed_counts_per_s.saturating_mul(self.radians_per_count))
+        self.speed_radps
     }
 
     /// Shaft angle travelled since start, rad.
