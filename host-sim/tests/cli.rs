@@ -80,3 +80,44 @@ fn bad_flags_and_bad_rig_files_name_what_is_wrong() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("rig.toml") && err.contains("[mechanics].rope_ea_n"), "{err}");
 }
+
+#[test]
+fn identify_recovers_ea_damping_and_sheave_damping_from_simulated_tests() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("dataset");
+    let run = |args: &[&str]| {
+        let out = host_sim().args(args).output().unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    };
+    let data_s = data.to_str().unwrap();
+    run(&["decay", "--mass", "33,70.5", "--length", "2.5", "--ea", "1.2e6", "--out", data_s]);
+    run(&[
+        "travel",
+        "--quiet",
+        "--m-car",
+        "58",
+        "--lw-start",
+        "2.0",
+        "--lw-end",
+        "6.5",
+        "--stem",
+        "up",
+        "--out",
+        data_s,
+    ]);
+    let out_dir = dir.path().join("id");
+    run(&["identify", data_s, "--out", out_dir.to_str().unwrap()]);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("identify.json")).unwrap()).unwrap();
+    for decay in report["free_decays"].as_array().unwrap() {
+        let mass = decay["mass_kg"].as_f64().unwrap();
+        let f1 = decay["first_frequency_hz"].as_f64().unwrap();
+        let zeta_true = 148.0 / (2.0 * mass * std::f64::consts::TAU * f1);
+        let ea = decay["rope_ea_n"].as_f64().unwrap();
+        let zeta = decay["damping_ratio"].as_f64().unwrap();
+        assert!((ea / 1.2e6 - 1.0).abs() < 0.03, "EA {ea}");
+        assert!((zeta / zeta_true - 1.0).abs() < 0.10, "zeta {zeta} vs {zeta_true}");
+    }
+    let c_sheave = report["travels"][0]["sheave_damping_nms_per_rad"].as_f64().unwrap();
+    assert!((c_sheave - 3.0).abs() < 0.15, "c_sheave {c_sheave}");
+}

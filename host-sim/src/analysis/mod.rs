@@ -9,13 +9,27 @@
 //! of panicking; non-finite samples (NaN, ±inf) are rejected so that a NaN
 //! never travels into a result.
 
+pub mod burg;
+pub mod dq0;
 pub mod filter;
+pub mod identify;
+pub mod iso2631;
+pub mod ride_quality;
 pub mod spectrogram;
 pub mod spectrum;
+pub mod stages;
+pub mod travel_signals;
+pub mod welch;
 
+pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
+pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::highpass_zero_phase;
+pub use iso2631::{wk_digital_gain, wk_gain, wk_weighting};
+pub use ride_quality::{ride_quality, RideQuality, RideQualityReport, TravelDirection};
 pub use spectrogram::{stft_spectrogram, Spectrogram};
 pub use spectrum::{amplitude_spectrum, AmplitudeSpectrum, SpectralPeak};
+pub use stages::{constant_speed_stage, travel_phases, TravelPhases};
+pub use welch::{welch_psd, Psd};
 
 /// Error returned by the analysis functions when an input is unusable.
 ///

@@ -1,8 +1,11 @@
 //! Command-line interface: one file per command.
 
 pub mod bench;
+pub mod decay;
+pub mod identify;
 pub mod modes;
 pub mod pil;
+pub mod ride_quality;
 pub mod travel;
 
 use std::path::{Path, PathBuf};
@@ -36,6 +39,15 @@ pub enum Command {
     Travel(travel::TravelArgs),
     /// Measures how fast travels simulate (ratio to real time).
     Bench(bench::BenchArgs),
+    /// Simulated free-decay tests (a mass on a rope with a fixed top, Eqn 9)
+    /// written as recordings.
+    Decay(decay::DecayArgs),
+    /// The paper's identification on a dataset: EA (Eqn 9) and damping
+    /// (Eqn 11-12) from free decays, sheave damping (Eqn 13) from travels.
+    Identify(identify::IdentifyArgs),
+    /// Lift ride quality after ISO 18738-1 (ISO 2631-1 Wk weighting) of a
+    /// recording or an EVIMP1 export.
+    RideQuality(ride_quality::RideQualityArgs),
     /// Processor in the loop: the plant here, the drive core in QEMU's
     /// emulated Cortex-M4F; checks every step against the host build and
     /// reports the instructions per control step.
@@ -49,6 +61,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Modes(args) => modes::run(&rig, &args),
         Command::Travel(args) => travel::run(&rig, &args),
         Command::Bench(args) => bench::run(&rig, &args),
+        Command::Decay(args) => decay::run(&rig, &args),
+        Command::Identify(args) => identify::run(&rig, &args),
+        Command::RideQuality(args) => ride_quality::run(&rig, &args),
         Command::Pil(args) => pil::run(&rig, &args),
     }
 }

@@ -4,13 +4,18 @@
 //! A recording is a pair of files with the same stem in a dataset
 //! directory: `<stem>.toml` (metadata) and `<stem>.csv` (samples, one column
 //! per signal, found by header name). This module holds the in-memory types
-//! shared by the writer ([`write`]) and a reader; the column-name constants
-//! below are the header names of the specification.
+//! shared by the writer ([`write`](mod@write)) and the reader ([`read`]); the
+//! column-name constants below are the header names of the specification.
+//! [`evimp`] reads the `EVIMP1` text export of lift ride-quality analyzers.
 
 use std::path::PathBuf;
 
+pub mod evimp;
+pub mod read;
 pub mod write;
 
+pub use evimp::{read_evimp, EvimpRecording};
+pub use read::{read_columns, read_dataset, read_meta, read_recording, ReadError};
 pub use write::write_recording;
 
 /// Value of the metadata field `format` for version 1 of the format.

@@ -1,0 +1,110 @@
+//! Signals of a travel recording that the analyses derive from its columns:
+//! the unwrapped shaft angle, the counterweight-side rope length over time
+//! and the electrical angle offset of the machine.
+
+use super::AnalysisError;
+
+/// The shaft angle, rad: the `angle_rad` column when there is one, else the
+/// running trapezoidal integral of the speed (rad/s) from 0.
+pub fn shaft_angle_rad(angle: Option<&[f64]>, speed_radps: &[f64], sample_rate_hz: f64) -> Vec<f64> {
+    if let Some(angle) = angle {
+        return angle.to_vec();
+    }
+    let dt = 1.0 / sample_rate_hz;
+    let mut theta = Vec::with_capacity(speed_radps.len());
+    let mut acc = 0.0;
+    for (k, w) in speed_radps.iter().enumerate() {
+        if k > 0 {
+            acc += 0.5 * (w + speed_radps[k - 1]) * dt;
+        }
+        theta.push(acc);
+    }
+    theta
+}
+
+/// Counterweight-side rope length, m, along the travel: `l_w = l_w0 + r
+/// (theta - theta_0)` (car up: the shaft angle grows and so does `l_w`).
+pub fn counterweight_side_length_m(shaft_angle_rad: &[f64], lw_start_m: f64, sheave_radius_m: f64) -> Vec<f64> {
+    let theta0 = shaft_angle_rad.first().copied().unwrap_or(0.0);
+    shaft_angle_rad.iter().map(|t| lw_start_m + sheave_radius_m * (t - theta0)).collect()
+}
+
+/// Offset (rad) between the encoder's electrical angle `p theta` and the
+/// rotor d axis, estimated from currents under vector control with `i_d = 0`:
+/// the current vector then lies on the q axis, 90 electrical degrees ahead of
+/// d, so the offset is the circular mean of `atan2(beta, alpha) - p theta -
+/// pi/2`, weighted by the current magnitude (samples with the largest
+/// currents dominate; the sign of the q current is taken into account).
+pub fn electrical_offset_rad(
+    i_a: &[f64],
+    i_b: &[f64],
+    i_c: &[f64],
+    shaft_angle_rad: &[f64],
+    pole_pairs: u32,
+) -> Result<f64, AnalysisError> {
+    let n = i_a.len();
+    if n == 0 || i_b.len() != n || i_c.len() != n || shaft_angle_rad.len() != n {
+        return Err(AnalysisError::InvalidParameter {
+            name: "phase currents and angle",
+            value: n as f64,
+            expected: "four non-empty signals of equal length",
+        });
+    }
+    let p = f64::from(pole_pairs);
+    let (mut sx, mut sy) = (0.0, 0.0);
+    for k in 0..n {
+        let alpha = (2.0 * i_a[k] - i_b[k] - i_c[k]) / 3.0;
+        let beta = (i_b[k] - i_c[k]) / 3f64.sqrt();
+        // Rotate the current vector back by the electrical angle: what is
+        // left is the vector in rotor coordinates, (i_d, i_q) up to the offset.
+        let (s, c) = (p * shaft_angle_rad[k]).sin_cos();
+        let (d, q) = (alpha * c + beta * s, beta * c - alpha * s);
+        // A negative q current points the other way: fold it onto +q.
+        let (d, q) = if q < 0.0 { (-d, -q) } else { (d, q) };
+        // Angle of (d, q) from the +q axis, as a unit-weighted vector.
+        sx += q;
+        sy += -d;
+    }
+    if sx == 0.0 && sy == 0.0 {
+        return Err(AnalysisError::InvalidParameter {
+            name: "phase currents",
+            value: 0.0,
+            expected: "non-zero currents",
+        });
+    }
+    Ok(sy.atan2(sx))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plant::pmsm::phase_currents_a;
+
+    #[test]
+    fn offset_of_q_axis_currents_is_found() {
+        for offset in [0.0, 0.4, -1.2] {
+            let (mut a, mut b, mut c, mut theta) = (vec![], vec![], vec![], vec![]);
+            for k in 0..5000 {
+                let t = k as f64 * 1e-3;
+                let iq = if k < 2500 { 12.0 } else { -7.0 };
+                let th = 6.15 * t;
+                let abc = phase_currents_a(0.0, iq, 6.0 * th + offset);
+                a.push(abc[0]);
+                b.push(abc[1]);
+                c.push(abc[2]);
+                theta.push(th);
+            }
+            let got = electrical_offset_rad(&a, &b, &c, &theta, 6).unwrap();
+            assert!((got - offset).abs() < 1e-9, "{got} vs {offset}");
+        }
+    }
+
+    #[test]
+    fn angle_from_speed_and_rope_length() {
+        let speed = vec![2.0; 1001];
+        let theta = shaft_angle_rad(None, &speed, 1000.0);
+        assert!((theta[1000] - 2.0).abs() < 1e-12);
+        let lw = counterweight_side_length_m(&theta, 1.0, 0.065);
+        assert!((lw[1000] - 1.13).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,89 @@
+//! `host-sim decay`: simulated free-decay tests (paper section 3.4, Eqn 9),
+//! written as `free_decay` recordings in the measurement format.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::{check_open_range, create_out_dir};
+use crate::config::RigConfig;
+use crate::plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay, FreeDecaySpec};
+use crate::recording::write::write_recording;
+use crate::recording::{Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
+
+/// Options of `decay`.
+#[derive(Debug, Args)]
+pub struct DecayArgs {
+    /// Hanging masses, kg (one recording each; default: the rig's car masses).
+    #[arg(long = "mass", value_name = "KG", value_delimiter = ',', allow_negative_numbers = true)]
+    pub masses_kg: Vec<f64>,
+    /// Rope lengths from the fixed end to the mass, m (one recording per mass and length).
+    #[arg(
+        long = "length",
+        value_name = "M",
+        value_delimiter = ',',
+        default_value = "4.0",
+        allow_negative_numbers = true
+    )]
+    pub lengths_m: Vec<f64>,
+    /// Rope EA, N (default: the rig's).
+    #[arg(long = "ea", value_name = "N", allow_negative_numbers = true)]
+    pub rope_ea_n: Option<f64>,
+    /// Damping on the mass, kg/s (default: the rig's car guide damping).
+    #[arg(long = "damping", value_name = "KG_PER_S", allow_negative_numbers = true)]
+    pub damping_kg_per_s: Option<f64>,
+    /// Recording length, s.
+    #[arg(long = "duration", value_name = "S", default_value_t = 3.0, allow_negative_numbers = true)]
+    pub duration_s: f64,
+    /// Rope elements of the discretised rope.
+    #[arg(long, default_value_t = 40)]
+    pub elements: usize,
+    /// Output directory (the dataset).
+    #[arg(long, value_name = "DIR", default_value = "out/decay")]
+    pub out: PathBuf,
+}
+
+/// Runs `decay`.
+pub fn run(rig: &RigConfig, args: &DecayArgs) -> anyhow::Result<()> {
+    let m = &rig.mechanics;
+    let masses = if args.masses_kg.is_empty() { m.m_car_kg.clone() } else { args.masses_kg.clone() };
+    check_open_range("--duration", args.duration_s, 0.0, 600.0)?;
+    create_out_dir(&args.out)?;
+    let fs = rig.measurement.sample_rate_hz;
+    for &mass in &masses {
+        check_open_range("--mass", mass, 0.0, 1.0e5)?;
+        for &length in &args.lengths_m {
+            check_open_range("--length", length, 0.0, 1.0e3)?;
+            let spec = FreeDecaySpec {
+                mass_kg: mass,
+                rope_length_m: length,
+                rope_ea_n: args.rope_ea_n.unwrap_or(m.rope_ea_n),
+                rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
+                damping_kg_per_s: args.damping_kg_per_s.unwrap_or(m.c_car_kg_per_s),
+                initial_acceleration_mps2: 2.0,
+                elements: args.elements,
+            };
+            let acc = simulate_free_decay(&spec, fs, args.duration_s)?;
+            let time: Vec<f64> = (0..acc.len()).map(|i| i as f64 / fs).collect();
+            let recording = Recording {
+                meta: RecordingMeta {
+                    kind: RecordingKind::FreeDecay { mass_kg: mass, rope_length_m: length },
+                    sample_rate_hz: fs,
+                    description: Some(format!(
+                        "host-sim free decay: EA {} N, mu {} kg/m, damping {} kg/s, {} rope elements",
+                        spec.rope_ea_n, spec.rope_mass_per_length_kg_per_m, spec.damping_kg_per_s, spec.elements
+                    )),
+                },
+                columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, acc)],
+            };
+            let stem = format!("decay_l{length}_m{mass}");
+            let (toml, _) = write_recording(&args.out, &stem, &recording)?;
+            println!(
+                "{}: m = {mass} kg on l = {length} m, first natural frequency (Eqn 9) {:.3} Hz",
+                toml.display(),
+                eqn9_first_frequency_hz(spec.rope_ea_n, spec.rope_mass_per_length_kg_per_m, length, mass)
+            );
+        }
+    }
+    Ok(())
+}
