@@ -121,3 +121,53 @@ fn identify_recovers_ea_damping_and_sheave_damping_from_simulated_tests() {
     let c_sheave = report["travels"][0]["sheave_damping_nms_per_rad"].as_f64().unwrap();
     assert!((c_sheave - 3.0).abs() < 0.15, "c_sheave {c_sheave}");
 }
+
+#[test]
+fn analyze_finds_the_ripple_lines_at_their_orders_of_the_mechanical_frequency() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("dataset");
+    let data_s = data.to_str().unwrap();
+    let out = host_sim()
+        .args([
+            "travel",
+            "--quiet",
+            "--m-car",
+            "45.5",
+            "--lw-start",
+            "1.5",
+            "--lw-end",
+            "7.0",
+            "--stem",
+            "up",
+            "--out",
+            data_s,
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out_dir = dir.path().join("an");
+    let out = host_sim().args(["analyze", data_s, "--out", out_dir.to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("analyze.json")).unwrap()).unwrap();
+    let travel = &report["travels"][0];
+    // The reference speed is 0.4 m/s on a 65 mm sheave: 0.9794 Hz.
+    let f_mech = travel["mechanical_frequency_hz"].as_f64().unwrap();
+    assert!((f_mech - 0.4 / 0.065 / std::f64::consts::TAU).abs() < 0.01 * f_mech, "{f_mech}");
+    // The orders the rig's [[ripple]] excites (the others are noise here).
+    let lines: Vec<&serde_json::Value> = travel["ripple_lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|l| [1, 6, 12, 36, 72].contains(&l["mechanical_order"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(lines.len(), 5);
+    for line in lines {
+        let expected = line["expected_frequency_hz"].as_f64().unwrap();
+        let found = line["frequency_hz"].as_f64().unwrap();
+        assert!((found - expected).abs() <= 0.01 * expected, "{line}");
+    }
+    for file in ["up/torque_psd.csv", "up/acc_car_mps2_spectrogram_burg.png", "up/acc_car_mps2_hp.png"] {
+        assert!(out_dir.join(file).exists(), "{file}");
+    }
+}

@@ -1,5 +1,6 @@
 //! Command-line interface: one file per command.
 
+pub mod analyze;
 pub mod bench;
 pub mod decay;
 pub mod identify;
@@ -39,6 +40,10 @@ pub enum Command {
     Travel(travel::TravelArgs),
     /// Measures how fast travels simulate (ratio to real time).
     Bench(bench::BenchArgs),
+    /// The paper's analyses of every travel in a dataset: dq0 torque, its
+    /// ripple PSD with labelled lines, accelerations and their Burg and STFT
+    /// spectrograms with the model's modes.
+    Analyze(analyze::AnalyzeArgs),
     /// Simulated free-decay tests (a mass on a rope with a fixed top, Eqn 9)
     /// written as recordings.
     Decay(decay::DecayArgs),
@@ -60,6 +65,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Modes(args) => modes::run(&rig, &args),
         Command::Travel(args) => travel::run(&rig, &args),
+        Command::Analyze(args) => analyze::run(&rig, &args),
         Command::Bench(args) => bench::run(&rig, &args),
         Command::Decay(args) => decay::run(&rig, &args),
         Command::Identify(args) => identify::run(&rig, &args),

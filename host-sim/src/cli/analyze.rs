@@ -1,0 +1,273 @@
+//! `host-sim analyze DATASET`: the paper's analyses of every travel in a
+//! dataset (section 3.3 and 3.6): the machine torque from the phase currents
+//! (dq0, electrical angle from the encoder), the constant-speed stage, the
+//! Welch PSD of the torque ripple over that stage with each line labelled by
+//! its source, and the car (counterweight, machine) acceleration high-passed
+//! at 1 Hz with its Burg and STFT spectrograms, 0-128 Hz, dB re 1 m/s^2,
+//! the model's natural frequencies traced on them.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use serde::Serialize;
+
+use super::create_out_dir;
+use crate::analysis::travel_signals::{counterweight_side_length_m, electrical_offset_rad, shaft_angle_rad};
+use crate::analysis::{
+    burg_spectrogram, constant_speed_stage, highpass_zero_phase, machine_torque_nm, stft_spectrogram, welch_psd,
+    Spectrogram,
+};
+use crate::config::RigConfig;
+use crate::plant::modes::natural_modes;
+use crate::plant::rope::{ChainParams, DOF};
+use crate::plots::{line_plot, spectrogram_plot, Series};
+use crate::recording::{
+    read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, I_A, I_B, I_C, SPEED,
+};
+
+/// Options of `analyze`.
+#[derive(Debug, Args)]
+pub struct AnalyzeArgs {
+    /// The dataset directory (pairs `<stem>.toml` + `<stem>.csv`).
+    pub dataset: PathBuf,
+    /// Welch segment length for the torque PSD, s.
+    #[arg(long = "welch-segment", value_name = "S", default_value_t = 4.0)]
+    pub welch_segment_s: f64,
+    /// Burg spectrogram: window, s.
+    #[arg(long = "burg-window", value_name = "S", default_value_t = 1.0)]
+    pub burg_window_s: f64,
+    /// Burg spectrogram: AR model order.
+    #[arg(long = "burg-order", default_value_t = 40)]
+    pub burg_order: usize,
+    /// STFT spectrogram window, s.
+    #[arg(long = "stft-window", value_name = "S", default_value_t = 2.0)]
+    pub stft_window_s: f64,
+    /// Output directory (one folder per recording).
+    #[arg(long, value_name = "DIR", default_value = "out/analyze")]
+    pub out: PathBuf,
+}
+
+/// A labelled line of the torque ripple.
+#[derive(Debug, Serialize)]
+struct RippleLine {
+    source: String,
+    mechanical_order: u32,
+    expected_frequency_hz: f64,
+    frequency_hz: f64,
+    amplitude_nm: f64,
+}
+
+/// What `analyze` reports for one travel.
+#[derive(Debug, Serialize)]
+struct TravelAnalysis {
+    recording: String,
+    constant_speed_start_s: f64,
+    constant_speed_end_s: f64,
+    mechanical_frequency_hz: f64,
+    electrical_offset_rad: f64,
+    mean_torque_nm: f64,
+    ripple_lines: Vec<RippleLine>,
+    files: Vec<String>,
+}
+
+/// The sources of the torque ripple lines the paper names (section 3.3),
+/// as multiples of the mechanical frequency for `p` pole pairs.
+fn ripple_sources(pole_pairs: u32) -> Vec<(u32, String)> {
+    let p = pole_pairs;
+    vec![
+        (1, "mechanical order 1 (imbalance, eccentricity)".to_string()),
+        (p, "electrical fundamental (p)".to_string()),
+        (2 * p, "2nd-order radial force (2p)".to_string()),
+        (3 * p, "3rd harmonic of the fundamental (3p)".to_string()),
+        (4 * p, "4th harmonic of the fundamental (4p)".to_string()),
+        (6 * p, "electromagnetic ripple k = 6 (6p)".to_string()),
+        (12 * p, "cogging n = 12 (12p)".to_string()),
+    ]
+}
+
+fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::Result<&'a [f64]> {
+    recording
+        .column(name)
+        .map(|c| c.values.as_slice())
+        .with_context(|| format!("recording `{stem}`: column `{name}` missing"))
+}
+
+/// Runs `analyze`.
+pub fn run(rig: &RigConfig, args: &AnalyzeArgs) -> anyhow::Result<()> {
+    let dataset = read_dataset(&args.dataset, rig.mechanics.rope_total_length_m)?;
+    create_out_dir(&args.out)?;
+    let mut results = Vec::new();
+    let mut skipped = Vec::new();
+    for (stem, recording) in &dataset {
+        match recording.meta.kind {
+            RecordingKind::Travel { .. } => results.push(analyze_travel(rig, args, stem, recording)?),
+            RecordingKind::FreeDecay { .. } => skipped.push(format!("{stem}: free decay (see `identify`)")),
+        }
+    }
+    let json = args.out.join("analyze.json");
+    #[derive(Serialize)]
+    struct Report<'a> {
+        dataset: String,
+        travels: &'a [TravelAnalysis],
+        skipped: &'a [String],
+    }
+    let report = Report { dataset: args.dataset.display().to_string(), travels: &results, skipped: &skipped };
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("cannot write {}", json.display()))?;
+    for t in &results {
+        println!(
+            "{}: constant speed {:.2}-{:.2} s, f_mech {:.4} Hz, mean torque {:.2} N m",
+            t.recording, t.constant_speed_start_s, t.constant_speed_end_s, t.mechanical_frequency_hz, t.mean_torque_nm
+        );
+        for line in &t.ripple_lines {
+            println!(
+                "  {:>3} x f_mech {:>8.3} Hz: {:>8.4} N m  {}",
+                line.mechanical_order, line.frequency_hz, line.amplitude_nm, line.source
+            );
+        }
+    }
+    for s in &skipped {
+        println!("skipped {s}");
+    }
+    println!("wrote {} and one folder per travel in {}", json.display(), args.out.display());
+    Ok(())
+}
+
+fn analyze_travel(
+    rig: &RigConfig,
+    args: &AnalyzeArgs,
+    stem: &str,
+    recording: &Recording,
+) -> anyhow::Result<TravelAnalysis> {
+    let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+        anyhow::bail!("`{stem}` is not a travel");
+    };
+    let fs = recording.meta.sample_rate_hz;
+    let mo = &rig.motor;
+    let out = args.out.join(stem);
+    create_out_dir(&out)?;
+    let mut files = Vec::new();
+
+    let speed = column(recording, SPEED, stem)?;
+    let (i_a, i_b, i_c) = (column(recording, I_A, stem)?, column(recording, I_B, stem)?, column(recording, I_C, stem)?);
+    let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
+    let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
+    let torque = machine_torque_nm(i_a, i_b, i_c, &angle, mo.pole_pairs, mo.flux_linkage_wb, mo.ld_h, mo.lq_h, offset)?;
+    let stage = constant_speed_stage(speed, fs)?;
+    let stage_speed = &speed[stage.clone()];
+    let f_mech = stage_speed.iter().map(|w| w.abs()).sum::<f64>() / stage_speed.len() as f64 / std::f64::consts::TAU;
+    let stage_torque = &torque[stage.clone()];
+    let mean_torque = stage_torque.iter().sum::<f64>() / stage_torque.len() as f64;
+
+    let segment = ((args.welch_segment_s * fs) as usize).min(stage_torque.len());
+    let psd = welch_psd(stage_torque, fs, segment, 0.5)?;
+    let mut ripple_lines = Vec::new();
+    for (order, source) in ripple_sources(mo.pole_pairs) {
+        let expected = order as f64 * f_mech;
+        if expected >= 0.5 * fs {
+            continue;
+        }
+        if let Some((frequency_hz, amplitude_nm)) =
+            psd.line_amplitude(expected, (0.03 * expected).max(2.0 * psd.bin_width_hz()))
+        {
+            ripple_lines.push(RippleLine {
+                source,
+                mechanical_order: order,
+                expected_frequency_hz: expected,
+                frequency_hz,
+                amplitude_nm,
+            });
+        }
+    }
+    let psd_csv = out.join("torque_psd.csv");
+    let mut csv = std::io::BufWriter::new(std::fs::File::create(&psd_csv)?);
+    writeln!(csv, "frequency_hz,torque_psd_nm2_per_hz")?;
+    for (f, d) in psd.frequency_hz.iter().zip(&psd.density) {
+        writeln!(csv, "{f},{d}")?;
+    }
+    csv.flush()?;
+    files.push(psd_csv.display().to_string());
+    let band: Vec<(f64, f64)> = psd
+        .frequency_hz
+        .iter()
+        .zip(&psd.density)
+        .filter(|(f, _)| **f <= 100.0)
+        .map(|(f, d)| (*f, 10.0 * d.max(1e-30).log10()))
+        .collect();
+    let (x, y): (Vec<f64>, Vec<f64>) = band.into_iter().unzip();
+    let psd_png = out.join("torque_psd.png");
+    line_plot(
+        &psd_png,
+        &format!("Torque ripple PSD over the constant-speed stage (Welch, {} s segments)", args.welch_segment_s),
+        "frequency [Hz]",
+        "PSD [dB re 1 (N m)^2/Hz]",
+        &[Series::new("machine torque (dq0)", x, y)],
+    )?;
+    files.push(psd_png.display().to_string());
+
+    // Accelerations: 1 Hz zero-phase high-pass, spectrograms with the model's modes.
+    let mut chain = ChainParams::from_rig(rig, m_car_kg);
+    chain.m_cw_kg = m_cw_kg;
+    let lw = counterweight_side_length_m(&angle, lw_start_m, rig.mechanics.sheave_radius_m);
+    let time: Vec<f64> = (0..speed.len()).map(|i| i as f64 / fs).collect();
+    let [_, band_hi] = rig.measurement.spectrogram_band_hz;
+    for (name, label) in [(ACC_CAR, "car"), (ACC_CW, "counterweight"), (ACC_MACHINE, "machine")] {
+        let Some(acc) = recording.column(name) else { continue };
+        let filtered = highpass_zero_phase(&acc.values, fs, rig.measurement.highpass_hz)?;
+        let hp_png = out.join(format!("{name}_hp.png"));
+        line_plot(
+            &hp_png,
+            &format!("{label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
+            "time [s]",
+            "acceleration [m/s^2]",
+            &[Series::new(label, time.clone(), filtered.clone())],
+        )?;
+        files.push(hp_png.display().to_string());
+        let burg = burg_spectrogram(&filtered, fs, args.burg_window_s, 0.75, args.burg_order, band_hi, 0.25)?;
+        let stft = stft_spectrogram(&filtered, fs, args.stft_window_s, 0.9, band_hi)?;
+        for (method, spectrogram) in [("burg", &burg), ("stft", &stft)] {
+            let png = out.join(format!("{name}_spectrogram_{method}.png"));
+            spectrogram_plot(
+                &png,
+                &format!("{label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, model modes traced"),
+                spectrogram,
+                &mode_overlays(&chain, &lw, fs, spectrogram, band_hi),
+                None,
+            )?;
+            files.push(png.display().to_string());
+        }
+    }
+    Ok(TravelAnalysis {
+        recording: stem.to_string(),
+        constant_speed_start_s: stage.start as f64 / fs,
+        constant_speed_end_s: stage.end as f64 / fs,
+        mechanical_frequency_hz: f_mech,
+        electrical_offset_rad: offset,
+        mean_torque_nm: mean_torque,
+        ripple_lines,
+        files,
+    })
+}
+
+/// The model's elastic natural frequencies (Eqn 10) at the rope length of
+/// each spectrogram time, as overlay curves inside the band.
+fn mode_overlays(chain: &ChainParams, lw: &[f64], fs: f64, spectrogram: &Spectrogram, band_hi: f64) -> Vec<Series> {
+    let total = chain.rope_total_length_m;
+    let modes: Vec<[f64; DOF]> = spectrogram
+        .times_s
+        .iter()
+        .map(|t| {
+            let l = lw[((t * fs) as usize).min(lw.len() - 1)].clamp(1e-3, total - 1e-3);
+            natural_modes(chain, l).frequencies_hz
+        })
+        .collect();
+    (1..DOF)
+        .filter(|&k| modes.iter().any(|f| f[k] <= band_hi))
+        .map(|k| {
+            let y = modes.iter().map(|f| if f[k] <= band_hi { f[k] } else { f64::NAN }).collect();
+            Series::new(format!("model f{}", k + 1), spectrogram.times_s.clone(), y)
+        })
+        .collect()
+}
