@@ -450,20 +450,7 @@ pub fn burg_spectrogram(
     frequency_step_hz: f64,
 ) -> Result<Spectrogram, AnalysisError> {
     check_sample_rate(sample_rate_hz)?;
-    if !(window_s.is_finite() && window_s > 0.0) {
-        return Err(AnalysisError::InvalidParameter {
-            name: "window_s",
-            value: window_s,
-            expected: "a finite window length > 0 s",
-        });
-    }
-    if !(overlap.is_finite() && (0.0..1.0).contains(&overlap)) {
-        return Err(AnalysisError::InvalidParameter {
-            name: "overlap",
-            value: overlap,
-            expected: "a fraction with 0 <= overlap < 1",
-        });
-    }
+    crate::analysis::check_window(window_s, overlap)?;
     if order == 0 {
         return Err(AnalysisError::InvalidParameter {
             name: "order",
@@ -535,21 +522,9 @@ pub fn burg_spectrogram(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::test_signals::gaussian;
     use crate::analysis::welch::welch_psd;
     use std::f64::consts::PI;
-
-    /// Deterministic standard normal samples (xorshift64* + Box-Muller).
-    fn gaussian(n: usize, seed: u64) -> Vec<f64> {
-        let mut state = seed.max(1);
-        let mut uniform = move || {
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            // In (0, 1]: never 0, so the logarithm below is finite.
-            ((state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 1.0) / (1u64 << 53) as f64
-        };
-        (0..n).map(|_| (-2.0 * uniform().ln()).sqrt() * (2.0 * PI * uniform()).cos()).collect()
-    }
 
     /// Polynomial coefficients a_1..a_p of prod (1 - 2 r cos(th) z^-1 + r^2 z^-2)
     /// for the pole pairs `(r, th)`.

@@ -21,6 +21,26 @@ pub mod stages;
 pub mod travel_signals;
 pub mod welch;
 
+#[cfg(test)]
+pub(crate) mod test_signals {
+    //! Signals shared by the analysis tests.
+
+    use std::f64::consts::PI;
+
+    /// Deterministic standard normal samples (xorshift64* + Box-Muller).
+    pub(crate) fn gaussian(n: usize, seed: u64) -> Vec<f64> {
+        let mut state = seed.max(1);
+        let mut uniform = move || {
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            // In (0, 1]: never 0, so the logarithm below is finite.
+            ((state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 1.0) / (1u64 << 53) as f64
+        };
+        (0..n).map(|_| (-2.0 * uniform().ln()).sqrt() * (2.0 * PI * uniform()).cos()).collect()
+    }
+}
+
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
 pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::highpass_zero_phase;
@@ -30,6 +50,26 @@ pub use spectrogram::{stft_spectrogram, Spectrogram};
 pub use spectrum::{amplitude_spectrum, AmplitudeSpectrum, SpectralPeak};
 pub use stages::{constant_speed_stage, travel_phases, TravelPhases};
 pub use welch::{welch_psd, Psd};
+
+/// Checks the window length (s, finite, > 0) and overlap (fraction in
+/// `[0, 1)`) of a segmented analysis.
+pub(crate) fn check_window(window_s: f64, overlap: f64) -> Result<(), AnalysisError> {
+    if !(window_s.is_finite() && window_s > 0.0) {
+        return Err(AnalysisError::InvalidParameter {
+            name: "window_s",
+            value: window_s,
+            expected: "a finite window length > 0 s",
+        });
+    }
+    if !(overlap.is_finite() && (0.0..1.0).contains(&overlap)) {
+        return Err(AnalysisError::InvalidParameter {
+            name: "overlap",
+            value: overlap,
+            expected: "a fraction with 0 <= overlap < 1",
+        });
+    }
+    Ok(())
+}
 
 /// Error returned by the analysis functions when an input is unusable.
 ///

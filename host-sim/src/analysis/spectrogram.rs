@@ -67,20 +67,7 @@ pub fn stft_spectrogram(
     max_frequency_hz: f64,
 ) -> Result<Spectrogram, AnalysisError> {
     check_sample_rate(sample_rate_hz)?;
-    if !(window_s.is_finite() && window_s > 0.0) {
-        return Err(AnalysisError::InvalidParameter {
-            name: "window_s",
-            value: window_s,
-            expected: "a finite window length > 0 s",
-        });
-    }
-    if !(overlap.is_finite() && (0.0..1.0).contains(&overlap)) {
-        return Err(AnalysisError::InvalidParameter {
-            name: "overlap",
-            value: overlap,
-            expected: "a fraction with 0 <= overlap < 1",
-        });
-    }
+    crate::analysis::check_window(window_s, overlap)?;
     let nyquist_hz = 0.5 * sample_rate_hz;
     if !(max_frequency_hz.is_finite() && max_frequency_hz > 0.0 && max_frequency_hz <= nyquist_hz) {
         return Err(AnalysisError::InvalidParameter {

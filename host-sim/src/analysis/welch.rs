@@ -199,20 +199,8 @@ impl Psd {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::test_signals::gaussian;
     use std::f64::consts::PI;
-
-    /// Deterministic standard normal samples (xorshift64* + Box-Muller).
-    fn gaussian(n: usize, seed: u64) -> Vec<f64> {
-        let mut state = seed.max(1);
-        let mut uniform = move || {
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            // In (0, 1]: never 0, so the logarithm below is finite.
-            ((state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 1.0) / (1u64 << 53) as f64
-        };
-        (0..n).map(|_| (-2.0 * uniform().ln()).sqrt() * (2.0 * PI * uniform()).cos()).collect()
-    }
 
     fn variance(x: &[f64]) -> f64 {
         let mean = x.iter().sum::<f64>() / x.len() as f64;

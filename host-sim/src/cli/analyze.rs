@@ -13,7 +13,7 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::create_out_dir;
+use super::{column, create_out_dir};
 use crate::analysis::travel_signals::{counterweight_side_length_m, electrical_offset_rad, shaft_angle_rad};
 use crate::analysis::{
     burg_spectrogram, constant_speed_stage, highpass_zero_phase, machine_torque_nm, stft_spectrogram, welch_psd,
@@ -85,13 +85,6 @@ fn ripple_sources(pole_pairs: u32) -> Vec<(u32, String)> {
         (6 * p, "electromagnetic ripple k = 6 (6p)".to_string()),
         (12 * p, "cogging n = 12 (12p)".to_string()),
     ]
-}
-
-fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::Result<&'a [f64]> {
-    recording
-        .column(name)
-        .map(|c| c.values.as_slice())
-        .with_context(|| format!("recording `{stem}`: column `{name}` missing"))
 }
 
 /// Runs `analyze`.

@@ -10,7 +10,7 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::create_out_dir;
+use super::{column, create_out_dir};
 use crate::analysis::dq0::machine_torque_nm;
 use crate::analysis::identify::{identify_free_decay, sheave_damping_from_torque_balance};
 use crate::analysis::stages::constant_speed_stage;
@@ -76,13 +76,6 @@ struct Report {
 fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
     let v: Vec<f64> = values.collect();
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-}
-
-fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::Result<&'a [f64]> {
-    recording
-        .column(name)
-        .map(|c| c.values.as_slice())
-        .with_context(|| format!("recording `{stem}`: column `{name}` missing"))
 }
 
 /// Runs `identify`.

@@ -15,6 +15,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 use crate::config::RigConfig;
+use crate::recording::Recording;
 
 /// Elevator drive simulator: the nominal 5-DOF plant of Arrasate et al.
 /// closed around the fixed-point drive core that also runs on the STM32G474.
@@ -89,6 +90,14 @@ pub fn check_open_range(flag: &str, value: f64, lo: f64, hi: f64) -> anyhow::Res
     } else {
         anyhow::bail!("{flag} = {value} is out of range: expected a finite value in ({lo}, {hi})")
     }
+}
+
+/// The samples of column `name` of the recording `stem`, or an error naming both.
+pub fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::Result<&'a [f64]> {
+    recording
+        .column(name)
+        .map(|c| c.values.as_slice())
+        .with_context(|| format!("recording `{stem}`: column `{name}` missing"))
 }
 
 /// Creates the output directory.
