@@ -4,66 +4,13 @@
 //! (for example the DC offset and gravity-free drift of a piezoelectric
 //! accelerometer) without shifting the phase of the content above the cutoff.
 
+use super::biquad::Biquad;
 use super::{check_sample_rate, check_signal, AnalysisError};
 
 /// Number of filter time constants used as edge padding.
 const PAD_TIME_CONSTANTS: f64 = 3.0;
 /// Smallest edge padding in samples (limited by the signal length).
 const MIN_PAD_SAMPLES: usize = 300;
-
-/// Coefficients of a normalized biquad section (a0 = 1), dimensionless:
-/// `H(z) = (b0 + b1 z^-1 + b2 z^-2) / (1 + a1 z^-1 + a2 z^-2)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Biquad {
-    b0: f64,
-    b1: f64,
-    b2: f64,
-    a1: f64,
-    a2: f64,
-}
-
-impl Biquad {
-    /// 2nd-order Butterworth high-pass with -3 dB at `cutoff_hz` (one pass),
-    /// designed by the bilinear transform with the cutoff pre-warped so that
-    /// the digital filter has exactly |H| = 1/sqrt(2) at `cutoff_hz`.
-    ///
-    /// Requires `0 < cutoff_hz < sample_rate_hz / 2` (checked by the caller).
-    fn butterworth_highpass(sample_rate_hz: f64, cutoff_hz: f64) -> Self {
-        let k = (std::f64::consts::PI * cutoff_hz / sample_rate_hz).tan();
-        let sqrt2 = std::f64::consts::SQRT_2;
-        let norm = 1.0 / (1.0 + sqrt2 * k + k * k);
-        Self {
-            b0: norm,
-            b1: -2.0 * norm,
-            b2: norm,
-            a1: 2.0 * (k * k - 1.0) * norm,
-            a2: (1.0 - sqrt2 * k + k * k) * norm,
-        }
-    }
-
-    /// Filters `data` in place (transposed direct form II).
-    ///
-    /// The filter starts in the state left by the past inputs
-    /// `x[-1] = past[0]`, `x[-2] = past[1]` (signal units) with the past
-    /// outputs at rest at 0. For a high-pass with a double zero at DC that
-    /// is the exact steady state after a constant or a ramp through those two
-    /// points, so such a history causes no transient.
-    fn filter_in_place(&self, data: &mut [f64], past: [f64; 2]) {
-        let Self { b0, b1, b2, a1, a2 } = *self;
-        let [x_m1, x_m2] = past;
-        // z1 = b1 x[-1] + b2 x[-2] - a1 y[-1] - a2 y[-2], z2 = b2 x[-1] - a2 y[-1]
-        // with y[-1] = y[-2] = 0.
-        let mut z1 = b1 * x_m1 + b2 * x_m2;
-        let mut z2 = b2 * x_m1;
-        for v in data.iter_mut() {
-            let x = *v;
-            let y = b0 * x + z1;
-            z1 = b1 * x - a1 * y + z2;
-            z2 = b2 * x - a2 * y;
-            *v = y;
-        }
-    }
-}
 
 /// Least-squares straight line through `samples` (index 0, 1, 2, ...):
 /// returns (value at index 0, slope per sample), in signal units.

@@ -53,6 +53,7 @@
 use realfft::num_complex::Complex64;
 use std::f64::consts::{PI, SQRT_2};
 
+use super::biquad::Biquad;
 use super::{check_sample_rate, check_signal, AnalysisError};
 
 /// Corner frequency of the band-limiting high-pass, Hz (ISO 2631-1 Wk: f1).
@@ -92,77 +93,6 @@ const INTERP_HALF_TAPS: usize = 16;
 /// Kaiser window shape parameter of the interpolation kernel
 /// (dimensionless; about 80 dB image rejection).
 const INTERP_KAISER_BETA: f64 = 8.0;
-
-/// Coefficients of a normalized biquad section (a0 = 1), dimensionless:
-/// `H(z) = (b0 + b1 z^-1 + b2 z^-2) / (1 + a1 z^-1 + a2 z^-2)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Biquad {
-    b0: f64,
-    b1: f64,
-    b2: f64,
-    a1: f64,
-    a2: f64,
-}
-
-impl Biquad {
-    /// Bilinear transform of the analog section
-    /// `(n0 + n1 s + n2 s^2) / (d0 + d1 s + d2 s^2)` (s in rad/s) at
-    /// `sample_rate_hz`, pre-warped so that the digital response at
-    /// `prewarp_hz` equals the analog response there:
-    /// `s = k (1 - z^-1) / (1 + z^-1)` with `k = w_p / tan(w_p / (2 fs))`.
-    ///
-    /// Requires `0 < prewarp_hz < sample_rate_hz / 2` (checked by callers).
-    pub(crate) fn bilinear(num: [f64; 3], den: [f64; 3], prewarp_hz: f64, sample_rate_hz: f64) -> Self {
-        let wp = 2.0 * PI * prewarp_hz;
-        let k = wp / (wp / (2.0 * sample_rate_hz)).tan();
-        // c0 (1 + z^-1)^2 + c1 k (1 - z^-2) + c2 k^2 (1 - z^-1)^2.
-        let map = |c: [f64; 3]| {
-            let [c0, c1, c2] = c;
-            let kk = k * k;
-            [c0 + c1 * k + c2 * kk, 2.0 * (c0 - c2 * kk), c0 - c1 * k + c2 * kk]
-        };
-        let b = map(num);
-        let a = map(den);
-        Self { b0: b[0] / a[0], b1: b[1] / a[0], b2: b[2] / a[0], a1: a[1] / a[0], a2: a[2] / a[0] }
-    }
-
-    /// 2nd-order Butterworth low-pass with -3 dB at `cutoff_hz`, pre-warped
-    /// bilinear design (unit DC gain). Requires `0 < cutoff_hz < fs / 2`.
-    pub(crate) fn butterworth_lowpass(cutoff_hz: f64, sample_rate_hz: f64) -> Self {
-        let wc = 2.0 * PI * cutoff_hz;
-        Self::bilinear([1.0, 0.0, 0.0], [1.0, SQRT_2 / wc, 1.0 / (wc * wc)], cutoff_hz, sample_rate_hz)
-    }
-
-    /// One sample through the section (transposed direct form II); `state`
-    /// holds the two delay elements.
-    #[inline]
-    pub(crate) fn step(&self, state: &mut [f64; 2], x: f64) -> f64 {
-        let y = self.b0 * x + state[0];
-        state[0] = self.b1 * x - self.a1 * y + state[1];
-        state[1] = self.b2 * x - self.a2 * y;
-        y
-    }
-
-    /// State of the delay elements after an input constant at `level`
-    /// forever (output `dc_gain * level`).
-    pub(crate) fn steady_state(&self, level: f64) -> [f64; 2] {
-        let y = self.dc_gain() * level;
-        [y - self.b0 * level, self.b2 * level - self.a2 * y]
-    }
-
-    /// Gain at 0 Hz (dimensionless).
-    pub(crate) fn dc_gain(&self) -> f64 {
-        (self.b0 + self.b1 + self.b2) / (1.0 + self.a1 + self.a2)
-    }
-
-    /// Complex response at `frequency_hz` for the sample rate the section
-    /// was designed for.
-    pub(crate) fn response(&self, frequency_hz: f64, sample_rate_hz: f64) -> Complex64 {
-        let z1 = Complex64::from_polar(1.0, -2.0 * PI * frequency_hz / sample_rate_hz);
-        let z2 = z1 * z1;
-        (self.b0 + self.b1 * z1 + self.b2 * z2) / (1.0 + self.a1 * z1 + self.a2 * z2)
-    }
-}
 
 /// Analog Wk sections as `(numerator, denominator, pre-warp frequency Hz)`
 /// with coefficients `[c0, c1, c2]` of `c0 + c1 s + c2 s^2`, s in rad/s.

@@ -9,6 +9,7 @@
 //! of panicking; non-finite samples (NaN, ±inf) are rejected so that a NaN
 //! never travels into a result.
 
+mod biquad;
 pub mod burg;
 pub mod dq0;
 pub mod filter;

@@ -68,7 +68,8 @@
 
 use std::ops::Range;
 
-use super::iso2631::{check_wk_sample_rate, wk_weighting, Biquad};
+use super::biquad::Biquad;
+use super::iso2631::{check_wk_sample_rate, wk_weighting};
 use super::{check_signal, AnalysisError};
 
 /// Acceleration of 1 mg in m/s^2 (a thousandth of the standard gravity

@@ -13,19 +13,14 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::{column, create_out_dir};
-use crate::analysis::travel_signals::{counterweight_side_length_m, electrical_offset_rad, shaft_angle_rad};
-use crate::analysis::{
-    burg_spectrogram, constant_speed_stage, highpass_zero_phase, machine_torque_nm, stft_spectrogram, welch_psd,
-    Spectrogram,
-};
+use super::{create_out_dir, travel_torque, TravelTorque};
+use crate::analysis::travel_signals::counterweight_side_length_m;
+use crate::analysis::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Spectrogram};
 use crate::config::RigConfig;
 use crate::plant::modes::natural_modes;
 use crate::plant::rope::{ChainParams, DOF};
 use crate::plots::{line_plot, spectrogram_plot, Series};
-use crate::recording::{
-    read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, I_A, I_B, I_C, SPEED,
-};
+use crate::recording::{read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
 
 /// Options of `analyze`.
 #[derive(Debug, Args)]
@@ -138,17 +133,18 @@ fn analyze_travel(
         anyhow::bail!("`{stem}` is not a travel");
     };
     let fs = recording.meta.sample_rate_hz;
-    let mo = &rig.motor;
+    let pole_pairs = rig.motor.pole_pairs;
     let out = args.out.join(stem);
     create_out_dir(&out)?;
     let mut files = Vec::new();
 
-    let speed = column(recording, SPEED, stem)?;
-    let (i_a, i_b, i_c) = (column(recording, I_A, stem)?, column(recording, I_B, stem)?, column(recording, I_C, stem)?);
-    let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
-    let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
-    let torque = machine_torque_nm(i_a, i_b, i_c, &angle, mo.pole_pairs, mo.flux_linkage_wb, mo.ld_h, mo.lq_h, offset)?;
-    let stage = constant_speed_stage(speed, fs)?;
+    let TravelTorque {
+        speed_radps: speed,
+        shaft_angle_rad: angle,
+        electrical_offset_rad: offset,
+        torque_nm: torque,
+        constant_speed: stage,
+    } = travel_torque(rig, recording, stem)?;
     let stage_speed = &speed[stage.clone()];
     let f_mech = stage_speed.iter().map(|w| w.abs()).sum::<f64>() / stage_speed.len() as f64 / std::f64::consts::TAU;
     let stage_torque = &torque[stage.clone()];
@@ -157,7 +153,7 @@ fn analyze_travel(
     let segment = ((args.welch_segment_s * fs) as usize).min(stage_torque.len());
     let psd = welch_psd(stage_torque, fs, segment, 0.5)?;
     let mut ripple_lines = Vec::new();
-    for (order, source) in ripple_sources(mo.pole_pairs) {
+    for (order, source) in ripple_sources(pole_pairs) {
         let expected = order as f64 * f_mech;
         if expected >= 0.5 * fs {
             continue;

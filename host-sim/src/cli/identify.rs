@@ -10,16 +10,14 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::{column, create_out_dir};
-use crate::analysis::dq0::machine_torque_nm;
+use super::{column, create_out_dir, travel_torque, TravelTorque};
 use crate::analysis::identify::{identify_free_decay, sheave_damping_from_torque_balance};
-use crate::analysis::stages::constant_speed_stage;
-use crate::analysis::travel_signals::{counterweight_side_length_m, electrical_offset_rad, shaft_angle_rad};
+use crate::analysis::travel_signals::counterweight_side_length_m;
 use crate::config::RigConfig;
 use crate::plant::rope::ChainParams;
 use crate::plots::{line_plot, Series};
 use crate::recording::read::read_dataset;
-use crate::recording::{Recording, RecordingKind, ACC_CAR, ANGLE, I_A, I_B, I_C, SPEED};
+use crate::recording::{Recording, RecordingKind, ACC_CAR};
 
 /// Options of `identify`.
 #[derive(Debug, Args)]
@@ -217,14 +215,8 @@ fn sheave_damping(
         anyhow::bail!("not a travel");
     };
     let m = &rig.mechanics;
-    let mo = &rig.motor;
-    let fs = recording.meta.sample_rate_hz;
-    let speed = column(recording, SPEED, stem)?;
-    let (i_a, i_b, i_c) = (column(recording, I_A, stem)?, column(recording, I_B, stem)?, column(recording, I_C, stem)?);
-    let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
-    let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
-    let torque = machine_torque_nm(i_a, i_b, i_c, &angle, mo.pole_pairs, mo.flux_linkage_wb, mo.ld_h, mo.lq_h, offset)?;
-    let stage = constant_speed_stage(speed, fs)?;
+    let TravelTorque { speed_radps: speed, shaft_angle_rad: angle, torque_nm: torque, constant_speed: stage, .. } =
+        travel_torque(rig, recording, stem)?;
     let lw = counterweight_side_length_m(&angle, lw_start_m, m.sheave_radius_m);
     let n = stage.len() as f64;
     let mean_torque = torque[stage.clone()].iter().sum::<f64>() / n;
