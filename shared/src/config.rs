@@ -83,6 +83,15 @@ pub struct DriveConfig {
     pub sheave_radius_m: f32,
     /// Gravitational acceleration, m/s^2.
     pub gravity_mps2: f32,
+    /// Rope longitudinal stiffness `EA` (Eqn 9), N: the chain model of the
+    /// ripple compensation's phase correction.
+    pub rope_ea_n: f32,
+    /// Car guide damping on the car's absolute velocity (Eqn 12), kg/s.
+    pub c_car_kg_per_s: f32,
+    /// Counterweight guide damping on its absolute velocity (Eqn 12), kg/s.
+    pub c_cw_kg_per_s: f32,
+    /// Rotational damping of the sheave (Eqn 13), N m s/rad.
+    pub c_sheave_nms_per_rad: f32,
 
     // --- travel profile ---
     /// Rated car speed, m/s.
@@ -143,5 +152,49 @@ impl DriveConfig {
     /// Largest ADC code.
     pub fn adc_max_code(&self) -> u16 {
         ((1u32 << self.adc_bits) - 1) as u16
+    }
+}
+
+/// The reference rig's drive parameters as `configs/rig.toml` gives them,
+/// for the unit tests of this crate.
+#[cfg(test)]
+pub(crate) fn reference_rig() -> DriveConfig {
+    DriveConfig {
+        pole_pairs: 6,
+        stator_resistance_ohm: 1.2,
+        ld_h: 0.015,
+        lq_h: 0.015,
+        flux_linkage_wb: 0.45,
+        max_current_a: 20.0,
+        overcurrent_trip_a: 30.0,
+        dc_bus_nominal_v: 100.0,
+        pwm_hz: 16000.0,
+        pwm_period_counts: 5312,
+        current_sense_full_scale_a: 50.0,
+        adc_bits: 12,
+        dc_bus_sense_full_scale_v: 200.0,
+        encoder_counts_per_rev: 16384,
+        current_loop_hz: 16000.0,
+        speed_loop_hz: 2000.0,
+        current_loop_bandwidth_hz: 1000.0,
+        speed_loop_bandwidth_hz: 5.0,
+        speed_estimator_bandwidth_hz: 25.0,
+        m_cw_kg: 33.0,
+        rope_total_length_m: 8.6,
+        rope_mass_per_length_kg_per_m: 0.095,
+        sheave_inertia_kg_m2: 0.3385,
+        sheave_radius_m: 0.065,
+        gravity_mps2: 9.81,
+        rope_ea_n: 1.0e6,
+        c_car_kg_per_s: 148.0,
+        c_cw_kg_per_s: 148.0,
+        c_sheave_nms_per_rad: 3.0,
+        rated_speed_mps: 0.4,
+        max_accel_mps2: 0.5,
+        max_jerk_mps3: 1.0,
+        overspeed_factor: 1.25,
+        dc_bus_undervoltage_v: 70.0,
+        dc_bus_overvoltage_v: 130.0,
+        current_sum_limit_a: 5.0,
     }
 }

@@ -16,9 +16,10 @@ use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
 use crate::fixed::{mul_int, q16, Q16};
 use crate::park_clarke::Abc;
 use crate::profile::{ProfileError, SCurve};
+use crate::ripple::{LearningInput, RippleCompensator, Strategy};
 use crate::speed_estimator::SpeedEstimator;
 use crate::speed_loop::{equivalent_inertia_kg_m2, out_of_balance_torque_nm, SpeedLoop};
-use crate::supervisor::{Fault, Supervisor, SupervisorLimits};
+use crate::supervisor::{Fault, MonitorLimits, MonitorSample, Supervisor, SupervisorLimits};
 use crate::trig::Angle;
 
 /// Duration of the pre-torque ramp with the brake applied, s.
@@ -193,6 +194,23 @@ pub struct Controller {
     speed_divider: u32,
     /// `2^48 / counts_per_rev`: binary angle per encoder count, Q16.
     binary_angle_per_count_q16: u64,
+    /// Torque-ripple compensation (q-current feed-forward by shaft angle).
+    compensation: RippleCompensator,
+    /// Fault checks: the latest current-loop sample, for the supervisor's
+    /// consistency checks (faults 8-11) at the next speed-loop tick.
+    loop_sample: LoopSample,
+}
+
+/// Fault checks: what the supervisor's consistency checks need from one
+/// current-loop step, kept in fixed point (converted at the speed-loop rate).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct LoopSample {
+    pwm_enabled: bool,
+    current_sum: Q16,
+    current: crate::park_clarke::Dq,
+    voltage: crate::park_clarke::Dq,
+    iq_ref: Q16,
+    speed_e: Q16,
 }
 
 impl Controller {
@@ -212,6 +230,17 @@ impl Controller {
             // Four times the over-speed increment, plus quantisation.
             max_counts_per_step: (4.0 * counts_per_step) as i32 + 2,
             max_step_interval_us: (2.5e6 / config.current_loop_hz) as u32,
+            monitors: MonitorLimits::new(
+                1.0 / config.speed_loop_hz,
+                config.current_sum_limit_a,
+                config.max_current_a,
+                rated,
+                config.pole_pairs as f32,
+                config.stator_resistance_ohm,
+                config.ld_h,
+                config.lq_h,
+                config.flux_linkage_wb,
+            ),
         };
         Self {
             config: *config,
@@ -234,12 +263,40 @@ impl Controller {
             dc_bus_v_per_code: q16(config.dc_bus_sense_full_scale_v / config.adc_max_code() as f32),
             speed_divider: config.speed_loop_divider(),
             binary_angle_per_count_q16: (1u64 << 48) / config.encoder_counts_per_rev.max(1) as u64,
+            compensation: RippleCompensator::new(config, &[], Strategy::Off),
+            loop_sample: LoopSample::default(),
         }
+    }
+
+    /// Installs a torque-ripple compensator (between travels).
+    pub fn set_compensation(&mut self, compensation: RippleCompensator) {
+        self.compensation = compensation;
+    }
+
+    /// The torque-ripple compensator and what it has learned.
+    pub fn compensation(&self) -> &RippleCompensator {
+        &self.compensation
+    }
+
+    /// The torque-ripple compensator, to change its strategy or table between travels.
+    pub fn compensation_mut(&mut self) -> &mut RippleCompensator {
+        &mut self.compensation
     }
 
     /// Current state.
     pub fn state(&self) -> DriveState {
         self.state
+    }
+
+    /// Fault checks: the supervisor's low-passed consistency quantities now
+    /// (faults 8-11), for diagnostics and margin tests.
+    pub fn monitor_levels(&self) -> crate::supervisor::MonitorLevels {
+        self.supervisor.monitor_levels()
+    }
+
+    /// Fault checks: the supervisor's limits in force.
+    pub fn supervisor_limits(&self) -> &SupervisorLimits {
+        self.supervisor.limits()
     }
 
     /// Starts a travel; accepted only in `Idle`.
@@ -277,6 +334,11 @@ impl Controller {
     }
 
     fn enter(&mut self, state: DriveState) {
+        match (self.state, state) {
+            (DriveState::BrakeLift, DriveState::Travel) => self.compensation.start_travel(),
+            (DriveState::Travel, _) => self.compensation.end_travel(),
+            _ => {}
+        }
         self.state = state;
         self.state_ticks = 0;
     }
@@ -292,6 +354,11 @@ impl Controller {
         let cpr = self.config.encoder_counts_per_rev.max(1);
         let electrical = self.estimator.revolution_counts() * self.config.pole_pairs as u32 % cpr;
         ((electrical as u64 * self.binary_angle_per_count_q16) >> 16) as u32
+    }
+
+    /// Shaft angle within the revolution from the encoder, as a binary angle.
+    fn shaft_angle(&self) -> Angle {
+        ((self.estimator.revolution_counts() as u64 * self.binary_angle_per_count_q16) >> 16) as u32
     }
 
     /// One PWM period.
@@ -313,6 +380,9 @@ impl Controller {
 
         if self.step_count % self.speed_divider == 0 {
             self.speed_tick();
+            // Fault checks: loop consistency (supervisor faults 8-11) on the
+            // latest current-loop sample, before the trip is acted on below.
+            self.check_loop_consistency();
         }
         self.step_count = self.step_count.wrapping_add(1);
 
@@ -338,24 +408,65 @@ impl Controller {
         if pwm_enabled {
             let speed_e =
                 Q16::from_bits(self.estimator.speed_radps().to_bits().saturating_mul(self.config.pole_pairs as i32));
+            // Ripple compensation while the car follows the profile.
+            let iq_ref = if self.state == DriveState::Travel {
+                self.iq_ref.saturating_add(self.compensation.iq_a(self.shaft_angle()))
+            } else {
+                self.iq_ref
+            };
             let out = self.current_loop.step(
                 Abc { a: currents[0], b: currents[1], c: currents[2] },
                 self.electrical_angle(),
                 speed_e,
-                self.iq_ref,
+                iq_ref,
                 dc_bus_v,
             );
             pwm_compare = out.compare;
             self.telemetry.id_a = to_f32(out.current.d);
             self.telemetry.iq_a = to_f32(out.current.q);
+            // Fault checks: keep this step's sample for the consistency checks.
+            self.loop_sample = LoopSample {
+                pwm_enabled: true,
+                current_sum: currents[0].saturating_add(currents[1]).saturating_add(currents[2]),
+                current: out.current,
+                voltage: out.voltage,
+                iq_ref,
+                speed_e,
+            };
         } else {
             self.current_loop.reset();
             self.telemetry.id_a = 0.0;
             self.telemetry.iq_a = 0.0;
+            // Fault checks: with the PWM off only the current sum is checked.
+            self.loop_sample = LoopSample {
+                current_sum: currents[0].saturating_add(currents[1]).saturating_add(currents[2]),
+                ..LoopSample::default()
+            };
         }
         self.telemetry.iq_ref_a = to_f32(self.iq_ref);
         self.telemetry.angle_rad = self.estimator.angle_rad();
         ControlOutput { pwm_compare, pwm_enabled, brake_released, state: self.state, telemetry: self.telemetry }
+    }
+
+    /// Fault checks: the supervisor's consistency checks (faults 8-11: current
+    /// sum, current tracking, back-EMF against the encoder, speed following)
+    /// on the latest current-loop sample and this tick's speed reference.
+    fn check_loop_consistency(&mut self) {
+        let s = self.loop_sample;
+        let brake_released = matches!(self.state, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold);
+        self.supervisor.check_consistency(&MonitorSample {
+            pwm_enabled: s.pwm_enabled,
+            brake_released,
+            current_sum_a: to_f32(s.current_sum),
+            id_a: to_f32(s.current.d),
+            iq_a: to_f32(s.current.q),
+            iq_ref_a: to_f32(s.iq_ref),
+            vd_v: to_f32(s.voltage.d),
+            vq_v: to_f32(s.voltage.q),
+            speed_e_radps: to_f32(s.speed_e),
+            speed_ref_radps: self.telemetry.speed_ref_radps,
+            speed_radps: self.telemetry.speed_radps,
+        });
     }
 
     /// Speed-loop period: estimator, over-speed check, sequence, q-current reference.
@@ -410,7 +521,20 @@ impl Controller {
                 }
             }
             DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet => {
-                let (torque, iq) = self.speed_loop.step(q16(speed_ref_radps), speed, q16(torque_ff));
+                let speed_ref_q16 = q16(speed_ref_radps);
+                if self.state == DriveState::Travel {
+                    self.compensation.speed_tick(&LearningInput {
+                        shaft_angle: self.shaft_angle(),
+                        position_counts: self.estimator.position_counts(),
+                        speed_radps: to_f32(speed),
+                        speed_error_radps: to_f32(speed_ref_q16.saturating_sub(speed)),
+                        car_acceleration_mps2: None,
+                        m_car_kg: travel.command.m_car_kg,
+                        lw_m,
+                        inertia_kg_m2: travel.inertia_kg_m2,
+                    });
+                }
+                let (torque, iq) = self.speed_loop.step(speed_ref_q16, speed, q16(torque_ff));
                 self.telemetry.torque_ref_nm = to_f32(torque);
                 self.iq_ref = iq;
                 let next = match self.state {
@@ -440,40 +564,7 @@ mod tests {
 
     /// The reference rig's drive parameters (as `configs/rig.toml` gives them).
     fn rig() -> DriveConfig {
-        DriveConfig {
-            pole_pairs: 6,
-            stator_resistance_ohm: 1.2,
-            ld_h: 0.015,
-            lq_h: 0.015,
-            flux_linkage_wb: 0.45,
-            max_current_a: 20.0,
-            overcurrent_trip_a: 30.0,
-            dc_bus_nominal_v: 100.0,
-            pwm_hz: 16000.0,
-            pwm_period_counts: 5312,
-            current_sense_full_scale_a: 50.0,
-            adc_bits: 12,
-            dc_bus_sense_full_scale_v: 200.0,
-            encoder_counts_per_rev: 16384,
-            current_loop_hz: 16000.0,
-            speed_loop_hz: 2000.0,
-            current_loop_bandwidth_hz: 1000.0,
-            speed_loop_bandwidth_hz: 5.0,
-            speed_estimator_bandwidth_hz: 25.0,
-            m_cw_kg: 33.0,
-            rope_total_length_m: 8.6,
-            rope_mass_per_length_kg_per_m: 0.095,
-            sheave_inertia_kg_m2: 0.3385,
-            sheave_radius_m: 0.065,
-            gravity_mps2: 9.81,
-            rated_speed_mps: 0.4,
-            max_accel_mps2: 0.5,
-            max_jerk_mps3: 1.0,
-            overspeed_factor: 1.25,
-            dc_bus_undervoltage_v: 70.0,
-            dc_bus_overvoltage_v: 130.0,
-            current_sum_limit_a: 5.0,
-        }
+        crate::config::reference_rig()
     }
 
     /// A healthy idle frame at step `k`: zero currents, 100 V bus.

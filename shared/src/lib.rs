@@ -22,6 +22,7 @@ pub mod frame;
 pub mod park_clarke;
 pub mod pi;
 pub mod profile;
+pub mod ripple;
 pub mod speed_estimator;
 pub mod speed_loop;
 pub mod supervisor;

@@ -25,6 +25,15 @@ pub fn equivalent_inertia_kg_m2(config: &DriveConfig, m_car_kg: f32) -> f32 {
         + (config.m_cw_kg + m_car_kg + config.rope_mass_per_length_kg_per_m * config.rope_total_length_m) * r * r
 }
 
+/// Speed PI gains `(Kp, Ki)` for the closed-loop bandwidth of `config` on
+/// the inertia `inertia_kg_m2`: `Kp = J wc` (N m s/rad), `Ki = Kp wc / 4`
+/// (N m/rad): PI zero a quarter of the crossover, phase margin about 76 degrees.
+pub fn speed_pi_gains(config: &DriveConfig, inertia_kg_m2: f32) -> (f32, f32) {
+    let wc = core::f32::consts::TAU * config.speed_loop_bandwidth_hz;
+    let kp = inertia_kg_m2 * wc;
+    (kp, kp * wc / 4.0)
+}
+
 /// Speed PI with torque output and conversion to q current.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpeedLoop {
@@ -38,9 +47,7 @@ impl SpeedLoop {
     /// `inertia_kg_m2`: `Kp = J wc`, `Ki = Kp wc / 4` (PI zero a quarter of the
     /// crossover, phase margin about 76 degrees).
     pub fn new(config: &DriveConfig, inertia_kg_m2: f32) -> Self {
-        let wc = core::f32::consts::TAU * config.speed_loop_bandwidth_hz;
-        let kp = inertia_kg_m2 * wc;
-        let ki = kp * wc / 4.0;
+        let (kp, ki) = speed_pi_gains(config, inertia_kg_m2);
         let ts = 1.0 / config.speed_loop_hz;
         let kt = config.torque_constant_nm_per_a();
         Self {

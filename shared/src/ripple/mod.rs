@@ -1,0 +1,417 @@
+//! Torque-ripple compensation: q-current feed-forward, indexed by the
+//! measured shaft angle, against the machine's angle-locked ripple (paper
+//! section 3.3). Four strategies behind one interface, chosen at run time
+//! with [`Strategy`]:
+//!
+//! 1. [`Strategy::Table`]: an offline harmonic table (Fourier coefficients per
+//!    mechanical order), identified from a calibration travel
+//!    ([`RippleCompensator::learned_table`] after a travel with
+//!    [`Strategy::Adaptive`]) and applied as it is.
+//! 2. [`Strategy::Adaptive`]: per-harmonic normalised LMS during the travel,
+//!    its error the speed-loop error demodulated at each order, with the
+//!    phase correction from the model ([`response::loop_response`]).
+//! 3. [`Strategy::Learning`]: iterative learning across travels, the
+//!    coefficients indexed by position ([`learning`]).
+//! 4. [`Strategy::CarObserver`]: the same learning law driven by the
+//!    observer's car-acceleration estimate and the model's car response, so it
+//!    aims at the car rather than at the shaft.
+//!
+//! Learning law (strategies 2 and 4), per speed-loop tick and harmonic `n`:
+//! the error `e` (speed error, rad/s, or car acceleration, m/s^2) is
+//! demodulated, `E = 2 e e^{-j n theta}`, and turned into a residual ripple
+//! estimate `R = conj(G) E / (|G|^2 + eps)` (N m), with `G` the model's
+//! response of `e` to a shaft torque at that order's frequency; then
+//! `U <- U - mu R`. If the true response is `G'`, the residual `T + U`
+//! decays as `exp(-mu f_s Re(G'/G) t)`: stable for any model error of phase
+//! under 90 degrees, time constant `1 / (mu f_s)` = 0.25 s when the model is
+//! right.
+//!
+//! Safety (all strategies): each harmonic's residual is averaged (time
+//! constant 0.125 s); if the residual with the compensation is larger than the
+//! estimated ripple without it (`|R| > 1.12 |R - U|`, i.e. worse by 1 dB)
+//! for the settling time, that harmonic backs off: its output goes to zero
+//! for the rest of the travel and it stops learning ([`RippleCompensator::backed_off`]).
+
+pub mod complex;
+pub mod harmonics;
+pub mod learning;
+pub mod response;
+
+use complex::Complex;
+use harmonics::{HarmonicCurrent, HarmonicTable, MAX_HARMONICS};
+use learning::{limit, LearningTable};
+
+use crate::config::DriveConfig;
+use crate::fixed::Q16;
+use crate::trig::{sin_cos, Angle};
+
+fn min(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Compensation strategy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Strategy {
+    /// No compensation.
+    Off,
+    /// Strategy 1: offline harmonic table.
+    Table,
+    /// Strategy 2: adaptive angle-indexed harmonics (LMS) during the travel.
+    Adaptive,
+    /// Strategy 3: iterative learning across travels, by position.
+    Learning,
+    /// Strategy 4: adaptive harmonics driven by the observer's car acceleration.
+    CarObserver,
+}
+
+impl Strategy {
+    /// All strategies, `Off` first.
+    pub const ALL: [Strategy; 5] =
+        [Strategy::Off, Strategy::Table, Strategy::Adaptive, Strategy::Learning, Strategy::CarObserver];
+
+    /// Numeric code (frames, recordings): 0 off .. 4 car observer.
+    pub fn code(self) -> u8 {
+        match self {
+            Strategy::Off => 0,
+            Strategy::Table => 1,
+            Strategy::Adaptive => 2,
+            Strategy::Learning => 3,
+            Strategy::CarObserver => 4,
+        }
+    }
+
+    /// The strategy of a [`Strategy::code`].
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.get(code as usize).copied()
+    }
+
+    /// Short name (`off`, `table`, `adaptive`, `learning`, `car-observer`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Strategy::Off => "off",
+            Strategy::Table => "table",
+            Strategy::Adaptive => "adaptive",
+            Strategy::Learning => "learning",
+            Strategy::CarObserver => "car-observer",
+        }
+    }
+}
+
+/// Largest LMS step per speed-loop tick (dimensionless): time constant
+/// `1 / (mu f_s)` = 0.25 s at 2 kHz.
+pub const LMS_STEP: f32 = 1.0 / 500.0;
+/// The LMS time constant spans at least this many periods of the order.
+pub const LMS_CYCLES: f32 = 4.0;
+/// Largest averaging factor of the demodulated error per tick
+/// (dimensionless): time constant 0.25 s at 2 kHz.
+pub const RESIDUAL_AVERAGING: f32 = 1.0 / 500.0;
+/// The residual average spans at least this many periods of the order.
+pub const AVERAGING_CYCLES: f32 = 4.0;
+/// Speed-error response below which learning slows down, rad/s per N m:
+/// `R = conj(G) E / (|G|^2 + floor^2)`.
+pub const SPEED_RESPONSE_FLOOR: f32 = 0.01;
+/// Car-acceleration response below which learning slows down, m/s^2 per N m.
+pub const CAR_RESPONSE_FLOOR: f32 = 0.02;
+/// Back-off ratio on squared magnitudes: `1.12^2`, 1 dB.
+pub const BACK_OFF_RATIO_SQ: f32 = 1.2589;
+/// Ticks a harmonic must look worse before it backs off (0.25 s at 2 kHz).
+pub const BACK_OFF_TICKS: u16 = 500;
+/// Learning runs only above this fraction of the rated shaft speed.
+pub const LEARNING_SPEED_FRACTION: f32 = 0.5;
+
+/// What the compensator learns from, once per speed-loop tick of a travel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LearningInput {
+    /// Shaft angle within the revolution (binary angle).
+    pub shaft_angle: Angle,
+    /// Shaft position since power-up, counts.
+    pub position_counts: i64,
+    /// Estimated shaft speed, rad/s.
+    pub speed_radps: f32,
+    /// Speed-loop error `speed_ref - speed` (position loop included), rad/s.
+    pub speed_error_radps: f32,
+    /// The observer's car acceleration, m/s^2 (strategy 4), if available.
+    pub car_acceleration_mps2: Option<f32>,
+    /// Car mass of the travel, kg.
+    pub m_car_kg: f32,
+    /// Counterweight-side rope length, m.
+    pub lw_m: f32,
+    /// Inertia the speed loop is tuned on, kg m^2.
+    pub inertia_kg_m2: f32,
+}
+
+/// The compensator: one of the [`Strategy`]s and its state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RippleCompensator {
+    config: DriveConfig,
+    strategy: Strategy,
+    /// Strategy 1's table, N m.
+    table: HarmonicTable,
+    /// Strategies 2 and 4: coefficients learned this travel, N m.
+    adaptive: HarmonicTable,
+    /// Strategy 3: coefficients by position.
+    learning: LearningTable,
+    /// What is applied now, N m.
+    applied: HarmonicTable,
+    /// Its 16 kHz form.
+    current: HarmonicCurrent,
+    /// Model response per harmonic (refreshed one harmonic per tick).
+    response: [Complex; MAX_HARMONICS],
+    /// Averaged demodulated error `2 e e^{-j n theta}` (units of the error).
+    demodulated: [Complex; MAX_HARMONICS],
+    /// Residual ripple estimate `T + U` from the averaged error, N m.
+    residual_nm: [Complex; MAX_HARMONICS],
+    worse_ticks: [u16; MAX_HARMONICS],
+    backed_off: [bool; MAX_HARMONICS],
+    ticks: u32,
+    /// Angle the 16 kHz evaluation leads the measured angle by (current-loop lag).
+    lead: Angle,
+    /// Largest coefficient magnitude, N m.
+    limit_nm: f32,
+    /// Whether harmonics that make things worse back off (on by default).
+    back_off_enabled: bool,
+}
+
+impl RippleCompensator {
+    /// A compensator for `orders` (mechanical orders, at most
+    /// [`MAX_HARMONICS`]) with `strategy`, empty tables.
+    pub fn new(config: &DriveConfig, orders: &[u16], strategy: Strategy) -> Self {
+        let zero = HarmonicTable::zero(orders);
+        Self {
+            config: *config,
+            strategy,
+            table: zero,
+            adaptive: zero,
+            learning: LearningTable::default(),
+            applied: zero,
+            current: HarmonicCurrent::default(),
+            response: [Complex::ZERO; MAX_HARMONICS],
+            demodulated: [Complex::ZERO; MAX_HARMONICS],
+            residual_nm: [Complex::ZERO; MAX_HARMONICS],
+            worse_ticks: [0; MAX_HARMONICS],
+            backed_off: [false; MAX_HARMONICS],
+            ticks: 0,
+            lead: 0,
+            limit_nm: 0.1 * config.max_current_a * config.torque_constant_nm_per_a(),
+            back_off_enabled: true,
+        }
+    }
+
+    /// Enables or disables the back-off (disable only to measure, e.g. a
+    /// response to a known injected table on a plant without ripple).
+    pub fn set_back_off(&mut self, enabled: bool) {
+        self.back_off_enabled = enabled;
+    }
+
+    /// The strategy in use.
+    pub fn strategy(&self) -> Strategy {
+        self.strategy
+    }
+
+    /// Switches strategy (between travels); the learned state is kept.
+    pub fn set_strategy(&mut self, strategy: Strategy) {
+        self.strategy = strategy;
+    }
+
+    /// Sets strategy 1's table (N m); its orders become the compensator's.
+    pub fn set_table(&mut self, table: HarmonicTable) {
+        self.table = table;
+        self.adaptive = HarmonicTable { torque_nm: [Complex::ZERO; MAX_HARMONICS], ..table };
+        self.applied = self.adaptive;
+        self.learning = LearningTable::default();
+    }
+
+    /// Strategy 1's table.
+    pub fn table(&self) -> HarmonicTable {
+        self.table
+    }
+
+    /// The coefficients learned by strategy 2 or 4 in the last travel: what
+    /// a calibration travel gives strategy 1.
+    pub fn learned_table(&self) -> HarmonicTable {
+        self.adaptive
+    }
+
+    /// The coefficients applied now, N m.
+    pub fn applied(&self) -> HarmonicTable {
+        self.applied
+    }
+
+    /// Harmonics that backed off in this travel.
+    pub fn backed_off(&self) -> [bool; MAX_HARMONICS] {
+        self.backed_off
+    }
+
+    /// Averaged residual ripple estimate `T + U` per harmonic, N m.
+    pub fn residual_nm(&self) -> [Complex; MAX_HARMONICS] {
+        self.residual_nm
+    }
+
+    /// Start of a travel: back-off flags and averages cleared; the adaptive
+    /// strategies start from zero, the table and the learned table are kept.
+    pub fn start_travel(&mut self) {
+        self.backed_off = [false; MAX_HARMONICS];
+        self.worse_ticks = [0; MAX_HARMONICS];
+        self.residual_nm = [Complex::ZERO; MAX_HARMONICS];
+        self.demodulated = [Complex::ZERO; MAX_HARMONICS];
+        self.ticks = 0;
+        self.adaptive.torque_nm = [Complex::ZERO; MAX_HARMONICS];
+        self.applied.torque_nm = [Complex::ZERO; MAX_HARMONICS];
+        self.current = HarmonicCurrent::default();
+    }
+
+    /// End of a travel: strategy 3 learns from it.
+    pub fn end_travel(&mut self) {
+        if self.strategy == Strategy::Learning {
+            // At least a quarter revolution of samples at the learning speed.
+            let rated = self.config.rated_shaft_speed_radps();
+            let per_rev = self.config.speed_loop_hz * core::f32::consts::TAU / rated;
+            self.learning.end_travel(self.applied.len, (0.25 * per_rev) as u16, self.limit_nm);
+            for k in 0..self.applied.len {
+                if self.backed_off[k] {
+                    self.learning.clear_harmonic(k);
+                }
+            }
+        }
+        self.current = HarmonicCurrent::default();
+    }
+
+    /// Compensation q current at the measured shaft angle, A (16 kHz path).
+    pub fn iq_a(&self, shaft_angle: Angle) -> Q16 {
+        if self.strategy == Strategy::Off {
+            return Q16::ZERO;
+        }
+        self.current.at(shaft_angle.wrapping_add(self.lead))
+    }
+
+    /// One speed-loop tick of a travel: learning, back-off, and the
+    /// coefficients of the next 16 kHz period.
+    pub fn speed_tick(&mut self, input: &LearningInput) {
+        let n = self.applied.len;
+        if self.strategy == Strategy::Off || n == 0 {
+            return;
+        }
+        let c = &self.config;
+        // Lead for the current loop's lag (1 / wc) and 1.5 PWM periods of sampling and update.
+        let lead_s = 1.0 / (core::f32::consts::TAU * c.current_loop_bandwidth_hz) + 1.5 / c.current_loop_hz;
+        let lead_turns = input.speed_radps * lead_s * (1.0 / core::f32::consts::TAU);
+        self.lead = (lead_turns * 4_294_967_296.0) as i32 as u32;
+
+        // Refresh one harmonic's model response per tick (round robin).
+        let k_refresh = (self.ticks % n as u32) as usize;
+        let omega = input.speed_radps * self.applied.orders[k_refresh] as f32;
+        let response = response::loop_response(c, input.m_car_kg, input.lw_m, input.inertia_kg_m2, omega);
+        self.response[k_refresh] = match self.strategy {
+            Strategy::CarObserver => response.car_acceleration_per_torque,
+            _ => response.speed_error_per_torque,
+        };
+        self.ticks = self.ticks.wrapping_add(1);
+
+        let learning_speed = LEARNING_SPEED_FRACTION * c.rated_shaft_speed_radps();
+        let fast_enough = input.speed_radps > learning_speed || input.speed_radps < -learning_speed;
+        let (error, floor) = match (self.strategy, input.car_acceleration_mps2) {
+            (Strategy::CarObserver, Some(a)) => (a, CAR_RESPONSE_FLOOR),
+            (Strategy::CarObserver, None) => (0.0, CAR_RESPONSE_FLOOR),
+            _ => (input.speed_error_radps, SPEED_RESPONSE_FLOOR),
+        };
+        let have_error = self.strategy != Strategy::CarObserver || input.car_acceleration_mps2.is_some();
+        let refreshed_all = self.ticks >= n as u32;
+        let speed_abs = if input.speed_radps < 0.0 { -input.speed_radps } else { input.speed_radps };
+        let cycles_per_tick = speed_abs * (1.0 / core::f32::consts::TAU) / c.speed_loop_hz;
+        for k in 0..n {
+            // Applied coefficient for this tick.
+            let applied = if self.backed_off[k] {
+                Complex::ZERO
+            } else {
+                match self.strategy {
+                    Strategy::Table => self.table.torque_nm[k],
+                    Strategy::Adaptive | Strategy::CarObserver => self.adaptive.torque_nm[k],
+                    Strategy::Learning => self.learning.torque_at(k, input.position_counts, c.encoder_counts_per_rev),
+                    Strategy::Off => Complex::ZERO,
+                }
+            };
+            self.applied.torque_nm[k] = applied;
+            if !fast_enough || !refreshed_all || !have_error || self.backed_off[k] {
+                continue;
+            }
+            let (s, co) = sin_cos(input.shaft_angle.wrapping_mul(self.applied.orders[k] as u32));
+            let demodulated = Complex::new(co.to_num::<f32>(), -s.to_num::<f32>()).scale(2.0 * error);
+            if !demodulated.is_finite() {
+                continue;
+            }
+            // Averages span at least LMS_CYCLES (learning) and AVERAGING_CYCLES (back-off) periods of the order.
+            let cycles = cycles_per_tick * self.applied.orders[k] as f32;
+            let step = min(LMS_STEP, cycles * (1.0 / LMS_CYCLES));
+            let averaging = min(RESIDUAL_AVERAGING, cycles * (1.0 / AVERAGING_CYCLES));
+            self.demodulated[k] = self.demodulated[k] + (demodulated - self.demodulated[k]).scale(averaging);
+            let g = self.response[k];
+            // Regularised inverse: a response below the floor learns slower instead of amplifying noise.
+            let shrunk = g.conj() * demodulated.scale(1.0 / (g.norm_sqr() + floor * floor));
+            match self.strategy {
+                Strategy::Adaptive | Strategy::CarObserver => {
+                    let next = self.adaptive.torque_nm[k] - shrunk.scale(step);
+                    self.adaptive.torque_nm[k] = limit(next, self.limit_nm);
+                }
+                Strategy::Learning => {
+                    self.learning.accumulate(k, input.position_counts, c.encoder_counts_per_rev, shrunk)
+                }
+                _ => {}
+            }
+            // Worse than without? |T + U| against |T| = |R - U|, R the unbiased residual.
+            let residual = self.demodulated[k] / g;
+            self.residual_nm[k] = residual;
+            let with = residual.norm_sqr();
+            let without = (residual - applied).norm_sqr();
+            if self.back_off_enabled && applied != Complex::ZERO && with > BACK_OFF_RATIO_SQ * without {
+                self.worse_ticks[k] = self.worse_ticks[k].saturating_add(1);
+                if self.worse_ticks[k] >= BACK_OFF_TICKS {
+                    self.backed_off[k] = true;
+                    self.applied.torque_nm[k] = Complex::ZERO;
+                    if matches!(self.strategy, Strategy::Adaptive | Strategy::CarObserver) {
+                        self.adaptive.torque_nm[k] = Complex::ZERO;
+                    }
+                }
+            } else {
+                self.worse_ticks[k] = 0;
+            }
+        }
+        self.current = HarmonicCurrent::from_table(&self.applied, c.torque_constant_nm_per_a(), &self.backed_off);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    fn rig() -> DriveConfig {
+        crate::config::reference_rig()
+    }
+
+    #[test]
+    fn a_table_is_applied_as_its_q_current() {
+        let config = rig();
+        let mut table = HarmonicTable::default();
+        table.push_cosine(12, 1.0, 1.0, 0.0);
+        let mut c = RippleCompensator::new(&config, &[12], Strategy::Table);
+        c.set_table(table);
+        c.start_travel();
+        c.speed_tick(&LearningInput {
+            shaft_angle: 0,
+            position_counts: 0,
+            speed_radps: 0.0,
+            speed_error_radps: 0.0,
+            car_acceleration_mps2: None,
+            m_car_kg: 70.5,
+            lw_m: 4.0,
+            inertia_kg_m2: 1.0,
+        });
+        let peak = (0..1000u32).map(|i| c.iq_a(i * 4_294_967).to_num::<f64>()).fold(0.0f64, |m, v| m.max(v.abs()));
+        let expected = 1.0 / config.torque_constant_nm_per_a() as f64;
+        assert!((peak - expected).abs() < 1e-3 * expected, "{peak} vs {expected}");
+    }
+}
