@@ -6,10 +6,13 @@ use std::time::Instant;
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use shared::config::Direction;
+use shared::ripple::Strategy;
+use shared::Controller;
 
 use super::{check_open_range, create_out_dir, default_car_mass_kg};
 use crate::analysis::{highpass_zero_phase, stft_spectrogram};
-use crate::closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
+use crate::closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
+use crate::compensation::{compensator, rig_ripple_table};
 use crate::config::RigConfig;
 use crate::plant::modes::natural_modes;
 use crate::plant::rope::{ChainParams, DOF};
@@ -52,9 +55,26 @@ pub struct TravelArgs {
     /// Output directory (the dataset).
     #[arg(long, value_name = "DIR", default_value = "out/travel")]
     pub out: PathBuf,
+    /// Torque-ripple compensation of the drive.
+    #[arg(long, value_enum, default_value_t = CompensationArg::Off)]
+    pub compensation: CompensationArg,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Ripple compensation on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum CompensationArg {
+    /// None.
+    Off,
+    /// Strategy 1 with the rig file's own `[[ripple]]` as its table, back-off
+    /// disabled: the exact cancellation of the simulated ripple, so that the
+    /// machine torque from the currents carries the rig's ripple amplitudes
+    /// (a check of the measurement chain; a real rig must identify its table).
+    RigTable,
+    /// Strategy 2: adaptive harmonics learned during the travel.
+    Adaptive,
 }
 
 /// Runs `travel`.
@@ -90,7 +110,21 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     );
     bar.set_message("simulating");
     let started = Instant::now();
-    let run = simulate_travel(rig, &spec, &options, Some(&bar))?;
+    let mut controller = Controller::new(&rig.drive_config());
+    let description = match args.compensation {
+        CompensationArg::Off => "no ripple compensation",
+        CompensationArg::RigTable => {
+            let mut c = compensator(rig, Strategy::Table, Some(rig_ripple_table(rig).negated()));
+            c.set_back_off(false);
+            controller.set_compensation(c);
+            "ripple compensation: the rig's ripple as the table (exact cancellation)"
+        }
+        CompensationArg::Adaptive => {
+            controller.set_compensation(compensator(rig, Strategy::Adaptive, None));
+            "ripple compensation: adaptive harmonics"
+        }
+    };
+    let run = simulate_travel_with(rig, &spec, &options, &mut controller, Some(&bar), None)?;
     let wall = started.elapsed().as_secs_f64();
     println!(
         "simulated {:.2} s of travel (m_car = {m_car} kg, {direction:?}, lw {} -> {} m) in {wall:.2} s: {:.1}x real time",
@@ -107,7 +141,7 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     let recording = run.to_recording(
         &spec,
         rig.mechanics.m_cw_kg,
-        format!("host-sim closed-loop travel, nominal plant, step {:.3e} s", options.max_step_s),
+        format!("host-sim closed-loop travel, nominal plant, step {:.3e} s, {description}", options.max_step_s),
     );
     let (toml_path, csv_path) = write_recording(&args.out, &stem, &recording)?;
     println!("recording: {} and {}", toml_path.display(), csv_path.display());

@@ -26,11 +26,19 @@
 //! under 90 degrees, time constant `1 / (mu f_s)` = 0.25 s when the model is
 //! right.
 //!
-//! Safety (all strategies): each harmonic's residual is averaged (time
-//! constant 0.125 s); if the residual with the compensation is larger than the
-//! estimated ripple without it (`|R| > 1.12 |R - U|`, i.e. worse by 1 dB)
-//! for the settling time, that harmonic backs off: its output goes to zero
-//! for the rest of the travel and it stops learning ([`RippleCompensator::backed_off`]).
+//! Safety (all strategies): each harmonic's demodulated error is averaged
+//! (time constant 0.25 s or four periods of the order, whichever is longer)
+//! and divided by the model response, an unbiased residual estimate `R`. If
+//! the residual with the compensation is larger than the estimated ripple
+//! without it (`|R| > 1.12 |R - U|`, worse by 1 dB) for 0.25 s while the
+//! response is above its floor (where `R` can be trusted), that harmonic
+//! backs off: its output goes to zero for the rest of the travel and it
+//! stops learning ([`RippleCompensator::backed_off`]).
+//!
+//! Weak responses: the learning step uses `conj(G) E / (|G|^2 + floor^2)`,
+//! so an order the encoder hardly sees (72 at rated speed: |G| ~ 1e-3 rad/s
+//! per N m, under the floor of 1e-2) learns slowly instead of amplifying
+//! noise; its time constant also spans at least four periods of the order.
 
 pub mod complex;
 pub mod harmonics;
@@ -366,7 +374,9 @@ impl RippleCompensator {
             self.residual_nm[k] = residual;
             let with = residual.norm_sqr();
             let without = (residual - applied).norm_sqr();
-            if self.back_off_enabled && applied != Complex::ZERO && with > BACK_OFF_RATIO_SQ * without {
+            // Judged only where the response is strong enough for the estimate to mean something.
+            let judged = g.norm_sqr() >= floor * floor;
+            if self.back_off_enabled && judged && applied != Complex::ZERO && with > BACK_OFF_RATIO_SQ * without {
                 self.worse_ticks[k] = self.worse_ticks[k].saturating_add(1);
                 if self.worse_ticks[k] >= BACK_OFF_TICKS {
                     self.backed_off[k] = true;
