@@ -278,7 +278,7 @@ impl RippleCompensator {
             // At least a quarter revolution of samples at the learning speed.
             let rated = self.config.rated_shaft_speed_radps();
             let per_rev = self.config.speed_loop_hz * core::f32::consts::TAU / rated;
-            self.learning.end_travel(self.applied.len, (0.25 * per_rev) as u16, self.limit_nm);
+            self.learning.end_travel(self.applied.len, (0.25 * per_rev) as u16, self.limit_nm, SPEED_RESPONSE_FLOOR);
             for k in 0..self.applied.len {
                 if self.backed_off[k] {
                     self.learning.clear_harmonic(k);
@@ -364,9 +364,13 @@ impl RippleCompensator {
                     let next = self.adaptive.torque_nm[k] - shrunk.scale(step);
                     self.adaptive.torque_nm[k] = limit(next, self.limit_nm);
                 }
-                Strategy::Learning => {
-                    self.learning.accumulate(k, input.position_counts, c.encoder_counts_per_rev, shrunk)
-                }
+                Strategy::Learning => self.learning.accumulate(
+                    k,
+                    input.position_counts,
+                    c.encoder_counts_per_rev,
+                    g.conj() * demodulated,
+                    g.norm_sqr(),
+                ),
                 _ => {}
             }
             // Worse than without? |T + U| against |T| = |R - U|, R the unbiased residual.

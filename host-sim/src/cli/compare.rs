@@ -1,0 +1,204 @@
+//! `host-sim compare`: every ripple-compensation strategy (and none) over the
+//! rig's travels and the model mismatches, as one table (CSV, Markdown,
+//! JSON) with plots; `--shard k/N` runs a part of the sweep, `--merge`
+//! joins the parts.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use shared::ripple::harmonics::HarmonicTable;
+use shared::ripple::Strategy;
+
+use super::create_out_dir;
+use crate::compensation::{all_cases, calibrate_table, run_case, CompareRow};
+use crate::config::RigConfig;
+use crate::plots::{line_plot, Series};
+
+/// Options of `compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// Run only part `k` of `N` of the cases (`k/N`, 1 <= k <= N): case `i`
+    /// belongs to part `i mod N + 1`. Merge the parts with `--merge`.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<String>,
+    /// Merge the `compare.csv` files of shards into one table instead of simulating.
+    #[arg(long, value_name = "CSV", num_args = 1..)]
+    pub merge: Vec<PathBuf>,
+    /// Only the nominal plant (no mismatch cases).
+    #[arg(long)]
+    pub nominal_only: bool,
+    /// Travels iterative learning runs before the measured one.
+    #[arg(long, value_name = "N", default_value_t = 3)]
+    pub learning_travels: usize,
+    /// Output directory.
+    #[arg(long, value_name = "DIR", default_value = "out/compare")]
+    pub out: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// The strategies `compare` runs (the observer-driven one where the drive has an observer).
+pub const STRATEGIES: [Strategy; 4] = [Strategy::Off, Strategy::Table, Strategy::Adaptive, Strategy::Learning];
+
+/// `k/N` of `--shard`.
+fn parse_shard(text: &str) -> anyhow::Result<(usize, usize)> {
+    let bad = || anyhow::anyhow!("--shard {text:?}: expected K/N with whole numbers 1 <= K <= N");
+    let (k, n) = text.split_once('/').ok_or_else(bad)?;
+    let (k, n): (usize, usize) = (k.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+    if k == 0 || n == 0 || k > n {
+        return Err(bad());
+    }
+    Ok((k, n))
+}
+
+/// Runs `compare`.
+pub fn run(rig: &RigConfig, args: &CompareArgs) -> anyhow::Result<()> {
+    if !args.merge.is_empty() {
+        if args.shard.is_some() {
+            bail!("--merge and --shard exclude each other");
+        }
+        let mut rows = Vec::new();
+        for path in &args.merge {
+            rows.extend(read_rows(path)?);
+        }
+        rows.sort_by_key(|r| r.case_index);
+        create_out_dir(&args.out)?;
+        return write_outputs(&args.out, &rows, None);
+    }
+    if args.learning_travels > 50 {
+        bail!("--learning-travels {}: expected at most 50", args.learning_travels);
+    }
+    let shard = args.shard.as_deref().map(parse_shard).transpose()?;
+    create_out_dir(&args.out)?;
+    let started = Instant::now();
+    let table = calibrate_table(rig).context("calibration travel for strategy 1's table")?;
+    let cases: Vec<(usize, _)> = all_cases(rig)
+        .into_iter()
+        .enumerate()
+        .filter(|(_, c)| !args.nominal_only || c.mismatch == crate::compensation::Mismatch::Nominal)
+        .filter(|(i, _)| shard.is_none_or(|(k, n)| i % n + 1 == k))
+        .collect();
+    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(cases.len() as u64) };
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} cases {elapsed_precise} eta {eta}")?
+            .progress_chars("=> "),
+    );
+    bar.set_message("compare");
+    let results: Vec<anyhow::Result<Vec<CompareRow>>> = cases
+        .par_iter()
+        .map(|(i, case)| {
+            let rows = run_case(rig, *i, case, &table, &STRATEGIES, args.learning_travels).with_context(|| {
+                format!("case {i}: {} kg {:?} {}", case.m_car_kg, case.direction, case.mismatch.label())
+            });
+            bar.inc(1);
+            rows
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut rows = Vec::new();
+    for r in results {
+        rows.extend(r?);
+    }
+    let wall = started.elapsed().as_secs_f64();
+    println!("{} cases x {} strategies in {wall:.1} s", cases.len(), STRATEGIES.len());
+    write_outputs(&args.out, &rows, Some(&table))
+}
+
+fn read_rows(path: &Path) -> anyhow::Result<Vec<CompareRow>> {
+    let mut reader = csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut rows = Vec::new();
+    for (i, row) in reader.deserialize().enumerate() {
+        let row: CompareRow =
+            row.with_context(|| format!("{}: data row {}: not a compare.csv row", path.display(), i + 1))?;
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or("never".into(), |v| format!("{v:.1}"))
+}
+
+fn write_outputs(out: &Path, rows: &[CompareRow], table: Option<&HarmonicTable>) -> anyhow::Result<()> {
+    let csv_path = out.join("compare.csv");
+    let mut writer =
+        csv::Writer::from_path(&csv_path).with_context(|| format!("cannot write {}", csv_path.display()))?;
+    for row in rows {
+        writer.serialize(row)?;
+    }
+    writer.flush()?;
+    let json_path = out.join("compare.json");
+    let table_json = table.map(|t| {
+        (0..t.len)
+            .map(|k| serde_json::json!({"order": t.orders[k], "re_nm": t.torque_nm[k].re, "im_nm": t.torque_nm[k].im}))
+            .collect::<Vec<_>>()
+    });
+    std::fs::write(
+        &json_path,
+        serde_json::to_string_pretty(&serde_json::json!({"calibrated_table": table_json, "rows": rows}))?,
+    )?;
+
+    let mut md = String::from(
+        "| case | m_car kg | dir | mismatch | strategy | A95 mg | max p-p mg | car 12x m/s^2 | 12x vs off dB | A95 vs off % | car 36x | car 72x | peak current A | learning s | travels | backed off |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        md += &format!(
+            "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.4} | {:+.1} | {:+.0} | {:.4} | {:.4} | {:.1} | {} | {} | {} |\n",
+            r.case_index,
+            r.m_car_kg,
+            r.direction,
+            r.mismatch,
+            r.strategy,
+            r.a95_mg,
+            r.max_peak_to_peak_mg,
+            r.car_12x_mps2,
+            r.car_12x_change_db,
+            r.a95_change_pct,
+            r.car_36x_mps2,
+            r.car_72x_mps2,
+            r.peak_current_a,
+            fmt_opt(r.learning_time_s),
+            r.travels,
+            r.backed_off_orders
+        );
+    }
+    let md_path = out.join("compare.md");
+    std::fs::write(&md_path, md)?;
+
+    // Per strategy: order-12 change and A95 change against the case index.
+    let mut strategies: Vec<&str> = rows.iter().map(|r| r.strategy.as_str()).collect();
+    strategies.dedup();
+    strategies.sort();
+    strategies.dedup();
+    let series = |f: &dyn Fn(&CompareRow) -> f64| -> Vec<Series> {
+        strategies
+            .iter()
+            .filter(|s| **s != "off")
+            .map(|s| {
+                let (x, y) = rows.iter().filter(|r| r.strategy == *s).map(|r| (r.case_index as f64, f(r))).unzip();
+                Series::new(*s, x, y)
+            })
+            .collect()
+    };
+    let db_path = out.join("compare_12x.png");
+    let a95_path = out.join("compare_a95.png");
+    let s12 = series(&|r| r.car_12x_change_db);
+    if !s12.is_empty() {
+        line_plot(&db_path, "Car acceleration at 12 x f_mech against no compensation", "case", "change [dB]", &s12)?;
+        line_plot(
+            &a95_path,
+            "Car A95 (ISO 18738-1) against no compensation",
+            "case",
+            "change [%]",
+            &series(&|r| r.a95_change_pct),
+        )?;
+        println!("plots: {}, {}", db_path.display(), a95_path.display());
+    }
+    println!("table: {}, {}, {}", csv_path.display(), md_path.display(), json_path.display());
+    Ok(())
+}
