@@ -475,6 +475,32 @@ impl RigConfig {
             current_sum_limit_a: co.current_sum_limit_a as f32,
         }
     }
+
+    /// The chain model of the reduced 5-DOF observer (`shared::observer`):
+    /// the `[mechanics]` values in `f32` and the mechanical orders of the
+    /// first `shared::observer::model::MAX_HARMONICS` `[[ripple]]` components
+    /// (only the orders: the observer estimates amplitudes and phases).
+    pub fn observer_model(&self) -> shared::observer::ChainModel {
+        let m = &self.mechanics;
+        let mut ripple_orders = [0u16; shared::observer::model::MAX_HARMONICS];
+        for (slot, ripple) in ripple_orders.iter_mut().zip(&self.ripple) {
+            *slot = ripple.mechanical_order.min(u16::MAX as u32) as u16;
+        }
+        shared::observer::ChainModel {
+            m_cw_kg: m.m_cw_kg as f32,
+            rope_total_length_m: m.rope_total_length_m as f32,
+            rope_ea_n: m.rope_ea_n as f32,
+            rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m as f32,
+            sheave_inertia_kg_m2: m.sheave_inertia_kg_m2 as f32,
+            sheave_radius_m: m.sheave_radius_m as f32,
+            c_cw_kg_per_s: m.c_cw_kg_per_s as f32,
+            c_car_kg_per_s: m.c_car_kg_per_s as f32,
+            c_sheave_nms_per_rad: m.c_sheave_nms_per_rad as f32,
+            gravity_mps2: m.gravity_mps2 as f32,
+            encoder_counts_per_rev: self.inverter.encoder_counts_per_rev,
+            ripple_orders,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -491,6 +517,23 @@ mod tests {
         if let Ok(spec) = RigConfig::load(&spec) {
             assert_eq!(spec, rig, "configs/rig.toml has drifted from shared/spec/rig.toml");
         }
+    }
+
+    #[test]
+    fn observer_model_carries_the_rig_mechanics_and_ripple_orders() {
+        let rig = RigConfig::embedded_default().unwrap();
+        let model = rig.observer_model();
+        assert_eq!(model.validate(), Ok(()));
+        assert_eq!(model.ripple_orders, [1, 6, 12, 36, 72]);
+        assert_eq!(model.rope_ea_n, 1.0e6);
+        assert_eq!(model.m_cw_kg, 33.0);
+        assert_eq!(model.encoder_counts_per_rev, 16384);
+        // Eqn 4 at mid travel with the heaviest car equals the f64 value within f32 rounding.
+        let lw = 4.3;
+        let expected = (70.5 - 33.0 + 0.095 * (8.6 - 2.0 * lw)) * 9.81 * 0.065;
+        let got = model.out_of_balance_torque_nm(lw as f32, 70.5) as f64;
+        println!("Eqn 4 at lw = {lw} m: {got:.6} N m (f64 {expected:.6})");
+        assert!((got - expected).abs() < 1e-4 * expected.abs());
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub mod current_loop;
 pub mod current_offset;
 pub mod fixed;
 pub mod frame;
+pub mod observer;
 pub mod park_clarke;
 pub mod pi;
 pub mod profile;

@@ -1,0 +1,414 @@
+//! Extended Kalman filter on the reduced chain ([`super::model`]), one
+//! measurement update and one Riccati step per 2 kHz tick.
+//!
+//! Augmented state (18 entries, SI units):
+//!
+//! * 0-5: the mechanical states of [`super::model`] (m, m/s);
+//! * 6: `kappa`, the rope stiffness over its nominal value (dimensionless,
+//!   random walk): an EA off by 20 % detunes the car mode by 10 %, which near
+//!   the 12th ripple order changes the car response several-fold, so the
+//!   filter identifies it as the travel sweeps the rope lengths;
+//! * 7: a slowly varying shaft disturbance torque `d_0`, N m (random walk);
+//! * 8-17: `a_n, b_n` of the angle-locked ripple `sum a_n cos(n theta) +
+//!   b_n sin(n theta)` for the orders of [`ChainModel::ripple_orders`], N m
+//!   (random walks; the observer knows the orders, not the amplitudes).
+//!
+//! Measurement: the sheave-edge position from the encoder, `theta r`, with the
+//! variance of a uniform quantisation step, `q^2 / 12`. Input: the machine
+//! torque `Kt i_q` (N m) minus the out-of-balance torque of Eqn 4.
+//!
+//! Determinism: only `f32` add, subtract, multiply and divide (through
+//! nalgebra's matrix products) and the integer sine table of [`crate::trig`],
+//! so the chip and the host compute the same bits.
+
+use nalgebra::{SMatrix, SVector};
+
+use super::model::{
+    discretise, ChainModel, Matrix6, ModelError, ReducedChain, Vector6, CAR_STRETCH, CW_STRETCH, MAX_HARMONICS,
+    MECHANICAL_STATES, SHEAVE_POSITION, SHEAVE_SPEED,
+};
+use crate::trig::sin_cos;
+
+/// Length of the augmented state.
+pub const STATES: usize = MECHANICAL_STATES + 2 + 2 * MAX_HARMONICS;
+/// Index of the stiffness scale `kappa`.
+pub const EA_SCALE: usize = MECHANICAL_STATES;
+/// Index of the slow disturbance torque `d_0`, N m.
+pub const DISTURBANCE_BIAS: usize = MECHANICAL_STATES + 1;
+/// Index of the first ripple coefficient `a_1`, N m.
+pub const FIRST_HARMONIC: usize = MECHANICAL_STATES + 2;
+const DISTURBANCE_STATES: usize = STATES - DISTURBANCE_BIAS;
+
+type StateVector = SVector<f32, STATES>;
+type Covariance = SMatrix<f32, STATES, STATES>;
+
+/// Noise intensities, initial uncertainty and numerical settings of the
+/// filter. The defaults are the tuning of the README's figures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObserverTuning {
+    /// Filter rate: one [`ChainObserver::update`] per period, Hz.
+    pub update_hz: f32,
+    /// White-noise intensity of unmodelled sheave-edge acceleration, m^2/s^3.
+    pub sheave_acceleration_noise: f32,
+    /// Random-walk intensity of the stiffness scale, 1/s.
+    pub ea_scale_noise_per_s: f32,
+    /// Random-walk intensity of the slow disturbance torque, N^2 m^2/s.
+    pub disturbance_noise: f32,
+    /// Random-walk intensity of each ripple coefficient, N^2 m^2/s.
+    pub ripple_noise: f32,
+    /// Initial standard deviation of the stiffness scale (dimensionless).
+    pub ea_scale_initial_sd: f32,
+    /// Initial standard deviation of the disturbance and ripple coefficients, N m.
+    pub disturbance_initial_sd_nm: f32,
+    /// Lower bound of the stiffness scale (dimensionless, > 0).
+    pub ea_scale_min: f32,
+    /// Upper bound of the stiffness scale (dimensionless).
+    pub ea_scale_max: f32,
+    /// Ticks between two re-discretisations of the model (rope lengths and
+    /// stiffness scale change slowly), at least 1.
+    pub reschedule_ticks: u32,
+    /// Terms of the discretisation series ([`discretise`]).
+    pub series_terms: usize,
+}
+
+impl Default for ObserverTuning {
+    fn default() -> Self {
+        Self {
+            update_hz: 2000.0,
+            sheave_acceleration_noise: 1.0e-4,
+            ea_scale_noise_per_s: 1.0e-4,
+            disturbance_noise: 1.0,
+            ripple_noise: 1.0,
+            ea_scale_initial_sd: 0.2,
+            disturbance_initial_sd_nm: 1.0,
+            ea_scale_min: 0.5,
+            ea_scale_max: 2.0,
+            reschedule_ticks: 8,
+            series_terms: 8,
+        }
+    }
+}
+
+impl ObserverTuning {
+    /// Checks every field; the error names the first one out of range.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        let non_negative = |v: f32| v.is_finite() && v >= 0.0;
+        let checks = [
+            (positive(self.update_hz), "update_hz", "a finite rate > 0 Hz"),
+            (non_negative(self.sheave_acceleration_noise), "sheave_acceleration_noise", "a finite value >= 0"),
+            (non_negative(self.ea_scale_noise_per_s), "ea_scale_noise_per_s", "a finite value >= 0"),
+            (non_negative(self.disturbance_noise), "disturbance_noise", "a finite value >= 0"),
+            (non_negative(self.ripple_noise), "ripple_noise", "a finite value >= 0"),
+            (non_negative(self.ea_scale_initial_sd), "ea_scale_initial_sd", "a finite value >= 0"),
+            (non_negative(self.disturbance_initial_sd_nm), "disturbance_initial_sd_nm", "a finite value >= 0"),
+            (positive(self.ea_scale_min), "ea_scale_min", "a finite value > 0"),
+            (
+                self.ea_scale_max.is_finite() && self.ea_scale_max >= self.ea_scale_min,
+                "ea_scale_max",
+                "a finite value >= ea_scale_min",
+            ),
+            (self.reschedule_ticks >= 1, "reschedule_ticks", "at least 1"),
+            ((2..=20).contains(&self.series_terms), "series_terms", "2 to 20 terms"),
+        ];
+        for (ok, field, expected) in checks {
+            if !ok {
+                return Err(ModelError { field, expected });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What the observer estimates after one tick (filtered: it includes that
+/// tick's encoder reading).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ObserverEstimate {
+    /// Car acceleration, m/s^2, positive up.
+    pub car_acceleration_mps2: f32,
+    /// Dynamic force of the car-side rope on the car (tension change from
+    /// the static tension at rest), N.
+    pub car_rope_force_n: f32,
+    /// Dynamic force of the counterweight-side rope on the counterweight, N.
+    pub counterweight_rope_force_n: f32,
+    /// Shaft disturbance torque (everything the machine torque and the model
+    /// do not explain: ripple, friction error), N m, positive lifts the car.
+    pub shaft_disturbance_torque_nm: f32,
+    /// Estimated rope `EA`, N.
+    pub rope_ea_n: f32,
+    /// Sheave-edge speed, m/s (positive: car up).
+    pub sheave_speed_mps: f32,
+    /// Counterweight-side rope length from the encoder (Eqn 3), m.
+    pub counterweight_side_length_m: f32,
+}
+
+/// The reduced 5-DOF observer: call [`ChainObserver::start`] when the brake
+/// lifts (the chain is at its static equilibrium then), then
+/// [`ChainObserver::update`] once per speed-loop period.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainObserver {
+    model: ChainModel,
+    tuning: ObserverTuning,
+    dt_s: f32,
+    metres_per_count: f32,
+    /// `2^48 / counts_per_rev`: binary angle per encoder count, Q16.
+    binary_angle_per_count_q16: u64,
+    m_car_kg: f32,
+    lw_start_m: f32,
+    started: bool,
+    last_count: u32,
+    counts: i64,
+    start_counts: i64,
+    /// Encoder position (counts) of the zero of state 0.
+    origin_counts: i64,
+    last_torque_nm: f32,
+    x: StateVector,
+    p: Covariance,
+    phi: Matrix6,
+    psi: Matrix6,
+    chain: ReducedChain,
+    ticks_to_schedule: u32,
+    restarts: u32,
+    estimate: ObserverEstimate,
+}
+
+impl ChainObserver {
+    /// An observer of `model` with `tuning`; checks both.
+    pub fn new(model: ChainModel, tuning: ObserverTuning) -> Result<Self, ModelError> {
+        model.validate()?;
+        tuning.validate()?;
+        let chain = model.reduced(0.5 * model.rope_total_length_m, model.m_cw_kg, 1.0);
+        let mut observer = Self {
+            model,
+            tuning,
+            dt_s: 1.0 / tuning.update_hz,
+            metres_per_count: model.metres_per_count(),
+            binary_angle_per_count_q16: (1u64 << 48) / model.encoder_counts_per_rev as u64,
+            m_car_kg: model.m_cw_kg,
+            lw_start_m: 0.5 * model.rope_total_length_m,
+            started: false,
+            last_count: 0,
+            counts: 0,
+            start_counts: 0,
+            origin_counts: 0,
+            last_torque_nm: 0.0,
+            x: StateVector::zeros(),
+            p: Covariance::zeros(),
+            phi: Matrix6::identity(),
+            psi: Matrix6::zeros(),
+            chain,
+            ticks_to_schedule: 0,
+            restarts: 0,
+            estimate: ObserverEstimate::default(),
+        };
+        observer.reset_filter();
+        Ok(observer)
+    }
+
+    /// Starts a travel: the chain at rest in its static equilibrium (brake
+    /// just lifted), counterweight-side length `lw_start_m` (m), car mass
+    /// `m_car_kg` (kg, load weighing), encoder counter `encoder_count` now.
+    /// A length outside the rope or a mass that is not positive is clamped
+    /// (to the model's range, and to the counterweight mass).
+    pub fn start(&mut self, lw_start_m: f32, m_car_kg: f32, encoder_count: u32) {
+        let (lw, _) = self.model.rope_lengths_m(lw_start_m);
+        self.lw_start_m = lw;
+        self.m_car_kg = if m_car_kg.is_finite() && m_car_kg > 0.0 { m_car_kg } else { self.model.m_cw_kg };
+        self.last_count = encoder_count;
+        self.counts = 0;
+        self.start_counts = 0;
+        self.origin_counts = 0;
+        self.last_torque_nm = self.model.out_of_balance_torque_nm(lw, self.m_car_kg);
+        self.started = true;
+        self.reset_filter();
+    }
+
+    fn reset_filter(&mut self) {
+        self.x = StateVector::zeros();
+        self.x[EA_SCALE] = 1.0;
+        let t = &self.tuning;
+        let step = self.metres_per_count;
+        let mut p = Covariance::zeros();
+        // At rest: position within a count, speeds and stretches tiny.
+        for i in 0..MECHANICAL_STATES {
+            p[(i, i)] = if i % 2 == 0 { step * step } else { 1.0e-6 };
+        }
+        p[(EA_SCALE, EA_SCALE)] = t.ea_scale_initial_sd * t.ea_scale_initial_sd;
+        let d2 = t.disturbance_initial_sd_nm * t.disturbance_initial_sd_nm;
+        p[(DISTURBANCE_BIAS, DISTURBANCE_BIAS)] = d2;
+        for (slot, &order) in self.model.ripple_orders.iter().enumerate() {
+            if order != 0 {
+                let i = FIRST_HARMONIC + 2 * slot;
+                p[(i, i)] = d2;
+                p[(i + 1, i + 1)] = d2;
+            }
+        }
+        self.p = p;
+        self.ticks_to_schedule = 0;
+        self.estimate = self.outputs();
+    }
+
+    /// True once [`ChainObserver::start`] has been called.
+    pub fn is_started(&self) -> bool {
+        self.started
+    }
+
+    /// How often the filter found a non-finite value and restarted itself
+    /// from rest at the current position (0 in normal operation).
+    pub fn restarts(&self) -> u32 {
+        self.restarts
+    }
+
+    /// The last estimate.
+    pub fn estimate(&self) -> ObserverEstimate {
+        self.estimate
+    }
+
+    /// Posterior variance of the stiffness scale (dimensionless), from the
+    /// diagonal of the covariance.
+    pub fn ea_scale_variance(&self) -> f32 {
+        self.p[(EA_SCALE, EA_SCALE)]
+    }
+
+    /// Counterweight-side rope length from the encoder (Eqn 3), m.
+    fn counterweight_side_length_m(&self) -> f32 {
+        self.lw_start_m + (self.counts - self.start_counts) as f32 * self.metres_per_count
+    }
+
+    /// `[1, cos(n_1 theta), sin(n_1 theta), ...]`: the regressor of the
+    /// disturbance states at the encoder angle (unused slots 0).
+    fn disturbance_regressor(&self) -> SVector<f32, DISTURBANCE_STATES> {
+        let cpr = self.model.encoder_counts_per_rev;
+        let within_rev = self.last_count % cpr;
+        let mut h = SVector::<f32, DISTURBANCE_STATES>::zeros();
+        h[0] = 1.0;
+        for (slot, &order) in self.model.ripple_orders.iter().enumerate() {
+            if order == 0 {
+                continue;
+            }
+            let nth = (within_rev as u64 * order as u64 % cpr as u64) as u64;
+            let angle = ((nth * self.binary_angle_per_count_q16) >> 16) as u32;
+            let (sin, cos) = sin_cos(angle);
+            const Q30: f32 = 1.0 / (1u32 << 30) as f32;
+            h[1 + 2 * slot] = cos.to_bits() as f32 * Q30;
+            h[2 + 2 * slot] = sin.to_bits() as f32 * Q30;
+        }
+        h
+    }
+
+    fn outputs(&self) -> ObserverEstimate {
+        let mech: Vector6 = self.x.fixed_rows::<MECHANICAL_STATES>(0).into_owned();
+        let c = &self.chain;
+        let h = self.disturbance_regressor();
+        let disturbance = self.x.fixed_rows::<DISTURBANCE_STATES>(DISTURBANCE_BIAS).dot(&h);
+        ObserverEstimate {
+            car_acceleration_mps2: c.car_acceleration_mps2(&mech),
+            car_rope_force_n: c.car_stiffness_n_per_m * mech[CAR_STRETCH],
+            counterweight_rope_force_n: c.cw_stiffness_n_per_m * mech[CW_STRETCH],
+            shaft_disturbance_torque_nm: disturbance,
+            rope_ea_n: self.x[EA_SCALE] * self.model.rope_ea_n,
+            sheave_speed_mps: mech[SHEAVE_SPEED],
+            counterweight_side_length_m: self.counterweight_side_length_m(),
+        }
+    }
+
+    /// One tick: `encoder_count` is the free-running (wrapping) encoder
+    /// counter now; `motor_torque_nm` the machine torque `Kt i_q` (N m, from
+    /// the measured q current) that acts until the next tick. A non-finite
+    /// torque is replaced by the last finite one, a torque beyond
+    /// `+-1e5 N m` is clamped. Before [`ChainObserver::start`] the observer
+    /// only follows the encoder and returns zeros.
+    pub fn update(&mut self, encoder_count: u32, motor_torque_nm: f32) -> ObserverEstimate {
+        // Modular difference of a wrapping counter.
+        let delta = encoder_count.wrapping_sub(self.last_count) as i32;
+        self.last_count = encoder_count;
+        self.counts = self.counts.saturating_add(delta as i64);
+        if !self.started {
+            return self.estimate;
+        }
+        if motor_torque_nm.is_finite() {
+            self.last_torque_nm = motor_torque_nm.clamp(-1.0e5, 1.0e5);
+        }
+
+        // Measurement update, H = e_0 (sheave-edge position).
+        let measured_m = (self.counts - self.origin_counts) as f32 * self.metres_per_count;
+        let step = self.metres_per_count;
+        let innovation_var = self.p[(0, 0)] + step * step / 12.0;
+        let gain: StateVector = self.p.column(SHEAVE_POSITION) / innovation_var;
+        let innovation = measured_m - self.x[SHEAVE_POSITION];
+        self.x += gain * innovation;
+        let p_row = self.p.row(SHEAVE_POSITION).into_owned();
+        self.p -= gain * p_row;
+        self.x[EA_SCALE] = self.x[EA_SCALE].max(self.tuning.ea_scale_min).min(self.tuning.ea_scale_max);
+
+        // Keep state 0 within one count of the origin: f32 resolves the
+        // stretch of the ropes next to a small position, not next to metres.
+        let shift = (self.x[SHEAVE_POSITION] / step) as i32;
+        self.origin_counts += shift as i64;
+        self.x[SHEAVE_POSITION] -= shift as f32 * step;
+
+        let lw = self.counterweight_side_length_m();
+        let kappa = self.x[EA_SCALE];
+        if self.ticks_to_schedule == 0 {
+            self.chain = self.model.reduced(lw, self.m_car_kg, kappa);
+            let (psi, phi) = discretise(&self.chain.system_matrix(), self.dt_s, self.tuning.series_terms);
+            self.psi = psi;
+            self.phi = phi;
+            self.ticks_to_schedule = self.tuning.reschedule_ticks;
+        }
+        self.ticks_to_schedule -= 1;
+        self.estimate = self.outputs();
+
+        // Prediction to the next tick.
+        let r = self.model.sheave_radius_m;
+        let h = self.disturbance_regressor();
+        let mech: Vector6 = self.x.fixed_rows::<MECHANICAL_STATES>(0).into_owned();
+        let disturbance = self.x.fixed_rows::<DISTURBANCE_STATES>(DISTURBANCE_BIAS).dot(&h);
+        let force_n = (self.last_torque_nm - self.model.out_of_balance_torque_nm(lw, self.m_car_kg) + disturbance) / r;
+        let gamma: Vector6 = self.psi * self.chain.sheave_force_input();
+        let stiffness_column: Vector6 = self.psi * self.chain.dynamics_per_stiffness_scale(&mech, kappa);
+        let next = self.phi * mech + gamma * force_n;
+        self.x.fixed_rows_mut::<MECHANICAL_STATES>(0).copy_from(&next);
+
+        // Riccati step P <- F P F^T + Q, with F the identity but for its
+        // first six rows [Phi | d/dkappa | gamma h^T / r].
+        let mut f_top = SMatrix::<f32, MECHANICAL_STATES, STATES>::zeros();
+        f_top.fixed_view_mut::<MECHANICAL_STATES, MECHANICAL_STATES>(0, 0).copy_from(&self.phi);
+        f_top.fixed_view_mut::<MECHANICAL_STATES, 1>(0, EA_SCALE).copy_from(&stiffness_column);
+        f_top
+            .fixed_view_mut::<MECHANICAL_STATES, DISTURBANCE_STATES>(0, DISTURBANCE_BIAS)
+            .copy_from(&(gamma * (h.transpose() / r)));
+        let fp_top = f_top * self.p; // rows 0-5 of F P
+        let corner = fp_top * f_top.transpose(); // rows and columns 0-5 of F P F^T
+        for i in 0..MECHANICAL_STATES {
+            for j in MECHANICAL_STATES..STATES {
+                self.p[(i, j)] = fp_top[(i, j)];
+                self.p[(j, i)] = fp_top[(i, j)];
+            }
+            for j in 0..MECHANICAL_STATES {
+                // Symmetrised: rounding must not make P drift from symmetry.
+                self.p[(i, j)] = 0.5 * (corner[(i, j)] + corner[(j, i)]);
+            }
+        }
+        let t = &self.tuning;
+        let dt = self.dt_s;
+        self.p[(SHEAVE_SPEED, SHEAVE_SPEED)] += t.sheave_acceleration_noise * dt;
+        self.p[(EA_SCALE, EA_SCALE)] += t.ea_scale_noise_per_s * dt;
+        self.p[(DISTURBANCE_BIAS, DISTURBANCE_BIAS)] += t.disturbance_noise * dt;
+        for (slot, &order) in self.model.ripple_orders.iter().enumerate() {
+            if order != 0 {
+                let i = FIRST_HARMONIC + 2 * slot;
+                self.p[(i, i)] += t.ripple_noise * dt;
+                self.p[(i + 1, i + 1)] += t.ripple_noise * dt;
+            }
+        }
+
+        let finite = self.x.iter().chain(self.p.iter()).all(|v| v.is_finite());
+        if !finite || self.p[(0, 0)] < 0.0 {
+            self.restarts = self.restarts.saturating_add(1);
+            self.origin_counts = self.counts;
+            self.reset_filter();
+        }
+        self.estimate
+    }
+}
