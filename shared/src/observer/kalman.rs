@@ -286,7 +286,7 @@ impl ChainObserver {
             if order == 0 {
                 continue;
             }
-            let nth = (within_rev as u64 * order as u64 % cpr as u64) as u64;
+            let nth = within_rev as u64 * order as u64 % cpr as u64;
             let angle = ((nth * self.binary_angle_per_count_q16) >> 16) as u32;
             let (sin, cos) = sin_cos(angle);
             const Q30: f32 = 1.0 / (1u32 << 30) as f32;
@@ -410,5 +410,164 @@ impl ChainObserver {
             self.reset_filter();
         }
         self.estimate
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::super::model::tests::rig_model;
+    use super::*;
+    use std::println;
+    use std::vec::Vec;
+
+    /// The 3-mass chain in f64 with a true EA of `ea_scale` times nominal, a
+    /// 12th-order ripple and a constant friction error on the shaft, under a
+    /// speed controller that drives the car up at 0.4 m/s from `lw = 1 m`.
+    /// Returns per 2 kHz tick: (encoder count, machine torque N m, true car
+    /// acceleration m/s^2, true disturbance torque N m).
+    fn simulate_own_model(ea_scale: f64, seconds: f64) -> Vec<(u32, f32, f64, f64)> {
+        let m = rig_model();
+        let (m_car, lw0) = (58.0, 1.0);
+        let r = m.sheave_radius_m as f64;
+        let mu = m.rope_mass_per_length_kg_per_m as f64;
+        let lt = m.rope_total_length_m as f64;
+        let disturbance = |theta: f64| 3.5 * libm_free_cos(12.0 * theta + 0.7) + 1.5;
+        let derivative = |x: &[f64; 6], torque: f64| -> [f64; 6] {
+            let lw = lw0 + x[0];
+            let lc = lt - lw;
+            let (kc, kw) = (ea_scale * m.rope_ea_n as f64 / lc, ea_scale * m.rope_ea_n as f64 / lw);
+            let mc = m_car + mu * lc / 2.0;
+            let mw = m.m_cw_kg as f64 + mu * lw / 2.0;
+            let msh = m.sheave_inertia_kg_m2 as f64 / (r * r) + mu * lt / 2.0;
+            let oob = (m_car - m.m_cw_kg as f64 + mu * (lc - lw)) * m.gravity_mps2 as f64 * r;
+            let force = (torque + disturbance(x[0] / r) - oob) / r;
+            let [_, v, ec, vc, ew, vw] = *x;
+            [
+                v,
+                (force - m.c_sheave_nms_per_rad as f64 / (r * r) * v - kc * ec - kw * ew) / msh,
+                v - vc,
+                (kc * ec - m.c_car_kg_per_s as f64 * vc) / mc,
+                v - vw,
+                (kw * ew - m.c_cw_kg_per_s as f64 * vw) / mw,
+            ]
+        };
+        let dt = 1.0 / 2000.0;
+        let substeps = 20;
+        let h = dt / substeps as f64;
+        let mut x = [0.0f64; 6];
+        let mut integral = 0.0;
+        let mut out = Vec::new();
+        for k in 0..(seconds / dt) as usize {
+            let t = k as f64 * dt;
+            let speed_ref = (0.5 * t).min(0.4);
+            let lw = lw0 + x[0];
+            let oob = (m_car - m.m_cw_kg as f64 + mu * (lt - 2.0 * lw)) * m.gravity_mps2 as f64 * r;
+            integral += (speed_ref - x[1]) * dt;
+            let torque = oob + 400.0 * (speed_ref - x[1]) * r * 40.0 + 4000.0 * integral * r;
+            let theta = x[0] / r;
+            let count = libm_free_floor(theta / core::f64::consts::TAU * m.encoder_counts_per_rev as f64);
+            let d = derivative(&x, torque);
+            let car_acc = d[3];
+            out.push((count as i64 as u32, torque as f32, car_acc, disturbance(theta)));
+            for _ in 0..substeps {
+                let add = |a: &[f64; 6], k: &[f64; 6], s: f64| core::array::from_fn::<f64, 6, _>(|i| a[i] + s * k[i]);
+                let k1 = derivative(&x, torque);
+                let k2 = derivative(&add(&x, &k1, h / 2.0), torque);
+                let k3 = derivative(&add(&x, &k2, h / 2.0), torque);
+                let k4 = derivative(&add(&x, &k3, h), torque);
+                x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+            }
+        }
+        out
+    }
+
+    // std's f64 methods are available to the test build (std is linked).
+    fn libm_free_cos(x: f64) -> f64 {
+        x.cos()
+    }
+    fn libm_free_floor(x: f64) -> f64 {
+        x.floor()
+    }
+
+    fn rms(values: impl Iterator<Item = f64>) -> f64 {
+        let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
+        (sum / n as f64).sqrt()
+    }
+
+    #[test]
+    fn converges_on_data_of_its_own_model_and_identifies_ea() {
+        let mut results = Vec::new();
+        for ea_scale in [1.0, 1.15, 0.85] {
+            let data = simulate_own_model(ea_scale, 8.0);
+            let mut observer = ChainObserver::new(rig_model(), ObserverTuning::default()).unwrap();
+            observer.start(1.0, 58.0, data[0].0);
+            let estimates: Vec<ObserverEstimate> = data.iter().map(|&(c, tq, _, _)| observer.update(c, tq)).collect();
+            // Last 3 s (constant speed from 0.8 s on).
+            let tail = data.len() - 6000..data.len();
+            let truth =
+                rms(tail.clone().map(|i| data[i].2 - data[tail.start..].iter().map(|d| d.2).sum::<f64>() / 6000.0));
+            let error = rms(tail.clone().map(|i| estimates[i].car_acceleration_mps2 as f64 - data[i].2));
+            let torque_error = rms(tail.clone().map(|i| estimates[i].shaft_disturbance_torque_nm as f64 - data[i].3));
+            let ea = observer.estimate().rope_ea_n as f64 / 1.0e6;
+            println!(
+                "EA x{ea_scale}: car acceleration error RMS {error:.4} m/s^2 of {truth:.4} m/s^2 ({:.2} %), \
+                 disturbance torque error RMS {torque_error:.3} N m, EA scale {ea:.4}",
+                100.0 * error / truth
+            );
+            results.push((ea_scale, error / truth, torque_error, ea));
+        }
+        for (ea_scale, ratio, torque_error, ea) in results {
+            assert!(ratio < 0.10, "EA x{ea_scale}: car acceleration error {:.1} % of the vibration", 100.0 * ratio);
+            // The ripple is 3.5 N m (2.5 N m RMS).
+            assert!(torque_error < 1.0, "EA x{ea_scale}: disturbance torque error {torque_error} N m");
+            assert!((ea - ea_scale).abs() < 0.03, "EA x{ea_scale}: estimated scale {ea}");
+        }
+    }
+
+    #[test]
+    fn extreme_inputs_give_finite_estimates() {
+        let mut observer = ChainObserver::new(rig_model(), ObserverTuning::default()).unwrap();
+        // Before start: zeros, no NaN.
+        let e = observer.update(12345, f32::NAN);
+        assert_eq!(e.car_acceleration_mps2, 0.0);
+        assert!(e.counterweight_side_length_m.is_finite());
+        observer.start(f32::NAN, -5.0, u32::MAX - 3);
+        let inputs = [
+            (u32::MAX, f32::NAN),
+            (5, f32::INFINITY),
+            (5, f32::NEG_INFINITY),
+            (1 << 31, 1.0e30),
+            (0, -1.0e30),
+            (7, f32::MIN_POSITIVE),
+            (u32::MAX / 3, 0.0),
+        ];
+        for k in 0..2000 {
+            let (count, torque) = inputs[k % inputs.len()];
+            let e = observer.update(count.wrapping_add(k as u32), torque);
+            let values = [
+                e.car_acceleration_mps2,
+                e.car_rope_force_n,
+                e.counterweight_rope_force_n,
+                e.shaft_disturbance_torque_nm,
+                e.rope_ea_n,
+                e.sheave_speed_mps,
+                e.counterweight_side_length_m,
+            ];
+            assert!(values.iter().all(|v| v.is_finite()), "tick {k}: {e:?}");
+        }
+        println!("after 2000 ticks of garbage: {:?}, restarts {}", observer.estimate(), observer.restarts());
+        let ea = observer.estimate().rope_ea_n;
+        assert!((0.5e6..=2.0e6).contains(&ea), "EA estimate {ea} outside the tuning bounds");
+    }
+
+    #[test]
+    fn bad_tuning_is_named() {
+        let tuning = ObserverTuning { reschedule_ticks: 0, ..ObserverTuning::default() };
+        assert_eq!(ChainObserver::new(rig_model(), tuning).unwrap_err().field, "reschedule_ticks");
+        let tuning = ObserverTuning { ea_scale_max: 0.1, ..ObserverTuning::default() };
+        assert_eq!(ChainObserver::new(rig_model(), tuning).unwrap_err().field, "ea_scale_max");
+        let tuning = ObserverTuning { update_hz: f32::NAN, ..ObserverTuning::default() };
+        assert_eq!(ChainObserver::new(rig_model(), tuning).unwrap_err().field, "update_hz");
     }
 }

@@ -262,3 +262,144 @@ pub fn discretise(a: &Matrix6, dt_s: f32, terms: usize) -> (Matrix6, Matrix6) {
     }
     (psi, Matrix6::identity() + a * psi)
 }
+
+#[cfg(test)]
+pub(crate) mod tests {
+    extern crate std;
+    use super::*;
+    use std::println;
+
+    /// The rig's chain as the observer sees it (configs/rig.toml).
+    pub(crate) fn rig_model() -> ChainModel {
+        ChainModel {
+            m_cw_kg: 33.0,
+            rope_total_length_m: 8.6,
+            rope_ea_n: 1.0e6,
+            rope_mass_per_length_kg_per_m: 0.095,
+            sheave_inertia_kg_m2: 0.3385,
+            sheave_radius_m: 0.065,
+            c_cw_kg_per_s: 148.0,
+            c_car_kg_per_s: 148.0,
+            c_sheave_nms_per_rad: 3.0,
+            gravity_mps2: 9.81,
+            encoder_counts_per_rev: 16384,
+            ripple_orders: [1, 6, 12, 36, 72],
+        }
+    }
+
+    /// Right-hand side of the reduced chain written out in f64, independently
+    /// of [`ReducedChain::system_matrix`]: sheave, car, counterweight.
+    fn derivative_f64(m: &ChainModel, lw: f64, m_car: f64, x: &[f64; 6], force_n: f64) -> [f64; 6] {
+        let lc = m.rope_total_length_m as f64 - lw;
+        let mu = m.rope_mass_per_length_kg_per_m as f64;
+        let r = m.sheave_radius_m as f64;
+        let (kc, kw) = (m.rope_ea_n as f64 / lc, m.rope_ea_n as f64 / lw);
+        let mc = m_car + mu * lc / 2.0;
+        let mw = m.m_cw_kg as f64 + mu * lw / 2.0;
+        let msh = m.sheave_inertia_kg_m2 as f64 / (r * r) + mu * (lc + lw) / 2.0;
+        let [_, v, ec, vc, ew, vw] = *x;
+        let rope_on_sheave = kc * ec + kw * ew;
+        [
+            v,
+            (force_n - m.c_sheave_nms_per_rad as f64 / (r * r) * v - rope_on_sheave) / msh,
+            v - vc,
+            (kc * ec - m.c_car_kg_per_s as f64 * vc) / mc,
+            v - vw,
+            (kw * ew - m.c_cw_kg_per_s as f64 * vw) / mw,
+        ]
+    }
+
+    /// `x(dt)` from `x0` with a constant sheave force, RK4 in 2000 substeps.
+    fn integrate_f64(m: &ChainModel, lw: f64, m_car: f64, x0: [f64; 6], force_n: f64, dt: f64) -> [f64; 6] {
+        let steps = 2000;
+        let h = dt / steps as f64;
+        let mut x = x0;
+        let add = |a: &[f64; 6], k: &[f64; 6], s: f64| core::array::from_fn::<f64, 6, _>(|i| a[i] + s * k[i]);
+        for _ in 0..steps {
+            let k1 = derivative_f64(m, lw, m_car, &x, force_n);
+            let k2 = derivative_f64(m, lw, m_car, &add(&x, &k1, h / 2.0), force_n);
+            let k3 = derivative_f64(m, lw, m_car, &add(&x, &k2, h / 2.0), force_n);
+            let k4 = derivative_f64(m, lw, m_car, &add(&x, &k3, h), force_n);
+            x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+        }
+        x
+    }
+
+    #[test]
+    fn discretised_model_matches_an_f64_integration() {
+        let model = rig_model();
+        let dt = 1.0 / 2000.0;
+        let mut worst: f64 = 0.0;
+        for m_car in [33.0f32, 70.5] {
+            for lw in [1.0f32, 4.0, 7.6] {
+                let chain = model.reduced(lw, m_car, 1.0);
+                let (psi, phi) = discretise(&chain.system_matrix(), dt, 8);
+                let gamma = psi * chain.sheave_force_input();
+                // Columns of Phi: unit initial states of each coordinate's scale.
+                for j in 0..6 {
+                    let scale = if j % 2 == 0 { 1.0e-4 } else { 1.0e-2 };
+                    let mut x0 = [0.0; 6];
+                    x0[j] = scale;
+                    let reference = integrate_f64(&model, lw as f64, m_car as f64, x0, 0.0, dt as f64);
+                    let norm = reference.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                    for i in 0..6 {
+                        let got = phi[(i, j)] as f64 * scale;
+                        worst = worst.max((got - reference[i]).abs() / norm);
+                    }
+                }
+                // Gamma: response to a 100 N sheave force from rest.
+                let reference = integrate_f64(&model, lw as f64, m_car as f64, [0.0; 6], 100.0, dt as f64);
+                let norm = reference.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                for i in 0..6 {
+                    worst = worst.max((gamma[i] as f64 * 100.0 - reference[i]).abs() / norm);
+                }
+            }
+        }
+        println!("largest difference of Phi and Gamma from the f64 RK4 integration: {worst:.2e} of the column");
+        assert!(worst < 1.0e-5, "discretisation off by {worst:.2e}");
+    }
+
+    #[test]
+    fn series_truncation_error_shrinks_with_terms() {
+        let model = rig_model();
+        let chain = model.reduced(1.0, 33.0, 1.0);
+        let a = chain.system_matrix();
+        let (_, reference) = discretise(&a, 5.0e-4, 16);
+        let mut previous = f32::MAX;
+        for terms in [2, 3, 4, 5] {
+            let (_, phi) = discretise(&a, 5.0e-4, terms);
+            let error = (phi - reference).abs().max();
+            println!("{terms} terms: largest |Phi - Phi_16| = {error:.3e}");
+            assert!(error < previous, "{terms} terms: {error} not below {previous}");
+            previous = error;
+        }
+    }
+
+    #[test]
+    fn bad_fields_are_named() {
+        let mut model = rig_model();
+        model.rope_ea_n = f32::NAN;
+        assert_eq!(model.validate().unwrap_err().field, "rope_ea_n");
+        let mut model = rig_model();
+        model.sheave_radius_m = -0.065;
+        let error = model.validate().unwrap_err();
+        assert_eq!(error.field, "sheave_radius_m");
+        println!("{error}");
+        let mut model = rig_model();
+        model.encoder_counts_per_rev = 0;
+        assert_eq!(model.validate().unwrap_err().field, "encoder_counts_per_rev");
+        assert_eq!(rig_model().validate(), Ok(()));
+    }
+
+    #[test]
+    fn extreme_rope_lengths_are_clamped_to_finite_stiffness() {
+        let model = rig_model();
+        for lw in [f32::NAN, f32::NEG_INFINITY, -3.0, 0.0, 8.6, 100.0, f32::INFINITY] {
+            let chain = model.reduced(lw, 70.5, 1.0);
+            let a = chain.system_matrix();
+            assert!(a.iter().all(|v| v.is_finite()), "lw = {lw}: non-finite A");
+            assert!(model.out_of_balance_torque_nm(lw, 70.5).is_finite(), "lw = {lw}");
+            assert!(chain.car_stiffness_n_per_m <= model.rope_ea_n / MIN_ROPE_LENGTH_M);
+        }
+    }
+}
