@@ -245,6 +245,10 @@ fn state_name(state: Option<DriveState>) -> &'static str {
             Fault::CurrentSensorImplausible => "Tripped(CurrentSensorImplausible)",
             Fault::EncoderImplausible => "Tripped(EncoderImplausible)",
             Fault::DeadlineMissed => "Tripped(DeadlineMissed)",
+            Fault::CurrentSensorOffset => "Tripped(CurrentSensorOffset)",
+            Fault::CurrentTracking => "Tripped(CurrentTracking)",
+            Fault::BackEmfMismatch => "Tripped(BackEmfMismatch)",
+            Fault::SpeedFollowing => "Tripped(SpeedFollowing)",
         },
     }
 }

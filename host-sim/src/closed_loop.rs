@@ -100,6 +100,84 @@ pub trait DriveController {
     fn command_travel(&mut self, command: TravelCommand) -> Result<(), SimError>;
     /// One PWM period.
     fn step(&mut self, sensors: &SensorFrame) -> Result<ControlOutput, SimError>;
+    /// One PWM period whose sensor frame is corrupted on the link: byte
+    /// `byte_index` of its encoding XOR `xor`. `None`: the controller did not
+    /// step (the frame was rejected). The default runs the frame through the
+    /// link codec in this process ([`corrupted_frame`]).
+    fn step_corrupted(
+        &mut self,
+        sensors: &SensorFrame,
+        byte_index: usize,
+        xor: u8,
+    ) -> Result<Option<ControlOutput>, SimError> {
+        match corrupted_frame(sensors, byte_index, xor) {
+            Some(frame) => self.step(&frame).map(Some),
+            None => Ok(None),
+        }
+    }
+}
+
+/// What happens to one control step under fault injection ([`FaultHook`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StepAction {
+    /// The controller steps on this frame (possibly altered by a sensor fault).
+    Run(SensorFrame),
+    /// The step runs `delay_s` (s) late: the frame carries the time stamp of
+    /// its execution; with a delay of half a period or more the previous
+    /// outputs act to the end of this period and the new ones from then on.
+    Late {
+        /// The sensor readings (sampled on time by the hardware trigger).
+        frame: SensorFrame,
+        /// Delay of the step, s.
+        delay_s: f64,
+    },
+    /// The step does not run: the timer keeps the previous compare values,
+    /// enable and brake outputs.
+    Skip,
+    /// The frame reaches the controller corrupted: byte `byte_index` of its
+    /// link encoding (`shared::frame`) XOR `xor`.
+    Corrupt {
+        /// The sensor readings before corruption.
+        frame: SensorFrame,
+        /// Index of the corrupted byte in the encoded frame.
+        byte_index: usize,
+        /// Bits flipped in that byte.
+        xor: u8,
+    },
+}
+
+/// Fault injection into the closed loop (see `crate::faults`): plant-side
+/// faults change the plant before a step, sensor and timing faults change
+/// what the controller gets, and the run may go on after a trip.
+pub trait FaultHook {
+    /// Before the step at `t_s` (s): change the plant (faults in the power
+    /// stage, the bus, the load or the brake).
+    fn before_step(&mut self, t_s: f64, plant: &mut Plant);
+    /// What the controller gets at `t_s` for the readings `frame`.
+    fn sensors(&mut self, t_s: f64, frame: SensorFrame, plant: &Plant) -> StepAction;
+    /// After the period that started at `t_s`, with the outputs in force.
+    fn after_step(&mut self, t_s: f64, plant: &Plant, output: &ControlOutput);
+    /// How long (s) to keep simulating after a trip (PWM off, brake
+    /// commanded); `None` ends the run with [`SimError::Tripped`].
+    fn keep_running_after_trip_s(&self) -> Option<f64>;
+}
+
+/// What the controller receives of a sensor frame corrupted on the link:
+/// the frame encoded with the link codec (`shared::frame`), byte
+/// `byte_index` XOR `xor`, decoded by a fresh decoder; `None` when the
+/// decoder rejects it (CRC) or never completes it.
+pub fn corrupted_frame(sensors: &SensorFrame, byte_index: usize, xor: u8) -> Option<SensorFrame> {
+    use shared::frame::{encode, Decoder, Message, MAX_FRAME};
+    let mut bytes = [0u8; MAX_FRAME];
+    let n = encode(&Message::Sense(*sensors), &mut bytes);
+    if let Some(byte) = bytes[..n].get_mut(byte_index) {
+        *byte ^= xor;
+    }
+    let mut decoder = Decoder::new();
+    bytes[..n].iter().find_map(|&byte| match decoder.push(byte) {
+        Some(Ok(Message::Sense(frame))) => Some(frame),
+        _ => None,
+    })
 }
 
 impl DriveController for Controller {
@@ -173,6 +251,23 @@ pub fn simulate_travel_with(
     options: &SimOptions,
     controller: &mut dyn DriveController,
     progress: Option<&ProgressBar>,
+    log: Option<&mut StepLog>,
+) -> Result<TravelRun, SimError> {
+    simulate_travel_faulted(rig, spec, options, controller, None, progress, log)
+}
+
+/// [`simulate_travel_with`] with faults injected by `hook` (none: the
+/// nominal loop). With a hook that keeps running after a trip, the run goes
+/// on with the controller tripped (PWM off, brake commanded) for that long
+/// and returns `Ok`; a corrupted frame goes through
+/// [`DriveController::step_corrupted`].
+pub fn simulate_travel_faulted(
+    rig: &RigConfig,
+    spec: &TravelSpec,
+    options: &SimOptions,
+    controller: &mut dyn DriveController,
+    mut hook: Option<&mut dyn FaultHook>,
+    progress: Option<&ProgressBar>,
     mut log: Option<&mut StepLog>,
 ) -> Result<TravelRun, SimError> {
     let total = rig.mechanics.rope_total_length_m;
@@ -215,18 +310,63 @@ pub fn simulate_travel_with(
     let mut next_sample: u64 = 0;
     let mut finished_at: Option<f64> = None;
     let mut k: u64 = 0;
+    // Outputs in force (what the timer holds when a step does not run).
+    let mut held: Option<ControlOutput> = None;
+    let mut tripped_at: Option<f64> = None;
     loop {
         let t_k = k as f64 * ts;
+        if let Some(hook) = hook.as_deref_mut() {
+            hook.before_step(t_k, &mut plant);
+        }
         let sensors = plant.sensor_frame();
-        let output = controller.step(&sensors)?;
-        if let Some(log) = log.as_deref_mut() {
-            log.steps.push((sensors, output));
-        }
+        let action = match hook.as_deref_mut() {
+            Some(hook) => hook.sensors(t_k, sensors, &plant),
+            None => StepAction::Run(sensors),
+        };
+        let (stepped, late) = match action {
+            StepAction::Run(frame) => (Some((frame, controller.step(&frame)?)), false),
+            StepAction::Late { mut frame, delay_s } => {
+                frame.time_us = frame.time_us.wrapping_add((delay_s * 1.0e6).round() as u32);
+                (Some((frame, controller.step(&frame)?)), delay_s >= 0.5 * ts)
+            }
+            StepAction::Skip => (None, false),
+            StepAction::Corrupt { frame, byte_index, xor } => {
+                (controller.step_corrupted(&frame, byte_index, xor)?.map(|o| (frame, o)), false)
+            }
+        };
+        let output = match (stepped, held) {
+            (Some((frame, output)), _) => {
+                if let Some(log) = log.as_deref_mut() {
+                    log.steps.push((frame, output));
+                }
+                output
+            }
+            (None, Some(previous)) => previous,
+            (None, None) => ControlOutput {
+                pwm_compare: [0; 3],
+                pwm_enabled: false,
+                brake_released: false,
+                state: DriveState::Idle,
+                telemetry: shared::controller::Telemetry::default(),
+            },
+        };
         if let DriveState::Tripped(fault) = output.state {
-            return Err(SimError::Tripped { time_s: t_k, fault });
+            match hook.as_deref().and_then(|h| h.keep_running_after_trip_s()) {
+                None => return Err(SimError::Tripped { time_s: t_k, fault }),
+                Some(after_s) => {
+                    let since = *tripped_at.get_or_insert(t_k);
+                    if t_k >= since + after_s {
+                        break;
+                    }
+                }
+            }
         }
+        // A late step's outputs load one underflow later: the previous ones act this period.
+        let previous = held.unwrap_or(output);
+        let applied_first_half = if late { previous } else { output };
+        held = Some(output);
         let mut inputs = plant.inputs();
-        inputs.brake_engaged = !output.brake_released;
+        inputs.brake_engaged = !applied_first_half.brake_released;
         plant.set_inputs(inputs);
         let mut advance_to = |plant: &mut Plant, t_end: f64, run: &mut TravelRun| {
             loop {
@@ -242,11 +382,21 @@ pub fn simulate_travel_with(
         };
         advance_to(&mut plant, t_k + 0.5 * ts, &mut run);
         plant.set_inputs(PlantInputs {
-            pwm_compare: output.pwm_compare,
-            pwm_enabled: output.pwm_enabled,
-            brake_engaged: !output.brake_released,
+            pwm_compare: applied_first_half.pwm_compare,
+            pwm_enabled: applied_first_half.pwm_enabled,
+            brake_engaged: !applied_first_half.brake_released,
         });
         advance_to(&mut plant, (k + 1) as f64 * ts, &mut run);
+        if late {
+            plant.set_inputs(PlantInputs {
+                pwm_compare: output.pwm_compare,
+                pwm_enabled: output.pwm_enabled,
+                brake_engaged: !output.brake_released,
+            });
+        }
+        if let Some(hook) = hook.as_deref_mut() {
+            hook.after_step(t_k, &plant, &output);
+        }
 
         let o = plant.observe();
         if !(o.car_acceleration_mps2.is_finite() && inside(o.counterweight_side_length_m)) {

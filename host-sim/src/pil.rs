@@ -20,10 +20,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use shared::frame::{command_result_from_code, encode, Decoder, Message, StepReport, MAX_FRAME};
+use shared::frame::{command_result_from_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
 use shared::{ControlOutput, Controller, DriveConfig, SensorFrame, TravelCommand};
 
-use crate::closed_loop::{DriveController, SimError};
+use crate::closed_loop::{corrupted_frame, DriveController, SimError};
 
 /// Processor clock of the MPS2 board in QEMU, which SysTick counts, Hz.
 pub const MPS2_SYSCLK_HZ: f64 = 25.0e6;
@@ -193,7 +193,12 @@ impl PilTarget {
     pub fn exchange(&mut self, message: &Message) -> Result<Message, PilError> {
         let mut frame = [0u8; MAX_FRAME];
         let n = encode(message, &mut frame);
-        self.stream.write_all(&frame[..n]).map_err(|source| PilError::Io { context: "send", source })?;
+        self.exchange_bytes(&frame[..n])
+    }
+
+    /// Sends raw bytes (a frame, possibly corrupted) and waits for the reply.
+    pub fn exchange_bytes(&mut self, frame: &[u8]) -> Result<Message, PilError> {
+        self.stream.write_all(frame).map_err(|source| PilError::Io { context: "send", source })?;
         let started = Instant::now();
         let mut buffer = [0u8; 256];
         loop {
@@ -251,6 +256,44 @@ impl DriveController for PilTarget {
             Message::Output(report) => report,
             other => return Err(PilError::Unexpected(other).into()),
         };
+        self.shadow_check(sensors, report)
+    }
+
+    /// Sends the frame with byte `byte_index` XOR `xor`: the target rejects
+    /// it ([`ACK_FRAME_REJECTED`], no step: `None`) or, if the corruption
+    /// still decodes, steps on what it decoded, as the shadow then does.
+    /// The sync bytes (0 and 1) cannot be corrupted here: the target would
+    /// see no frame at all and the host could not tell when to stop waiting.
+    fn step_corrupted(
+        &mut self,
+        sensors: &SensorFrame,
+        byte_index: usize,
+        xor: u8,
+    ) -> Result<Option<ControlOutput>, SimError> {
+        let mut frame = [0u8; MAX_FRAME];
+        let n = encode(&Message::Sense(*sensors), &mut frame);
+        if !(2..n).contains(&byte_index) {
+            return Err(SimError::Link(format!(
+                "frame corruption at byte {byte_index}: the PIL link corrupts bytes 2..{n} (after the sync pair)"
+            )));
+        }
+        frame[byte_index] ^= xor;
+        match self.exchange_bytes(&frame[..n])? {
+            Message::Ack(ACK_FRAME_REJECTED) => Ok(None),
+            Message::Output(report) => {
+                let decoded = corrupted_frame(sensors, byte_index, xor).ok_or_else(|| {
+                    SimError::Link("the target stepped on a frame the host codec rejects".to_string())
+                })?;
+                self.shadow_check(&decoded, report).map(Some)
+            }
+            other => Err(PilError::Unexpected(other).into()),
+        }
+    }
+}
+
+impl PilTarget {
+    /// Steps the shadow on `sensors` and checks the target's `report` against it.
+    fn shadow_check(&mut self, sensors: &SensorFrame, report: StepReport) -> Result<ControlOutput, SimError> {
         let host = self.shadow.step(sensors);
         if !report.matches(&host) {
             return Err(SimError::Link(format!(

@@ -21,7 +21,7 @@ mod uart;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
-use shared::frame::{command_result_code, encode, Decoder, Message, StepReport, MAX_FRAME};
+use shared::frame::{command_result_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
 use shared::Controller;
 
 #[cfg(feature = "rtt")]
@@ -75,8 +75,11 @@ fn main() -> ! {
             }
             Some(Ok(Message::Output(_) | Message::Ack(_))) => continue,
             Some(Err(error)) => {
+                // A rejected frame is a step that does not run: the
+                // controller's deadline check sees the gap at the next frame.
+                // The host is told so that it does not wait for an output.
                 defmt::warn!("dropped a bad frame: {}", defmt::Debug2Format(&error));
-                continue;
+                Message::Ack(ACK_FRAME_REJECTED)
             }
         };
         let n = encode(&reply, &mut frame);

@@ -20,6 +20,12 @@ pub const MAX_PAYLOAD: usize = 64;
 /// Largest encoded frame, bytes.
 pub const MAX_FRAME: usize = MAX_PAYLOAD + 6;
 
+/// [`Message::Ack`] code of the chip's answer to a frame its decoder
+/// rejected (CRC, kind, length or field): the step of a rejected `Sense`
+/// frame does not run, which the controller sees as a missed deadline at the
+/// next frame.
+pub const ACK_FRAME_REJECTED: u8 = 0xFF;
+
 const KIND_SENSE: u8 = 0x01;
 const KIND_TRAVEL: u8 = 0x02;
 const KIND_RESET: u8 = 0x03;

@@ -3,6 +3,7 @@
 pub mod analyze;
 pub mod bench;
 pub mod decay;
+pub mod faults;
 pub mod identify;
 pub mod modes;
 pub mod pil;
@@ -58,6 +59,10 @@ pub enum Command {
     /// emulated Cortex-M4F; checks every step against the host build and
     /// reports the instructions per control step.
     Pil(pil::PilArgs),
+    /// The drive under faults: every fault kind at several instants of a
+    /// travel, car up and down (or the faults given), with detection time,
+    /// reason, peak current and acceleration, displacement after detection.
+    Faults(faults::FaultsArgs),
 }
 
 /// Runs a parsed command line.
@@ -72,6 +77,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Identify(args) => identify::run(&rig, &args),
         Command::RideQuality(args) => ride_quality::run(&rig, &args),
         Command::Pil(args) => pil::run(&rig, &args),
+        Command::Faults(args) => faults::run(&rig, &args),
     }
 }
 
