@@ -11,6 +11,7 @@
 pub mod analysis;
 pub mod cli;
 pub mod closed_loop;
+pub mod compensation;
 pub mod faults;
 pub mod pil;
 pub mod plant;

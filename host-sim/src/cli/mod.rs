@@ -2,6 +2,7 @@
 
 pub mod analyze;
 pub mod bench;
+pub mod compare;
 pub mod decay;
 pub mod faults;
 pub mod identify;
@@ -63,6 +64,10 @@ pub enum Command {
     /// travel, car up and down (or the faults given), with detection time,
     /// reason, peak current and acceleration, displacement after detection.
     Faults(faults::FaultsArgs),
+    /// Every torque-ripple compensation strategy (and none) over the rig's
+    /// travels and model mismatches: ride quality, car vibration at 12, 36
+    /// and 72 x f_mech, peak current, learning time.
+    Compare(compare::CompareArgs),
 }
 
 /// Runs a parsed command line.
@@ -78,6 +83,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::RideQuality(args) => ride_quality::run(&rig, &args),
         Command::Pil(args) => pil::run(&rig, &args),
         Command::Faults(args) => faults::run(&rig, &args),
+        Command::Compare(args) => compare::run(&rig, &args),
     }
 }
 

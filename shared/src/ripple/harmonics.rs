@@ -84,10 +84,10 @@ impl HarmonicCurrent {
     pub fn from_table(table: &HarmonicTable, torque_constant_nm_per_a: f32, muted: &[bool; MAX_HARMONICS]) -> Self {
         let inverse_kt = 1.0 / torque_constant_nm_per_a;
         let mut current = Self { orders: table.orders, len: table.len, ..Self::default() };
-        for k in 0..table.len {
-            if !muted[k] {
-                let u = table.torque_nm[k];
-                current.coefficients_a[k] = (q16(u.re * inverse_kt), q16(-u.im * inverse_kt));
+        let used = table.len.min(MAX_HARMONICS);
+        for ((slot, u), &mute) in current.coefficients_a.iter_mut().zip(&table.torque_nm).zip(muted).take(used) {
+            if !mute {
+                *slot = (q16(u.re * inverse_kt), q16(-u.im * inverse_kt));
             }
         }
         current
