@@ -10,7 +10,7 @@ use shared::Controller;
 
 use super::inject::{FaultInjector, Observed};
 use super::{FaultKind, FaultSpec, Instant, Onset, KIND_NAMES};
-use crate::closed_loop::{simulate_travel_faulted, DriveController, SimError, SimOptions, TravelSpec};
+use crate::closed_loop::{simulate_travel_faulted, DriveController, SimOptions, TravelSpec};
 use crate::config::RigConfig;
 
 /// Simulated time after a trip, s: long enough for the car to settle on
@@ -96,9 +96,7 @@ pub fn run_case_with(
             landing_error_m = run.lw_m.last().map(|lw| lw - case.travel.lw_end_m);
         }
         Ok(_) => {}
-        Err(e @ (SimError::Diverged(_) | SimError::Timeout(_) | SimError::Link(_) | SimError::Tripped { .. })) => {
-            error = Some(e.to_string())
-        }
+        // Plant out of range, timeout, a link failure, a refused command.
         Err(e) => error = Some(e.to_string()),
     }
     FaultOutcome {
