@@ -21,11 +21,11 @@ use shared::speed_loop::equivalent_inertia_kg_m2;
 #[test]
 fn chain_response_resonances_are_the_natural_frequencies_of_the_5_dof_model() {
     let rig = rig();
-    let mut drive = rig.drive_config();
+    let mut model = rig.observer_model();
     // Undamped, so the resonances are sharp.
-    drive.c_car_kg_per_s = 0.0;
-    drive.c_cw_kg_per_s = 0.0;
-    drive.c_sheave_nms_per_rad = 0.0;
+    model.c_car_kg_per_s = 0.0;
+    model.c_cw_kg_per_s = 0.0;
+    model.c_sheave_nms_per_rad = 0.0;
     for (m_car, lw) in [(70.5, 4.0), (33.0, 2.0), (58.0, 6.5)] {
         let mut chain = ChainParams::from_rig(&rig, m_car);
         chain.c_car_kg_per_s = 0.0;
@@ -35,7 +35,7 @@ fn chain_response_resonances_are_the_natural_frequencies_of_the_5_dof_model() {
         for &f in &modes[1..3] {
             // |mobility| grows without bound toward a resonance: compare 0.2 % either side with 5 % away.
             let at = |f_hz: f64| {
-                chain_response(&drive, m_car as f32, lw as f32, (std::f64::consts::TAU * f_hz) as f32)
+                chain_response(&model, m_car as f32, lw as f32, (std::f64::consts::TAU * f_hz) as f32)
                     .shaft_mobility
                     .norm_sqr()
             };
@@ -64,11 +64,11 @@ fn closed_loop_response_model_matches_the_simulated_drive() {
     for o in orders {
         table.push_cosine(o, 1.0, 1.0, 0.0);
     }
-    let mut comp = RippleCompensator::new(&drive, &orders, Strategy::Table);
+    let mut comp = RippleCompensator::new(&drive, &rig.observer_model(), &orders, Strategy::Table);
     comp.set_table(table);
     comp.set_back_off(false);
     let mut controller = shared::Controller::new(&drive);
-    controller.set_compensation(comp);
+    controller.set_compensation(Some(comp));
     let spec = TravelSpec::full_travel(&rig, 70.5, Direction::Up);
     let mut log = StepLog::default();
     simulate_travel_with(&rig, &spec, &SimOptions::for_rig(&rig), &mut controller, None, Some(&mut log)).unwrap();
@@ -87,7 +87,8 @@ fn closed_loop_response_model_matches_the_simulated_drive() {
             });
             let mid = w[w.len() / 2];
             let lw = rig.travel.lw_low_m as f32 + mid.angle_rad * rig.mechanics.sheave_radius_m as f32;
-            let g = loop_response(&drive, 70.5, lw, inertia, mid.speed_radps * o as f32).speed_error_per_torque;
+            let g = loop_response(&drive, &rig.observer_model(), 70.5, lw, inertia, mid.speed_radps * o as f32)
+                .speed_error_per_torque;
             if g.norm_sqr() < 0.01 * 0.01 {
                 continue;
             }

@@ -2,8 +2,10 @@
 //! `shared::ripple` set up from the rig file, run over travels and model
 //! mismatches, and the measures `host-sim compare` reports for each run.
 
+use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use shared::config::Direction;
+use shared::observer::{ChainObserver, ObserverTuning};
 use shared::ripple::harmonics::HarmonicTable;
 use shared::ripple::{RippleCompensator, Strategy};
 use shared::{ControlOutput, Controller, SensorFrame};
@@ -33,7 +35,7 @@ pub fn rig_ripple_table(rig: &RigConfig) -> HarmonicTable {
 /// strategy 1's table if given.
 pub fn compensator(rig: &RigConfig, strategy: Strategy, table: Option<HarmonicTable>) -> RippleCompensator {
     let drive = rig.drive_config();
-    let mut compensator = RippleCompensator::new(&drive, &ripple_orders(rig), strategy);
+    let mut compensator = RippleCompensator::new(&drive, &rig.observer_model(), &ripple_orders(rig), strategy);
     if let Some(table) = table {
         compensator.set_table(table);
     }
@@ -104,6 +106,12 @@ impl Mismatch {
     }
 }
 
+/// The drive's chain observer for `rig` with the default tuning.
+pub fn observer(rig: &RigConfig) -> Result<ChainObserver, SimError> {
+    ChainObserver::new(rig.observer_model(), ObserverTuning::default())
+        .map_err(|e| SimError::BadTravel(format!("observer model: {} must be {}", e.field, e.expected)))
+}
+
 /// Changes the plant's ripple orders before the first step (the phase-drift mismatch).
 struct RippleOrderShift {
     fraction: f64,
@@ -144,7 +152,10 @@ pub fn travel_with_compensator(
 ) -> Result<(TravelRun, RippleCompensator), SimError> {
     let plant_rig = mismatch.plant_rig(nominal);
     let mut controller = Controller::new(&nominal.drive_config());
-    controller.set_compensation(compensator);
+    if compensator.strategy() == Strategy::CarObserver {
+        controller.set_observer(Some(observer(nominal)?));
+    }
+    controller.set_compensation(Some(compensator));
     let mut shift = RippleOrderShift { fraction: 0.0, done: false };
     let hook: Option<&mut dyn FaultHook> = match mismatch {
         Mismatch::RipplePhaseDrift { fraction } => {
@@ -154,7 +165,8 @@ pub fn travel_with_compensator(
         _ => None,
     };
     let run = simulate_travel_faulted(&plant_rig, spec, options, &mut controller, hook, None, None)?;
-    Ok((run, *controller.compensation()))
+    let after = *controller.compensation().expect("installed above");
+    Ok((run, after))
 }
 
 /// Mechanical orders whose car-acceleration amplitude `compare` reports
@@ -326,8 +338,9 @@ pub fn run_case(
             let mut comp = compensator(rig, strategy, Some(*table));
             let travels = if strategy == Strategy::Learning { learning_travels + 1 } else { 1 };
             let mut last = None;
-            for _ in 0..travels {
-                let (run, after) = travel_with_compensator(rig, case.mismatch, &spec, &options, comp)?;
+            for travel in 0..travels {
+                let (run, after) = travel_with_compensator(rig, case.mismatch, &spec, &options, comp)
+                    .with_context(|| format!("strategy {}, travel {}", strategy.name(), travel + 1))?;
                 comp = after;
                 last = Some(ride_metrics(&run)?);
             }

@@ -83,15 +83,6 @@ pub struct DriveConfig {
     pub sheave_radius_m: f32,
     /// Gravitational acceleration, m/s^2.
     pub gravity_mps2: f32,
-    /// Rope longitudinal stiffness `EA` (Eqn 9), N: the chain model of the
-    /// ripple compensation's phase correction.
-    pub rope_ea_n: f32,
-    /// Car guide damping on the car's absolute velocity (Eqn 12), kg/s.
-    pub c_car_kg_per_s: f32,
-    /// Counterweight guide damping on its absolute velocity (Eqn 12), kg/s.
-    pub c_cw_kg_per_s: f32,
-    /// Rotational damping of the sheave (Eqn 13), N m s/rad.
-    pub c_sheave_nms_per_rad: f32,
 
     // --- travel profile ---
     /// Rated car speed, m/s.
@@ -185,10 +176,6 @@ pub(crate) fn reference_rig() -> DriveConfig {
         sheave_inertia_kg_m2: 0.3385,
         sheave_radius_m: 0.065,
         gravity_mps2: 9.81,
-        rope_ea_n: 1.0e6,
-        c_car_kg_per_s: 148.0,
-        c_cw_kg_per_s: 148.0,
-        c_sheave_nms_per_rad: 3.0,
         rated_speed_mps: 0.4,
         max_accel_mps2: 0.5,
         max_jerk_mps3: 1.0,
@@ -196,5 +183,25 @@ pub(crate) fn reference_rig() -> DriveConfig {
         dc_bus_undervoltage_v: 70.0,
         dc_bus_overvoltage_v: 130.0,
         current_sum_limit_a: 5.0,
+    }
+}
+
+/// The reference rig's chain as `configs/rig.toml` gives it, for the unit
+/// tests of this crate.
+#[cfg(test)]
+pub(crate) fn reference_chain() -> crate::observer::ChainModel {
+    crate::observer::ChainModel {
+        m_cw_kg: 33.0,
+        rope_total_length_m: 8.6,
+        rope_ea_n: 1.0e6,
+        rope_mass_per_length_kg_per_m: 0.095,
+        sheave_inertia_kg_m2: 0.3385,
+        sheave_radius_m: 0.065,
+        c_cw_kg_per_s: 148.0,
+        c_car_kg_per_s: 148.0,
+        c_sheave_nms_per_rad: 3.0,
+        gravity_mps2: 9.81,
+        encoder_counts_per_rev: 16384,
+        ripple_orders: [1, 6, 12, 36, 72],
     }
 }

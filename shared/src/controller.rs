@@ -14,9 +14,10 @@
 use crate::config::{Direction, DriveConfig};
 use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
 use crate::fixed::{mul_int, q16, Q16};
+use crate::observer::{ChainObserver, ObserverEstimate};
 use crate::park_clarke::Abc;
 use crate::profile::{ProfileError, SCurve};
-use crate::ripple::{LearningInput, RippleCompensator, Strategy};
+use crate::ripple::{LearningInput, RippleCompensator};
 use crate::speed_estimator::SpeedEstimator;
 use crate::speed_loop::{equivalent_inertia_kg_m2, out_of_balance_torque_nm, SpeedLoop};
 use crate::supervisor::{Fault, MonitorLimits, MonitorSample, Supervisor, SupervisorLimits};
@@ -194,8 +195,12 @@ pub struct Controller {
     speed_divider: u32,
     /// `2^48 / counts_per_rev`: binary angle per encoder count, Q16.
     binary_angle_per_count_q16: u64,
-    /// Torque-ripple compensation (q-current feed-forward by shaft angle).
-    compensation: RippleCompensator,
+    /// Torque-ripple compensation (q-current feed-forward by shaft angle), if installed.
+    compensation: Option<RippleCompensator>,
+    /// The reduced 5-DOF observer, if installed (run at the speed-loop rate with the brake released).
+    observer: Option<ChainObserver>,
+    /// The encoder counter of the latest step (what the observer reads), counts.
+    last_encoder_count: u32,
     /// Fault checks: the latest current-loop sample, for the supervisor's
     /// consistency checks (faults 8-11) at the next speed-loop tick.
     loop_sample: LoopSample,
@@ -263,24 +268,34 @@ impl Controller {
             dc_bus_v_per_code: q16(config.dc_bus_sense_full_scale_v / config.adc_max_code() as f32),
             speed_divider: config.speed_loop_divider(),
             binary_angle_per_count_q16: (1u64 << 48) / config.encoder_counts_per_rev.max(1) as u64,
-            compensation: RippleCompensator::new(config, &[], Strategy::Off),
+            compensation: None,
+            observer: None,
+            last_encoder_count: 0,
             loop_sample: LoopSample::default(),
         }
     }
 
-    /// Installs a torque-ripple compensator (between travels).
-    pub fn set_compensation(&mut self, compensation: RippleCompensator) {
+    /// Installs a torque-ripple compensator, or removes it (between travels).
+    pub fn set_compensation(&mut self, compensation: Option<RippleCompensator>) {
         self.compensation = compensation;
     }
 
-    /// The torque-ripple compensator and what it has learned.
-    pub fn compensation(&self) -> &RippleCompensator {
-        &self.compensation
+    /// The torque-ripple compensator and what it has learned, if installed.
+    pub fn compensation(&self) -> Option<&RippleCompensator> {
+        self.compensation.as_ref()
     }
 
-    /// The torque-ripple compensator, to change its strategy or table between travels.
-    pub fn compensation_mut(&mut self) -> &mut RippleCompensator {
-        &mut self.compensation
+    /// Installs the chain observer, or removes it (between travels). With
+    /// an observer installed, strategy 4 of the compensation learns from its
+    /// car acceleration.
+    pub fn set_observer(&mut self, observer: Option<ChainObserver>) {
+        self.observer = observer;
+    }
+
+    /// The observer's latest estimate (car acceleration m/s^2, rope forces N,
+    /// shaft disturbance N m), if an observer is installed and started.
+    pub fn observer_estimate(&self) -> Option<ObserverEstimate> {
+        self.observer.filter(|o| o.is_started()).map(|o| o.estimate())
     }
 
     /// Current state.
@@ -335,8 +350,25 @@ impl Controller {
 
     fn enter(&mut self, state: DriveState) {
         match (self.state, state) {
-            (DriveState::BrakeLift, DriveState::Travel) => self.compensation.start_travel(),
-            (DriveState::Travel, _) => self.compensation.end_travel(),
+            (DriveState::PreTorque, DriveState::BrakeLift) => {
+                if let (Some(o), Some(t)) = (self.observer.as_mut(), self.travel) {
+                    let moved_m = self.estimator.position_counts().saturating_sub(t.start_counts) as f32
+                        * core::f32::consts::TAU
+                        / self.config.encoder_counts_per_rev as f32
+                        * self.config.sheave_radius_m;
+                    o.start(t.command.lw_start_m + moved_m, t.command.m_car_kg, self.last_encoder_count);
+                }
+            }
+            (DriveState::BrakeLift, DriveState::Travel) => {
+                if let Some(c) = self.compensation.as_mut() {
+                    c.start_travel();
+                }
+            }
+            (DriveState::Travel, _) => {
+                if let Some(c) = self.compensation.as_mut() {
+                    c.end_travel();
+                }
+            }
             _ => {}
         }
         self.state = state;
@@ -368,6 +400,7 @@ impl Controller {
             self.supervisor.check_step_interval(frame.time_us.wrapping_sub(last));
         }
         self.last_time_us = Some(frame.time_us);
+        self.last_encoder_count = frame.encoder_count;
 
         let codes = frame.phase_current_codes;
         let zero = self.config.adc_zero_code();
@@ -409,10 +442,9 @@ impl Controller {
             let speed_e =
                 Q16::from_bits(self.estimator.speed_radps().to_bits().saturating_mul(self.config.pole_pairs as i32));
             // Ripple compensation while the car follows the profile.
-            let iq_ref = if self.state == DriveState::Travel {
-                self.iq_ref.saturating_add(self.compensation.iq_a(self.shaft_angle()))
-            } else {
-                self.iq_ref
+            let iq_ref = match (&self.compensation, self.state) {
+                (Some(c), DriveState::Travel) => self.iq_ref.saturating_add(c.iq_a(self.shaft_angle())),
+                _ => self.iq_ref,
             };
             let out = self.current_loop.step(
                 Abc { a: currents[0], b: currents[1], c: currents[2] },
@@ -522,13 +554,20 @@ impl Controller {
             }
             DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet => {
                 let speed_ref_q16 = q16(speed_ref_radps);
-                if self.state == DriveState::Travel {
-                    self.compensation.speed_tick(&LearningInput {
-                        shaft_angle: self.shaft_angle(),
+                let shaft_angle = self.shaft_angle();
+                let car_acceleration_mps2 = match self.observer.as_mut() {
+                    Some(o) if self.state != DriveState::BrakeSet && o.is_started() => {
+                        Some(o.update(self.last_encoder_count, kt * self.telemetry.iq_a).car_acceleration_mps2)
+                    }
+                    _ => None,
+                };
+                if let (Some(c), DriveState::Travel) = (self.compensation.as_mut(), self.state) {
+                    c.speed_tick(&LearningInput {
+                        shaft_angle,
                         position_counts: self.estimator.position_counts(),
                         speed_radps: to_f32(speed),
                         speed_error_radps: to_f32(speed_ref_q16.saturating_sub(speed)),
-                        car_acceleration_mps2: None,
+                        car_acceleration_mps2,
                         m_car_kg: travel.command.m_car_kg,
                         lw_m,
                         inertia_kg_m2: travel.inertia_kg_m2,

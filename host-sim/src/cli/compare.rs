@@ -42,8 +42,8 @@ pub struct CompareArgs {
     pub quiet: bool,
 }
 
-/// The strategies `compare` runs (the observer-driven one where the drive has an observer).
-pub const STRATEGIES: [Strategy; 4] = [Strategy::Off, Strategy::Table, Strategy::Adaptive, Strategy::Learning];
+/// The strategies `compare` runs: all of them.
+pub const STRATEGIES: [Strategy; 5] = Strategy::ALL;
 
 /// `k/N` of `--shard`.
 fn parse_shard(text: &str) -> anyhow::Result<(usize, usize)> {

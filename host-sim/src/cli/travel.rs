@@ -116,11 +116,11 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         CompensationArg::RigTable => {
             let mut c = compensator(rig, Strategy::Table, Some(rig_ripple_table(rig).negated()));
             c.set_back_off(false);
-            controller.set_compensation(c);
+            controller.set_compensation(Some(c));
             "ripple compensation: the rig's ripple as the table (exact cancellation)"
         }
         CompensationArg::Adaptive => {
-            controller.set_compensation(compensator(rig, Strategy::Adaptive, None));
+            controller.set_compensation(Some(compensator(rig, Strategy::Adaptive, None)));
             "ripple compensation: adaptive harmonics"
         }
     };

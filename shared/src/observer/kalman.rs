@@ -145,7 +145,7 @@ pub struct ObserverEstimate {
 /// The reduced 5-DOF observer: call [`ChainObserver::start`] when the brake
 /// lifts (the chain is at its static equilibrium then), then
 /// [`ChainObserver::update`] once per speed-loop period.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ChainObserver {
     model: ChainModel,
     tuning: ObserverTuning,

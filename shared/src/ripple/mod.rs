@@ -36,9 +36,12 @@
 //! stops learning ([`RippleCompensator::backed_off`]).
 //!
 //! Weak responses: the learning step uses `conj(G) E / (|G|^2 + floor^2)`,
-//! so an order the encoder hardly sees (72 at rated speed: |G| ~ 1e-3 rad/s
-//! per N m, under the floor of 1e-2) learns slowly instead of amplifying
-//! noise; its time constant also spans at least four periods of the order.
+//! so an order the encoder sees poorly learns slowly instead of amplifying
+//! noise, and an order under [`UNOBSERVABLE_FRACTION`] of the floor (72 at
+//! rated speed: |G| ~ 8e-4 rad/s per N m against 3e-3) is not learned at
+//! all: what it would learn is the model's bias there (iterative learning
+//! drove it to 4x the true 72nd-order ripple before this rule). The time
+//! constant also spans at least four periods of the order.
 
 pub mod complex;
 pub mod harmonics;
@@ -51,6 +54,7 @@ use learning::{limit, LearningTable};
 
 use crate::config::DriveConfig;
 use crate::fixed::Q16;
+use crate::observer::ChainModel;
 use crate::trig::{sin_cos, Angle};
 
 fn min(a: f32, b: f32) -> f32 {
@@ -122,14 +126,19 @@ pub const AVERAGING_CYCLES: f32 = 4.0;
 /// Speed-error response below which learning slows down, rad/s per N m:
 /// `R = conj(G) E / (|G|^2 + floor^2)`.
 pub const SPEED_RESPONSE_FLOOR: f32 = 0.01;
+/// An order whose response is under this fraction of the floor is not
+/// learned (the 72nd at rated speed: |G| ~ 8e-4 rad/s per N m, under 3e-3).
+pub const UNOBSERVABLE_FRACTION: f32 = 0.3;
 /// Car-acceleration response below which learning slows down, m/s^2 per N m.
 pub const CAR_RESPONSE_FLOOR: f32 = 0.02;
 /// Back-off ratio on squared magnitudes: `1.12^2`, 1 dB.
 pub const BACK_OFF_RATIO_SQ: f32 = 1.2589;
 /// Ticks a harmonic must look worse before it backs off (0.25 s at 2 kHz).
 pub const BACK_OFF_TICKS: u16 = 500;
-/// Learning runs only above this fraction of the rated shaft speed.
-pub const LEARNING_SPEED_FRACTION: f32 = 0.5;
+/// Learning runs only above this fraction of the rated shaft speed: at
+/// constant speed, where the orders are steady lines (while the speed sweeps,
+/// the large 12th order leaks into the weak orders' estimates).
+pub const LEARNING_SPEED_FRACTION: f32 = 0.9;
 
 /// What the compensator learns from, once per speed-loop tick of a travel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -156,6 +165,8 @@ pub struct LearningInput {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RippleCompensator {
     config: DriveConfig,
+    /// The drive's model of the chain (phase correction).
+    chain: ChainModel,
     strategy: Strategy,
     /// Strategy 1's table, N m.
     table: HarmonicTable,
@@ -185,12 +196,13 @@ pub struct RippleCompensator {
 }
 
 impl RippleCompensator {
-    /// A compensator for `orders` (mechanical orders, at most
-    /// [`MAX_HARMONICS`]) with `strategy`, empty tables.
-    pub fn new(config: &DriveConfig, orders: &[u16], strategy: Strategy) -> Self {
+    /// A compensator of the drive `config` on the chain `chain` for `orders`
+    /// (mechanical orders, at most [`MAX_HARMONICS`]) with `strategy`, empty tables.
+    pub fn new(config: &DriveConfig, chain: &ChainModel, orders: &[u16], strategy: Strategy) -> Self {
         let zero = HarmonicTable::zero(orders);
         Self {
             config: *config,
+            chain: *chain,
             strategy,
             table: zero,
             adaptive: zero,
@@ -247,6 +259,11 @@ impl RippleCompensator {
     /// The coefficients applied now, N m.
     pub fn applied(&self) -> HarmonicTable {
         self.applied
+    }
+
+    /// Strategy 3's coefficient of harmonic `k` at `position_counts` (from power-up), N m.
+    pub fn learning_torque_at(&self, k: usize, position_counts: i64) -> Complex {
+        self.learning.torque_at(k, position_counts, self.config.encoder_counts_per_rev)
     }
 
     /// Harmonics that backed off in this travel.
@@ -312,7 +329,7 @@ impl RippleCompensator {
         // Refresh one harmonic's model response per tick (round robin).
         let k_refresh = (self.ticks % n as u32) as usize;
         let omega = input.speed_radps * self.applied.orders[k_refresh] as f32;
-        let response = response::loop_response(c, input.m_car_kg, input.lw_m, input.inertia_kg_m2, omega);
+        let response = response::loop_response(c, &self.chain, input.m_car_kg, input.lw_m, input.inertia_kg_m2, omega);
         self.response[k_refresh] = match self.strategy {
             Strategy::CarObserver => response.car_acceleration_per_torque,
             _ => response.speed_error_per_torque,
@@ -357,6 +374,11 @@ impl RippleCompensator {
             let averaging = min(RESIDUAL_AVERAGING, cycles * (1.0 / AVERAGING_CYCLES));
             self.demodulated[k] = self.demodulated[k] + (demodulated - self.demodulated[k]).scale(averaging);
             let g = self.response[k];
+            // An order the error hardly responds to is not learned at all:
+            // whatever it would learn would be the bias of the model there.
+            if g.norm_sqr() < UNOBSERVABLE_FRACTION * UNOBSERVABLE_FRACTION * floor * floor {
+                continue;
+            }
             // Regularised inverse: a response below the floor learns slower instead of amplifying noise.
             let shrunk = g.conj() * demodulated.scale(1.0 / (g.norm_sqr() + floor * floor));
             match self.strategy {
@@ -406,12 +428,16 @@ mod tests {
         crate::config::reference_rig()
     }
 
+    fn chain() -> ChainModel {
+        crate::config::reference_chain()
+    }
+
     #[test]
     fn a_table_is_applied_as_its_q_current() {
         let config = rig();
         let mut table = HarmonicTable::default();
         table.push_cosine(12, 1.0, 1.0, 0.0);
-        let mut c = RippleCompensator::new(&config, &[12], Strategy::Table);
+        let mut c = RippleCompensator::new(&config, &chain(), &[12], Strategy::Table);
         c.set_table(table);
         c.start_travel();
         c.speed_tick(&LearningInput {

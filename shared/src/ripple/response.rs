@@ -13,6 +13,7 @@
 use super::complex::Complex;
 use crate::config::DriveConfig;
 use crate::controller::POSITION_GAIN_PER_S;
+use crate::observer::ChainModel;
 use crate::speed_loop::speed_pi_gains;
 
 /// Dynamic stiffness `(-w^2 m + j w c)` of a mass `m_kg` with viscous damping
@@ -35,7 +36,7 @@ fn through_spring(k_n_per_m: f32, z: Complex) -> (Complex, Complex) {
 /// displacement.
 fn rope_side(
     omega_radps: f32,
-    config: &DriveConfig,
+    config: &ChainModel,
     length_m: f32,
     end_mass_kg: f32,
     end_damping_kg_per_s: f32,
@@ -61,7 +62,7 @@ pub struct ChainResponse {
 /// Eqn 6 at angular frequency `omega_radps` (signed: a negative frequency
 /// gives the conjugate), car mass `m_car_kg`, counterweight-side rope length
 /// `lw_m`.
-pub fn chain_response(config: &DriveConfig, m_car_kg: f32, lw_m: f32, omega_radps: f32) -> ChainResponse {
+pub fn chain_response(config: &ChainModel, m_car_kg: f32, lw_m: f32, omega_radps: f32) -> ChainResponse {
     let w = if omega_radps < 0.0 { -omega_radps } else { omega_radps };
     let r = config.sheave_radius_m;
     let lc_m = config.rope_total_length_m - lw_m;
@@ -89,17 +90,19 @@ pub struct LoopResponse {
     pub car_acceleration_per_torque: Complex,
 }
 
-/// The closed-loop responses at `omega_radps` (signed), for a travel with a
-/// car of `m_car_kg` at rope length `lw_m`, the speed loop tuned on
-/// `inertia_kg_m2` as [`crate::speed_loop::SpeedLoop::new`] does.
+/// The closed-loop responses at `omega_radps` (signed) of the drive
+/// `config` on the chain `chain`, for a travel with a car of `m_car_kg` at
+/// rope length `lw_m`, the speed loop tuned on `inertia_kg_m2` as
+/// [`crate::speed_loop::SpeedLoop::new`] does.
 pub fn loop_response(
     config: &DriveConfig,
+    chain: &ChainModel,
     m_car_kg: f32,
     lw_m: f32,
     inertia_kg_m2: f32,
     omega_radps: f32,
 ) -> LoopResponse {
-    let chain = chain_response(config, m_car_kg, lw_m, omega_radps);
+    let response = chain_response(chain, m_car_kg, lw_m, omega_radps);
     let s = Complex::new(0.0, omega_radps);
     let (kp, ki) = speed_pi_gains(config, inertia_kg_m2);
     let wn = core::f32::consts::TAU * config.speed_estimator_bandwidth_hz;
@@ -112,9 +115,9 @@ pub fn loop_response(
     // Speed error = -(estimator + K_pos / s) w (the position loop reads the raw counts).
     let feedback = estimator + Complex::new(POSITION_GAIN_PER_S, 0.0) * s.recip();
     let pi = Complex::new(kp, 0.0) + Complex::new(ki, 0.0) * s.recip();
-    let y = chain.shaft_mobility;
+    let y = response.shaft_mobility;
     let speed_per_torque = y / (Complex::ONE + pi * feedback * delay * y);
     // Car: u_c = ratio * u_sheave = ratio * r * theta, a = s^2 u_c = s * ratio * r * w.
-    let car = s * chain.car_per_sheave.scale(config.sheave_radius_m) * speed_per_torque;
+    let car = s * response.car_per_sheave.scale(chain.sheave_radius_m) * speed_per_torque;
     LoopResponse { speed_error_per_torque: -(feedback * speed_per_torque), car_acceleration_per_torque: car }
 }
