@@ -25,4 +25,7 @@ fn main() {
     let path = out_dir.join("drive_config.rs");
     fs::write(&path, rig.drive_config_source("configs/rig.toml"))
         .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+    let path = out_dir.join("chain_model.rs");
+    fs::write(&path, rig.chain_model_source("configs/rig.toml"))
+        .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
 }

@@ -292,6 +292,26 @@ impl DriveController for PilTarget {
 }
 
 impl PilTarget {
+    /// Installs ripple compensation `strategy` with `table` on the target
+    /// and on the shadow alike ([`Controller::install_compensation`] with
+    /// the drive's chain model `chain`); the table keeps its first
+    /// [`shared::frame::COMPENSATION_HARMONICS`] harmonics, as the frame does.
+    pub fn install_compensation(
+        &mut self,
+        strategy: shared::ripple::Strategy,
+        table: &shared::ripple::harmonics::HarmonicTable,
+        chain: &shared::observer::ChainModel,
+    ) -> Result<(), PilError> {
+        let mut sent = *table;
+        sent.len = sent.len.min(shared::frame::COMPENSATION_HARMONICS);
+        match self.exchange(&Message::Compensation { strategy, table: sent })? {
+            Message::Ack(0) => {}
+            other => return Err(PilError::Unexpected(other)),
+        }
+        self.shadow.install_compensation(strategy, &sent, chain);
+        Ok(())
+    }
+
     /// Steps the shadow on `sensors` and checks the target's `report` against it.
     fn shadow_check(&mut self, sensors: &SensorFrame, report: StepReport) -> Result<ControlOutput, SimError> {
         let host = self.shadow.step(sensors);

@@ -30,6 +30,7 @@ use defmt_rtt as _;
 use defmt_semihosting as _;
 
 include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
+include!(concat!(env!("OUT_DIR"), "/chain_model.rs"));
 
 /// SysTick reload: the full 24-bit range, ticks.
 const SYSTICK_RELOAD: u32 = 0x00FF_FFFF;
@@ -71,6 +72,10 @@ fn main() -> ! {
             Some(Ok(Message::Travel(command))) => Message::Ack(command_result_code(controller.command_travel(command))),
             Some(Ok(Message::Reset)) => {
                 controller.reset();
+                Message::Ack(0)
+            }
+            Some(Ok(Message::Compensation { strategy, table })) => {
+                controller.install_compensation(strategy, &table, &CHAIN_MODEL);
                 Message::Ack(0)
             }
             Some(Ok(Message::Output(_) | Message::Ack(_))) => continue,

@@ -429,6 +429,19 @@ impl RigConfig {
         )
     }
 
+    /// Rust source of `pub const CHAIN_MODEL: shared::observer::ChainModel =
+    /// ...;` ([`RigConfig::observer_model`]) for build scripts, like
+    /// [`RigConfig::drive_config_source`].
+    pub fn chain_model_source(&self, origin: &str) -> String {
+        format!(
+            "// @generated from {origin} by rig-config. Do not edit.\n\
+             /// The drive's model of the rope chain, generated at build time from `{origin}`.\n\
+             pub const CHAIN_MODEL: shared::observer::{:?};\n",
+            self.observer_model()
+        )
+        .replacen("ChainModel {", "ChainModel = shared::observer::ChainModel {", 1)
+    }
+
     /// The drive-core parameters of this rig.
     pub fn drive_config(&self) -> DriveConfig {
         let m = &self.mechanics;

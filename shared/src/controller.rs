@@ -14,10 +14,11 @@
 use crate::config::{Direction, DriveConfig};
 use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
 use crate::fixed::{mul_int, q16, Q16};
-use crate::observer::{ChainObserver, ObserverEstimate};
+use crate::observer::{ChainModel, ChainObserver, ObserverEstimate, ObserverTuning};
 use crate::park_clarke::Abc;
 use crate::profile::{ProfileError, SCurve};
-use crate::ripple::{LearningInput, RippleCompensator};
+use crate::ripple::harmonics::HarmonicTable;
+use crate::ripple::{LearningInput, RippleCompensator, Strategy};
 use crate::speed_estimator::SpeedEstimator;
 use crate::speed_loop::{equivalent_inertia_kg_m2, out_of_balance_torque_nm, SpeedLoop};
 use crate::supervisor::{Fault, MonitorLimits, MonitorSample, Supervisor, SupervisorLimits};
@@ -283,6 +284,27 @@ impl Controller {
     /// The torque-ripple compensator and what it has learned, if installed.
     pub fn compensation(&self) -> Option<&RippleCompensator> {
         self.compensation.as_ref()
+    }
+
+    /// Installs ripple compensation `strategy` for the orders of `table`
+    /// (strategy 1's table, N m) on the drive's chain model `chain`, with the
+    /// chain observer when the strategy is [`Strategy::CarObserver`];
+    /// [`Strategy::Off`] removes both. The one setup the chip (PIL) and the
+    /// host share.
+    pub fn install_compensation(&mut self, strategy: Strategy, table: &HarmonicTable, chain: &ChainModel) {
+        if strategy == Strategy::Off {
+            self.compensation = None;
+            self.observer = None;
+            return;
+        }
+        let mut compensator = RippleCompensator::new(&self.config, chain, &table.orders[..table.len], strategy);
+        compensator.set_table(*table);
+        self.compensation = Some(compensator);
+        self.observer = if strategy == Strategy::CarObserver {
+            ChainObserver::new(*chain, ObserverTuning::default()).ok()
+        } else {
+            None
+        };
     }
 
     /// Installs the chain observer, or removes it (between travels). With

@@ -10,6 +10,9 @@
 use crate::config::Direction;
 use crate::controller::{CommandError, ControlOutput, DriveState, SensorFrame, Telemetry, TravelCommand};
 use crate::profile::ProfileError;
+use crate::ripple::complex::Complex;
+use crate::ripple::harmonics::HarmonicTable;
+use crate::ripple::Strategy;
 
 /// First sync byte.
 pub const SYNC0: u8 = 0xA5;
@@ -29,6 +32,10 @@ pub const ACK_FRAME_REJECTED: u8 = 0xFF;
 const KIND_SENSE: u8 = 0x01;
 const KIND_TRAVEL: u8 = 0x02;
 const KIND_RESET: u8 = 0x03;
+const KIND_COMPENSATION: u8 = 0x04;
+/// Harmonics a [`Message::Compensation`] frame carries.
+pub const COMPENSATION_HARMONICS: usize = 6;
+const COMPENSATION_LEN: usize = 2 + 10 * COMPENSATION_HARMONICS;
 const KIND_OUTPUT: u8 = 0x81;
 const KIND_ACK: u8 = 0x82;
 
@@ -104,6 +111,15 @@ pub enum Message {
     Travel(TravelCommand),
     /// Host -> chip: clear a latched fault.
     Reset,
+    /// Host -> chip: install ripple compensation `strategy` with `table`
+    /// (its first [`COMPENSATION_HARMONICS`] harmonics), see
+    /// [`crate::Controller::install_compensation`].
+    Compensation {
+        /// Strategy.
+        strategy: Strategy,
+        /// Strategy 1's table and the orders, N m.
+        table: HarmonicTable,
+    },
     /// Chip -> host: the result of a step.
     Output(StepReport),
     /// Chip -> host: reply to `Travel` or `Reset`: 0 accepted, else a refusal code.
@@ -219,6 +235,7 @@ fn payload_len(kind: u8) -> Option<usize> {
         KIND_SENSE => Some(SENSE_LEN),
         KIND_TRAVEL => Some(TRAVEL_LEN),
         KIND_RESET => Some(0),
+        KIND_COMPENSATION => Some(COMPENSATION_LEN),
         KIND_OUTPUT => Some(OUTPUT_LEN),
         KIND_ACK => Some(1),
         _ => None,
@@ -232,6 +249,7 @@ pub fn encode(message: &Message, buf: &mut [u8; MAX_FRAME]) -> usize {
         Message::Sense(_) => KIND_SENSE,
         Message::Travel(_) => KIND_TRAVEL,
         Message::Reset => KIND_RESET,
+        Message::Compensation { .. } => KIND_COMPENSATION,
         Message::Output(_) => KIND_OUTPUT,
         Message::Ack(_) => KIND_ACK,
     };
@@ -254,6 +272,17 @@ pub fn encode(message: &Message, buf: &mut [u8; MAX_FRAME]) -> usize {
             w.f32(t.lw_start_m);
         }
         Message::Reset => {}
+        Message::Compensation { strategy, table } => {
+            let len = table.len.min(COMPENSATION_HARMONICS);
+            w.u8(strategy.code());
+            w.u8(len as u8);
+            for k in 0..COMPENSATION_HARMONICS {
+                let (order, u) = if k < len { (table.orders[k], table.torque_nm[k]) } else { (0, Complex::ZERO) };
+                w.u16(order);
+                w.f32(u.re);
+                w.f32(u.im);
+            }
+        }
         Message::Output(r) => {
             r.pwm_compare.iter().for_each(|&c| w.u16(c));
             w.u8(r.pwm_enabled as u8 | (r.brake_released as u8) << 1);
@@ -289,6 +318,22 @@ fn parse(kind: u8, payload: &[u8]) -> Result<Message, FrameError> {
             Message::Travel(TravelCommand { direction, distance_m: r.f32(), m_car_kg: r.f32(), lw_start_m: r.f32() })
         }
         KIND_RESET => Message::Reset,
+        KIND_COMPENSATION => {
+            let strategy = Strategy::from_code(r.u8()).ok_or(FrameError::BadField)?;
+            let len = r.u8() as usize;
+            if len > COMPENSATION_HARMONICS {
+                return Err(FrameError::BadField);
+            }
+            let mut table = HarmonicTable { len, ..HarmonicTable::default() };
+            for k in 0..COMPENSATION_HARMONICS {
+                let (order, re, im) = (r.u16(), r.f32(), r.f32());
+                if k < len {
+                    table.orders[k] = order;
+                    table.torque_nm[k] = Complex::new(re, im);
+                }
+            }
+            Message::Compensation { strategy, table }
+        }
         KIND_OUTPUT => {
             let pwm_compare = [r.u16(), r.u16(), r.u16()];
             let flags = r.u8();
@@ -408,7 +453,10 @@ mod tests {
     use crate::supervisor::Fault;
     use std::vec::Vec;
 
-    fn messages() -> [Message; 6] {
+    fn messages() -> [Message; 7] {
+        let mut table = HarmonicTable::default();
+        table.push_cosine(12, 3.5, 0.6, -0.8);
+        table.push_cosine(72, 0.5, -1.0, 0.0);
         let output = ControlOutput {
             pwm_compare: [1, 2656, 5312],
             pwm_enabled: true,
@@ -430,6 +478,7 @@ mod tests {
                 lw_start_m: 7.6,
             }),
             Message::Reset,
+            Message::Compensation { strategy: Strategy::Learning, table },
             Message::Output(StepReport::new(&output, 987)),
             Message::Ack(0),
             Message::Ack(3),

@@ -162,6 +162,35 @@ pub fn create_out_dir(dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))
 }
 
+/// A ripple-compensation strategy on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StrategyArg {
+    /// None.
+    Off,
+    /// Strategy 1: offline harmonic table.
+    Table,
+    /// Strategy 2: adaptive harmonics during the travel.
+    Adaptive,
+    /// Strategy 3: iterative learning across travels.
+    Learning,
+    /// Strategy 4: adaptive harmonics driven by the observer's car acceleration.
+    CarObserver,
+}
+
+impl StrategyArg {
+    /// The strategy.
+    pub fn strategy(self) -> shared::ripple::Strategy {
+        use shared::ripple::Strategy;
+        match self {
+            StrategyArg::Off => Strategy::Off,
+            StrategyArg::Table => Strategy::Table,
+            StrategyArg::Adaptive => Strategy::Adaptive,
+            StrategyArg::Learning => Strategy::Learning,
+            StrategyArg::CarObserver => Strategy::CarObserver,
+        }
+    }
+}
+
 /// The default car mass of `rig`: the heaviest car of `[mechanics].m_car_kg`.
 pub fn default_car_mass_kg(rig: &RigConfig) -> f64 {
     rig.mechanics.m_car_kg.iter().copied().fold(rig.mechanics.m_cw_kg, f64::max)

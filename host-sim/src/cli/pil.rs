@@ -13,8 +13,10 @@ use shared::config::Direction;
 use shared::frame::StepReport;
 
 use super::travel::DirectionArg;
+use super::StrategyArg;
 use super::{check_open_range, create_out_dir, default_car_mass_kg};
 use crate::closed_loop::{simulate_travel_with, SimOptions, TravelSpec};
+use crate::compensation::rig_ripple_table;
 use crate::config::RigConfig;
 use crate::pil::{default_elf_path, PilOptions, PilTarget};
 
@@ -40,6 +42,11 @@ pub struct PilArgs {
     /// QEMU `-icount shift`: 2^shift ns of virtual time per instruction.
     #[arg(long = "icount-shift", default_value_t = 5)]
     pub icount_shift: u32,
+    /// Ripple compensation on the target (strategy 1's table: the rig's
+    /// `[[ripple]]` negated; strategy 4 adds the chain observer). Learning
+    /// runs at rated speed: give `--steps 60000` to reach it.
+    #[arg(long, value_enum, default_value_t = StrategyArg::Off)]
+    pub compensation: StrategyArg,
     /// Output directory (`pil_steps.csv`, `qemu.log`).
     #[arg(long, value_name = "DIR", default_value = "out/pil")]
     pub out: PathBuf,
@@ -91,6 +98,8 @@ pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
     };
     let drive = rig.drive_config();
     let mut target = PilTarget::launch(&options, &drive)?;
+    let strategy = args.compensation.strategy();
+    target.install_compensation(strategy, &rig_ripple_table(rig).negated(), &rig.observer_model())?;
     let spec = TravelSpec::full_travel(rig, m_car, direction);
     let sim_options =
         SimOptions { max_control_steps: (args.steps > 0).then_some(args.steps), ..SimOptions::for_rig(rig) };
@@ -103,10 +112,11 @@ pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
     let wall = started.elapsed().as_secs_f64();
     let reports = target.reports();
     println!(
-        "{} control steps ({:.2} s of travel, m_car = {m_car} kg, {direction:?}) on the emulated Cortex-M4F in {wall:.1} s: \
-         every output bit-identical to the host build",
+        "{} control steps ({:.2} s of travel, m_car = {m_car} kg, {direction:?}, compensation {}) on the emulated \
+         Cortex-M4F in {wall:.1} s: every output bit-identical to the host build",
         reports.len(),
-        run.duration_s()
+        run.duration_s(),
+        strategy.name()
     );
 
     let per_tick = target.instructions_per_tick();

@@ -85,9 +85,9 @@ impl LearningTable {
 
     /// End of a travel: every bin with at least `min_samples` samples
     /// learns (see the module documentation; `floor` is the response floor
-    /// in the units of `G`); the sums are cleared. Coefficients are limited
-    /// to `limit_nm` in magnitude.
-    pub fn end_travel(&mut self, harmonics: usize, min_samples: u16, limit_nm: f32, floor: f32) {
+    /// in the units of `G`); the sums are cleared. Coefficients of harmonic
+    /// `k` are limited to `limits_nm[k]` in magnitude.
+    pub fn end_travel(&mut self, harmonics: usize, min_samples: u16, limits_nm: &[f32; MAX_HARMONICS], floor: f32) {
         let floor2 = floor * floor;
         for k in 0..harmonics.min(MAX_HARMONICS) {
             let (mut num, mut den, mut n) = (Complex::ZERO, 0.0f32, 0.0f32);
@@ -108,7 +108,7 @@ impl LearningTable {
                     let residual =
                         (self.weighted_sum[b][k] + overall.scale(lambda)).scale(1.0 / (self.weight_sum[b][k] + lambda));
                     let next = self.torque_nm[b][k] - residual.scale(LEARNING_GAIN);
-                    self.torque_nm[b][k] = limit(next, limit_nm);
+                    self.torque_nm[b][k] = limit(next, limits_nm[k]);
                 }
             }
         }
@@ -155,7 +155,7 @@ mod tests {
         for p in (0..3000).step_by(10) {
             table.accumulate(0, p, cpr, g.conj() * g * x, g.norm_sqr());
         }
-        table.end_travel(1, 10, 100.0, 0.01);
+        table.end_travel(1, 10, &[100.0; MAX_HARMONICS], 0.01);
         let u = table.torque_at(0, 1500, cpr);
         // Learned -0.8 X, less the whisker of regularisation (0.01 floor^2 / |G|^2 = 1e-4).
         assert!((u + x.scale(0.8)).norm_sqr() < 1e-6, "{u:?}");

@@ -130,7 +130,13 @@ pub const SPEED_RESPONSE_FLOOR: f32 = 0.01;
 /// learned (the 72nd at rated speed: |G| ~ 8e-4 rad/s per N m, under 3e-3).
 pub const UNOBSERVABLE_FRACTION: f32 = 0.3;
 /// Car-acceleration response below which learning slows down, m/s^2 per N m.
-pub const CAR_RESPONSE_FLOOR: f32 = 0.02;
+pub const CAR_RESPONSE_FLOOR: f32 = 0.05;
+/// Largest inductive voltage `L_q n w_rated |U| / Kt` one harmonic may ask
+/// of the current loop at rated speed, V: a quarter of the supervisor's
+/// back-EMF margin (`supervisor::BACK_EMF_LIMIT_FRACTION` of the rated
+/// back-EMF, 4.15 V on the rig) per harmonic is 1 V; 1.5 V lets the 12th
+/// order reach 5.5 N m (the rig's 3.5 N m plus 57 %) and caps the 72nd at 0.9 N m.
+pub const HARMONIC_VOLTAGE_BUDGET_V: f32 = 1.5;
 /// Back-off ratio on squared magnitudes: `1.12^2`, 1 dB.
 pub const BACK_OFF_RATIO_SQ: f32 = 1.2589;
 /// Ticks a harmonic must look worse before it backs off (0.25 s at 2 kHz).
@@ -139,6 +145,22 @@ pub const BACK_OFF_TICKS: u16 = 500;
 /// constant speed, where the orders are steady lines (while the speed sweeps,
 /// the large 12th order leaks into the weak orders' estimates).
 pub const LEARNING_SPEED_FRACTION: f32 = 0.9;
+
+/// Largest coefficient per harmonic of `orders`, N m: a tenth of the torque
+/// limit, and no more than [`HARMONIC_VOLTAGE_BUDGET_V`] of inductive
+/// voltage at rated speed.
+fn harmonic_limits_nm(config: &DriveConfig, orders: &[u16]) -> [f32; MAX_HARMONICS] {
+    let kt = config.torque_constant_nm_per_a();
+    let overall = 0.1 * config.max_current_a * kt;
+    let mut limits = [overall; MAX_HARMONICS];
+    for (slot, &order) in limits.iter_mut().zip(orders) {
+        let volts_per_nm = config.lq_h * order as f32 * config.rated_shaft_speed_radps() / kt;
+        if volts_per_nm > 0.0 {
+            *slot = min(overall, HARMONIC_VOLTAGE_BUDGET_V / volts_per_nm);
+        }
+    }
+    limits
+}
 
 /// What the compensator learns from, once per speed-loop tick of a travel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -189,8 +211,9 @@ pub struct RippleCompensator {
     ticks: u32,
     /// Angle the 16 kHz evaluation leads the measured angle by (current-loop lag).
     lead: Angle,
-    /// Largest coefficient magnitude, N m.
-    limit_nm: f32,
+    /// Largest coefficient magnitude per harmonic, N m: a tenth of the
+    /// torque limit, and within [`HARMONIC_VOLTAGE_BUDGET_V`].
+    limit_nm: [f32; MAX_HARMONICS],
     /// Whether harmonics that make things worse back off (on by default).
     back_off_enabled: bool,
 }
@@ -216,7 +239,7 @@ impl RippleCompensator {
             backed_off: [false; MAX_HARMONICS],
             ticks: 0,
             lead: 0,
-            limit_nm: 0.1 * config.max_current_a * config.torque_constant_nm_per_a(),
+            limit_nm: harmonic_limits_nm(config, orders),
             back_off_enabled: true,
         }
     }
@@ -240,6 +263,7 @@ impl RippleCompensator {
     /// Sets strategy 1's table (N m); its orders become the compensator's.
     pub fn set_table(&mut self, table: HarmonicTable) {
         self.table = table;
+        self.limit_nm = harmonic_limits_nm(&self.config, &table.orders[..table.len.min(MAX_HARMONICS)]);
         self.adaptive = HarmonicTable { torque_nm: [Complex::ZERO; MAX_HARMONICS], ..table };
         self.applied = self.adaptive;
         self.learning = LearningTable::default();
@@ -295,7 +319,7 @@ impl RippleCompensator {
             // At least a quarter revolution of samples at the learning speed.
             let rated = self.config.rated_shaft_speed_radps();
             let per_rev = self.config.speed_loop_hz * core::f32::consts::TAU / rated;
-            self.learning.end_travel(self.applied.len, (0.25 * per_rev) as u16, self.limit_nm, SPEED_RESPONSE_FLOOR);
+            self.learning.end_travel(self.applied.len, (0.25 * per_rev) as u16, &self.limit_nm, SPEED_RESPONSE_FLOOR);
             for k in 0..self.applied.len {
                 if self.backed_off[k] {
                     self.learning.clear_harmonic(k);
@@ -353,7 +377,7 @@ impl RippleCompensator {
                 Complex::ZERO
             } else {
                 match self.strategy {
-                    Strategy::Table => self.table.torque_nm[k],
+                    Strategy::Table => limit(self.table.torque_nm[k], self.limit_nm[k]),
                     Strategy::Adaptive | Strategy::CarObserver => self.adaptive.torque_nm[k],
                     Strategy::Learning => self.learning.torque_at(k, input.position_counts, c.encoder_counts_per_rev),
                     Strategy::Off => Complex::ZERO,
@@ -384,7 +408,7 @@ impl RippleCompensator {
             match self.strategy {
                 Strategy::Adaptive | Strategy::CarObserver => {
                     let next = self.adaptive.torque_nm[k] - shrunk.scale(step);
-                    self.adaptive.torque_nm[k] = limit(next, self.limit_nm);
+                    self.adaptive.torque_nm[k] = limit(next, self.limit_nm[k]);
                 }
                 Strategy::Learning => self.learning.accumulate(
                     k,
