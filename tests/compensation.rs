@@ -121,7 +121,10 @@ fn run_cases(
                 let rig = &rig;
                 scope.spawn(move || {
                     half.iter()
-                        .flat_map(|(i, c)| run_case(rig, *i, c, &table, strategies, 3).unwrap())
+                        .flat_map(|(i, c)| {
+                            run_case(rig, *i, c, &table, strategies, 3)
+                                .unwrap_or_else(|e| panic!("case {i} ({c:?}): {e:#}"))
+                        })
                         .collect::<Vec<_>>()
                 })
             })
@@ -172,7 +175,7 @@ fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_d
         })
         .collect();
     assert_eq!(cases.len(), 10);
-    let strategies = [Strategy::Off, Strategy::Table, Strategy::Adaptive, Strategy::Learning];
+    let strategies = Strategy::ALL;
     let rows = run_cases(cases, &strategies, table);
     for r in rows.iter().filter(|r| r.strategy != "off") {
         let a95_db = 20.0 * (1.0 + r.a95_change_pct / 100.0).log10();

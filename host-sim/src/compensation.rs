@@ -335,7 +335,7 @@ pub fn run_case(
         let (metrics, comp, travels) = if strategy == Strategy::Off {
             (off.clone(), compensator(rig, Strategy::Off, None), 1)
         } else {
-            let mut comp = compensator(rig, strategy, Some(*table));
+            let mut comp = compensator(rig, strategy, (strategy == Strategy::Table).then_some(*table));
             let travels = if strategy == Strategy::Learning { learning_travels + 1 } else { 1 };
             let mut last = None;
             for travel in 0..travels {

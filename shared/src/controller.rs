@@ -577,9 +577,9 @@ impl Controller {
             DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet => {
                 let speed_ref_q16 = q16(speed_ref_radps);
                 let shaft_angle = self.shaft_angle();
-                let car_acceleration_mps2 = match self.observer.as_mut() {
+                let estimate = match self.observer.as_mut() {
                     Some(o) if self.state != DriveState::BrakeSet && o.is_started() => {
-                        Some(o.update(self.last_encoder_count, kt * self.telemetry.iq_a).car_acceleration_mps2)
+                        Some(o.update(self.last_encoder_count, kt * self.telemetry.iq_a))
                     }
                     _ => None,
                 };
@@ -589,7 +589,8 @@ impl Controller {
                         position_counts: self.estimator.position_counts(),
                         speed_radps: to_f32(speed),
                         speed_error_radps: to_f32(speed_ref_q16.saturating_sub(speed)),
-                        car_acceleration_mps2,
+                        car_acceleration_mps2: estimate.map(|e| e.car_acceleration_mps2),
+                        rope_ea_n: estimate.map(|e| e.rope_ea_n),
                         m_car_kg: travel.command.m_car_kg,
                         lw_m,
                         inertia_kg_m2: travel.inertia_kg_m2,

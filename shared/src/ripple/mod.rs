@@ -29,11 +29,12 @@
 //! Safety (all strategies): each harmonic's demodulated error is averaged
 //! (time constant 0.25 s or four periods of the order, whichever is longer)
 //! and divided by the model response, an unbiased residual estimate `R`. If
-//! the residual with the compensation is larger than the estimated ripple
-//! without it (`|R| > 1.12 |R - U|`, worse by 1 dB) for 0.25 s while the
-//! response is above its floor (where `R` can be trusted), that harmonic
-//! backs off: its output goes to zero for the rest of the travel and it
-//! stops learning ([`RippleCompensator::backed_off`]).
+//! the residual with the compensation is not at least 2 dB under the
+//! estimated ripple without it (`|R| > 0.8 |R - U|`) for a net 0.125 s while the response is
+//! above its floor (where `R` can be trusted), that harmonic backs off: its
+//! output goes to zero for the rest of the travel and it stops learning
+//! ([`RippleCompensator::backed_off`]). A learned coefficient that runs into
+//! its limit backs off too.
 //!
 //! Weak responses: the learning step uses `conj(G) E / (|G|^2 + floor^2)`,
 //! so an order the encoder sees poorly learns slowly instead of amplifying
@@ -131,16 +132,22 @@ pub const SPEED_RESPONSE_FLOOR: f32 = 0.01;
 pub const UNOBSERVABLE_FRACTION: f32 = 0.3;
 /// Car-acceleration response below which learning slows down, m/s^2 per N m.
 pub const CAR_RESPONSE_FLOOR: f32 = 0.05;
+/// Highest frequency strategy 4 learns at, Hz: the reduced observer's
+/// car estimate is good around the first two elastic modes (10-24 Hz).
+pub const CAR_OBSERVER_MAX_HZ: f32 = 25.0;
 /// Largest inductive voltage `L_q n w_rated |U| / Kt` one harmonic may ask
 /// of the current loop at rated speed, V: a quarter of the supervisor's
 /// back-EMF margin (`supervisor::BACK_EMF_LIMIT_FRACTION` of the rated
 /// back-EMF, 4.15 V on the rig) per harmonic is 1 V; 1.5 V lets the 12th
 /// order reach 5.5 N m (the rig's 3.5 N m plus 57 %) and caps the 72nd at 0.9 N m.
 pub const HARMONIC_VOLTAGE_BUDGET_V: f32 = 1.5;
-/// Back-off ratio on squared magnitudes: `1.12^2`, 1 dB.
-pub const BACK_OFF_RATIO_SQ: f32 = 1.2589;
-/// Ticks a harmonic must look worse before it backs off (0.25 s at 2 kHz).
-pub const BACK_OFF_TICKS: u16 = 500;
+/// Back-off ratio on squared magnitudes: 0.64 (-2 dB). A harmonic that
+/// gains less than 2 dB over no compensation is off before it can be worse
+/// (a table whose phase drifts: at 47 degrees instead of 60).
+pub const BACK_OFF_RATIO_SQ: f32 = 0.64;
+/// Net ticks a harmonic must look worse before it backs off (0.125 s at
+/// 2 kHz): a tick that looks worse counts up, one that does not counts down.
+pub const BACK_OFF_TICKS: u16 = 250;
 /// Learning runs only above this fraction of the rated shaft speed: at
 /// constant speed, where the orders are steady lines (while the speed sweeps,
 /// the large 12th order leaks into the weak orders' estimates).
@@ -175,6 +182,9 @@ pub struct LearningInput {
     pub speed_error_radps: f32,
     /// The observer's car acceleration, m/s^2 (strategy 4), if available.
     pub car_acceleration_mps2: Option<f32>,
+    /// The observer's identified rope `EA`, N, if available: the response
+    /// model uses it instead of the nominal.
+    pub rope_ea_n: Option<f32>,
     /// Car mass of the travel, kg.
     pub m_car_kg: f32,
     /// Counterweight-side rope length, m.
@@ -350,10 +360,15 @@ impl RippleCompensator {
         let lead_turns = input.speed_radps * lead_s * (1.0 / core::f32::consts::TAU);
         self.lead = (lead_turns * 4_294_967_296.0) as i32 as u32;
 
-        // Refresh one harmonic's model response per tick (round robin).
+        // Refresh one harmonic's model response per tick (round robin), on
+        // the observer's EA where there is one.
+        let mut chain = self.chain;
+        if let Some(ea) = input.rope_ea_n.filter(|ea| ea.is_finite() && *ea > 0.0) {
+            chain.rope_ea_n = ea;
+        }
         let k_refresh = (self.ticks % n as u32) as usize;
         let omega = input.speed_radps * self.applied.orders[k_refresh] as f32;
-        let response = response::loop_response(c, &self.chain, input.m_car_kg, input.lw_m, input.inertia_kg_m2, omega);
+        let response = response::loop_response(c, &chain, input.m_car_kg, input.lw_m, input.inertia_kg_m2, omega);
         self.response[k_refresh] = match self.strategy {
             Strategy::CarObserver => response.car_acceleration_per_torque,
             _ => response.speed_error_per_torque,
@@ -395,12 +410,21 @@ impl RippleCompensator {
             // Averages span at least LMS_CYCLES (learning) and AVERAGING_CYCLES (back-off) periods of the order.
             let cycles = cycles_per_tick * self.applied.orders[k] as f32;
             let step = min(LMS_STEP, cycles * (1.0 / LMS_CYCLES));
+            // Strategy 4 learns four times slower: its error is an estimate with a loop of its own.
+            let step = if self.strategy == Strategy::CarObserver { 0.25 * step } else { step };
             let averaging = min(RESIDUAL_AVERAGING, cycles * (1.0 / AVERAGING_CYCLES));
             self.demodulated[k] = self.demodulated[k] + (demodulated - self.demodulated[k]).scale(averaging);
             let g = self.response[k];
             // An order the error hardly responds to is not learned at all:
             // whatever it would learn would be the bias of the model there.
-            if g.norm_sqr() < UNOBSERVABLE_FRACTION * UNOBSERVABLE_FRACTION * floor * floor {
+            // Strategy 4 learns only orders the car answers at least `floor` to,
+            // below CAR_OBSERVER_MAX_HZ: above, the observer's car estimate
+            // follows its own ripple states, and learning from it closes a
+            // loop that runs away (36th order, EA x0.8, 33 kg).
+            let car = self.strategy == Strategy::CarObserver;
+            let fraction = if car { 1.0 } else { UNOBSERVABLE_FRACTION };
+            let too_fast = car && cycles * c.speed_loop_hz > CAR_OBSERVER_MAX_HZ;
+            if too_fast || g.norm_sqr() < fraction * fraction * floor * floor {
                 continue;
             }
             // Regularised inverse: a response below the floor learns slower instead of amplifying noise.
@@ -408,6 +432,13 @@ impl RippleCompensator {
             match self.strategy {
                 Strategy::Adaptive | Strategy::CarObserver => {
                     let next = self.adaptive.torque_nm[k] - shrunk.scale(step);
+                    // A coefficient that runs into its limit is not converging: back off.
+                    if next.norm_sqr() > self.limit_nm[k] * self.limit_nm[k] && self.back_off_enabled {
+                        self.backed_off[k] = true;
+                        self.adaptive.torque_nm[k] = Complex::ZERO;
+                        self.applied.torque_nm[k] = Complex::ZERO;
+                        continue;
+                    }
                     self.adaptive.torque_nm[k] = limit(next, self.limit_nm[k]);
                 }
                 Strategy::Learning => self.learning.accumulate(
@@ -436,7 +467,7 @@ impl RippleCompensator {
                     }
                 }
             } else {
-                self.worse_ticks[k] = 0;
+                self.worse_ticks[k] = self.worse_ticks[k].saturating_sub(1);
             }
         }
         self.current = HarmonicCurrent::from_table(&self.applied, c.torque_constant_nm_per_a(), &self.backed_off);
@@ -470,6 +501,7 @@ mod tests {
             speed_radps: 0.0,
             speed_error_radps: 0.0,
             car_acceleration_mps2: None,
+            rope_ea_n: None,
             m_car_kg: 70.5,
             lw_m: 4.0,
             inertia_kg_m2: 1.0,
