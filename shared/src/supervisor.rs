@@ -48,7 +48,7 @@ pub const MIN_CURRENT_FRACTION: f32 = 0.05;
 pub const BACK_EMF_TAU_S: f32 = 0.004;
 /// Level of the back-EMF residual as a fraction of the back-EMF at the rated
 /// shaft speed `p w_rated psi` (fault 10), dimensionless.
-pub const BACK_EMF_LIMIT_FRACTION: f32 = 0.35;
+pub const BACK_EMF_LIMIT_FRACTION: f32 = 0.25;
 /// Time constant of the low-passed speed-following error (fault 11), s.
 pub const FOLLOWING_TAU_S: f32 = 0.02;
 /// Level of the speed-following error as a fraction of the rated shaft speed

@@ -89,7 +89,7 @@ impl LearningTable {
     /// `k` are limited to `limits_nm[k]` in magnitude.
     pub fn end_travel(&mut self, harmonics: usize, min_samples: u16, limits_nm: &[f32; MAX_HARMONICS], floor: f32) {
         let floor2 = floor * floor;
-        for k in 0..harmonics.min(MAX_HARMONICS) {
+        for (k, &limit_nm) in limits_nm.iter().enumerate().take(harmonics.min(MAX_HARMONICS)) {
             let (mut num, mut den, mut n) = (Complex::ZERO, 0.0f32, 0.0f32);
             for b in 0..BINS {
                 num = num + self.weighted_sum[b][k];
@@ -108,7 +108,7 @@ impl LearningTable {
                     let residual =
                         (self.weighted_sum[b][k] + overall.scale(lambda)).scale(1.0 / (self.weight_sum[b][k] + lambda));
                     let next = self.torque_nm[b][k] - residual.scale(LEARNING_GAIN);
-                    self.torque_nm[b][k] = limit(next, limits_nm[k]);
+                    self.torque_nm[b][k] = limit(next, limit_nm);
                 }
             }
         }

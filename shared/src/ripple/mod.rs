@@ -132,6 +132,8 @@ pub const SPEED_RESPONSE_FLOOR: f32 = 0.01;
 pub const UNOBSERVABLE_FRACTION: f32 = 0.3;
 /// Car-acceleration response below which learning slows down, m/s^2 per N m.
 pub const CAR_RESPONSE_FLOOR: f32 = 0.05;
+/// Time a harmonic takes to fade in at the start of a travel or out when it backs off, s.
+pub const FADE_S: f32 = 0.05;
 /// Highest frequency strategy 4 learns at, Hz: the reduced observer's
 /// car estimate is good around the first two elastic modes (10-24 Hz).
 pub const CAR_OBSERVER_MAX_HZ: f32 = 25.0;
@@ -218,6 +220,8 @@ pub struct RippleCompensator {
     residual_nm: [Complex; MAX_HARMONICS],
     worse_ticks: [u16; MAX_HARMONICS],
     backed_off: [bool; MAX_HARMONICS],
+    /// Fade of each harmonic's output, 0..1.
+    fade: [f32; MAX_HARMONICS],
     ticks: u32,
     /// Angle the 16 kHz evaluation leads the measured angle by (current-loop lag).
     lead: Angle,
@@ -247,6 +251,7 @@ impl RippleCompensator {
             residual_nm: [Complex::ZERO; MAX_HARMONICS],
             worse_ticks: [0; MAX_HARMONICS],
             backed_off: [false; MAX_HARMONICS],
+            fade: [0.0; MAX_HARMONICS],
             ticks: 0,
             lead: 0,
             limit_nm: harmonic_limits_nm(config, orders),
@@ -314,6 +319,7 @@ impl RippleCompensator {
     /// strategies start from zero, the table and the learned table are kept.
     pub fn start_travel(&mut self) {
         self.backed_off = [false; MAX_HARMONICS];
+        self.fade = [0.0; MAX_HARMONICS];
         self.worse_ticks = [0; MAX_HARMONICS];
         self.residual_nm = [Complex::ZERO; MAX_HARMONICS];
         self.demodulated = [Complex::ZERO; MAX_HARMONICS];
@@ -387,17 +393,26 @@ impl RippleCompensator {
         let speed_abs = if input.speed_radps < 0.0 { -input.speed_radps } else { input.speed_radps };
         let cycles_per_tick = speed_abs * (1.0 / core::f32::consts::TAU) / c.speed_loop_hz;
         for k in 0..n {
-            // Applied coefficient for this tick.
-            let applied = if self.backed_off[k] {
-                Complex::ZERO
-            } else {
-                match self.strategy {
-                    Strategy::Table => limit(self.table.torque_nm[k], self.limit_nm[k]),
-                    Strategy::Adaptive | Strategy::CarObserver => self.adaptive.torque_nm[k],
-                    Strategy::Learning => self.learning.torque_at(k, input.position_counts, c.encoder_counts_per_rev),
-                    Strategy::Off => Complex::ZERO,
-                }
+            // Applied coefficient for this tick, faded in at the start and
+            // out on back-off: a step in a harmonic current is a step in the
+            // current loop's voltage, which the back-EMF check would see.
+            let base = match self.strategy {
+                Strategy::Table => limit(self.table.torque_nm[k], self.limit_nm[k]),
+                Strategy::Adaptive | Strategy::CarObserver => self.adaptive.torque_nm[k],
+                Strategy::Learning => self.learning.torque_at(k, input.position_counts, c.encoder_counts_per_rev),
+                Strategy::Off => Complex::ZERO,
             };
+            let fade_step = 1.0 / (FADE_S * c.speed_loop_hz);
+            self.fade[k] = if self.backed_off[k] {
+                if self.fade[k] > fade_step {
+                    self.fade[k] - fade_step
+                } else {
+                    0.0
+                }
+            } else {
+                min(1.0, self.fade[k] + fade_step)
+            };
+            let applied = base.scale(self.fade[k]);
             self.applied.torque_nm[k] = applied;
             if !fast_enough || !refreshed_all || !have_error || self.backed_off[k] {
                 continue;
@@ -435,8 +450,6 @@ impl RippleCompensator {
                     // A coefficient that runs into its limit is not converging: back off.
                     if next.norm_sqr() > self.limit_nm[k] * self.limit_nm[k] && self.back_off_enabled {
                         self.backed_off[k] = true;
-                        self.adaptive.torque_nm[k] = Complex::ZERO;
-                        self.applied.torque_nm[k] = Complex::ZERO;
                         continue;
                     }
                     self.adaptive.torque_nm[k] = limit(next, self.limit_nm[k]);
@@ -461,16 +474,13 @@ impl RippleCompensator {
                 self.worse_ticks[k] = self.worse_ticks[k].saturating_add(1);
                 if self.worse_ticks[k] >= BACK_OFF_TICKS {
                     self.backed_off[k] = true;
-                    self.applied.torque_nm[k] = Complex::ZERO;
-                    if matches!(self.strategy, Strategy::Adaptive | Strategy::CarObserver) {
-                        self.adaptive.torque_nm[k] = Complex::ZERO;
-                    }
                 }
             } else {
                 self.worse_ticks[k] = self.worse_ticks[k].saturating_sub(1);
             }
         }
-        self.current = HarmonicCurrent::from_table(&self.applied, c.torque_constant_nm_per_a(), &self.backed_off);
+        self.current =
+            HarmonicCurrent::from_table(&self.applied, c.torque_constant_nm_per_a(), &[false; MAX_HARMONICS]);
     }
 }
 
@@ -495,7 +505,7 @@ mod tests {
         let mut c = RippleCompensator::new(&config, &chain(), &[12], Strategy::Table);
         c.set_table(table);
         c.start_travel();
-        c.speed_tick(&LearningInput {
+        let input = LearningInput {
             shaft_angle: 0,
             position_counts: 0,
             speed_radps: 0.0,
@@ -505,7 +515,17 @@ mod tests {
             m_car_kg: 70.5,
             lw_m: 4.0,
             inertia_kg_m2: 1.0,
-        });
+        };
+        // Faded in over FADE_S: at half of it, half the table; after it, all of it.
+        let ticks = (FADE_S * config.speed_loop_hz) as usize;
+        for _ in 0..ticks / 2 {
+            c.speed_tick(&input);
+        }
+        let half = c.applied().torque_nm[0].re;
+        assert!((half - 0.5).abs() < 0.02, "{half}");
+        for _ in 0..ticks {
+            c.speed_tick(&input);
+        }
         let peak = (0..1000u32).map(|i| c.iq_a(i * 4_294_967).to_num::<f64>()).fold(0.0f64, |m, v| m.max(v.abs()));
         let expected = 1.0 / config.torque_constant_nm_per_a() as f64;
         assert!((peak - expected).abs() < 1e-3 * expected, "{peak} vs {expected}");
