@@ -158,9 +158,9 @@ fn the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_ev
     }
 }
 
-/// Every strategy on every mismatch case (one light and one heavy travel
-/// each): never more than 1 dB worse than no compensation on the car's 12x
-/// component or its A95.
+/// Every strategy on every mismatch case (three travels each; `host-sim
+/// compare` runs all 8): never more than 1 dB worse than no compensation on
+/// the car's 12x line or its A95.
 #[test]
 fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_db() {
     let rig = rig();
@@ -171,10 +171,11 @@ fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_d
         .filter(|(_, c)| {
             c.mismatch != Mismatch::Nominal
                 && ((c.m_car_kg == 70.5 && c.direction == Direction::Up)
+                    || (c.m_car_kg == 45.5 && c.direction == Direction::Up)
                     || (c.m_car_kg == 33.0 && c.direction == Direction::Down))
         })
         .collect();
-    assert_eq!(cases.len(), 10);
+    assert_eq!(cases.len(), 15);
     let strategies = Strategy::ALL;
     let rows = run_cases(cases, &strategies, table);
     for r in rows.iter().filter(|r| r.strategy != "off") {

@@ -182,8 +182,9 @@ pub struct RideMetrics {
     pub a95_mg: f64,
     /// ISO 18738-1 maximum peak-to-peak in the constant-speed stage, mg.
     pub max_peak_to_peak_mg: f64,
-    /// Car acceleration amplitude at the orders [`REPORTED_ORDERS`] over the
-    /// constant-speed stage (lock-in on the encoder angle), m/s^2.
+    /// Car acceleration amplitude of the line at the orders
+    /// [`REPORTED_ORDERS`] over the constant-speed stage ([`line_amplitude`],
+    /// lock-in on the encoder angle), m/s^2.
     pub car_order_amplitude_mps2: [f64; 3],
     /// Largest phase-current vector magnitude `sqrt(2/3 (ia^2+ib^2+ic^2))` over the travel, A.
     pub peak_current_a: f64,
@@ -205,13 +206,22 @@ pub fn order_amplitude(signal: &[f64], angle_rad: &[f64], n: f64, range: std::op
     2.0 * (re * re + im * im).sqrt() / range.len().max(1) as f64
 }
 
+/// Largest [`order_amplitude`] of `signal` within +-1.5 % of order `n`
+/// (13 lock-ins 0.25 % apart, finer than the 1/revolutions resolution of a
+/// travel): the line near the order, wherever a drifting ripple puts it.
+pub fn line_amplitude(signal: &[f64], angle_rad: &[f64], n: f64, range: std::ops::Range<usize>) -> f64 {
+    (-6..=6)
+        .map(|i| order_amplitude(signal, angle_rad, n * (1.0 + 0.0025 * i as f64), range.clone()))
+        .fold(0.0, f64::max)
+}
+
 /// The measures of one travel.
 pub fn ride_metrics(run: &TravelRun) -> anyhow::Result<RideMetrics> {
     let fs = run.sample_rate_hz;
     let stage = constant_speed_stage(&run.speed_radps, fs)?;
     let quality = ride_quality(&run.acc_car_mps2, fs, Some(stage.clone()))?;
     let constant = quality.constant_speed.expect("a constant-speed range was given");
-    let amplitude = |n: u16| order_amplitude(&run.acc_car_mps2, &run.angle_rad, n as f64, stage.clone());
+    let amplitude = |n: u16| line_amplitude(&run.acc_car_mps2, &run.angle_rad, n as f64, stage.clone());
     let window = (LEARNING_WINDOW_S * fs) as usize;
     let order12_windows = (stage.start..stage.end.saturating_sub(window))
         .step_by(window.max(1))
