@@ -170,8 +170,7 @@ fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_d
         .enumerate()
         .filter(|(_, c)| {
             c.mismatch != Mismatch::Nominal
-                && ((c.m_car_kg == 70.5 && c.direction == Direction::Up)
-                    || (c.m_car_kg == 45.5 && c.direction == Direction::Up)
+                && (((c.m_car_kg == 45.5 || c.m_car_kg == 70.5) && c.direction == Direction::Up)
                     || (c.m_car_kg == 33.0 && c.direction == Direction::Down))
         })
         .collect();
