@@ -271,20 +271,7 @@ pub(crate) mod tests {
 
     /// The rig's chain as the observer sees it (configs/rig.toml).
     pub(crate) fn rig_model() -> ChainModel {
-        ChainModel {
-            m_cw_kg: 33.0,
-            rope_total_length_m: 8.6,
-            rope_ea_n: 1.0e6,
-            rope_mass_per_length_kg_per_m: 0.095,
-            sheave_inertia_kg_m2: 0.3385,
-            sheave_radius_m: 0.065,
-            c_cw_kg_per_s: 148.0,
-            c_car_kg_per_s: 148.0,
-            c_sheave_nms_per_rad: 3.0,
-            gravity_mps2: 9.81,
-            encoder_counts_per_rev: 16384,
-            ripple_orders: [1, 6, 12, 36, 72],
-        }
+        crate::config::reference_chain()
     }
 
     /// Right-hand side of the reduced chain written out in f64, independently
