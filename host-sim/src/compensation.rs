@@ -24,8 +24,7 @@ pub fn ripple_orders(rig: &RigConfig) -> Vec<u16> {
 /// the ripple the plant applies, so `negated()` is a perfect compensation.
 pub fn rig_ripple_table(rig: &RigConfig) -> HarmonicTable {
     let mut table = HarmonicTable::default();
-    for r in &rig.ripple {
-        let order = r.mechanical_order.min(u16::MAX as u32) as u16;
+    for (r, order) in rig.ripple.iter().zip(ripple_orders(rig)) {
         table.push_cosine(order, r.amplitude_nm as f32, r.phase_rad.cos() as f32, r.phase_rad.sin() as f32);
     }
     table

@@ -172,7 +172,6 @@ fn write_outputs(out: &Path, rows: &[CompareRow], table: Option<&HarmonicTable>)
 
     // Per strategy: order-12 change and A95 change against the case index.
     let mut strategies: Vec<&str> = rows.iter().map(|r| r.strategy.as_str()).collect();
-    strategies.dedup();
     strategies.sort();
     strategies.dedup();
     let series = |f: &dyn Fn(&CompareRow) -> f64| -> Vec<Series> {

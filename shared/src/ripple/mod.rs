@@ -58,14 +58,6 @@ use crate::fixed::Q16;
 use crate::observer::ChainModel;
 use crate::trig::{sin_cos, Angle};
 
-fn min(a: f32, b: f32) -> f32 {
-    if a < b {
-        a
-    } else {
-        b
-    }
-}
-
 /// Compensation strategy.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Strategy {
@@ -165,7 +157,7 @@ fn harmonic_limits_nm(config: &DriveConfig, orders: &[u16]) -> [f32; MAX_HARMONI
     for (slot, &order) in limits.iter_mut().zip(orders) {
         let volts_per_nm = config.lq_h * order as f32 * config.rated_shaft_speed_radps() / kt;
         if volts_per_nm > 0.0 {
-            *slot = min(overall, HARMONIC_VOLTAGE_BUDGET_V / volts_per_nm);
+            *slot = overall.min(HARMONIC_VOLTAGE_BUDGET_V / volts_per_nm);
         }
     }
     limits
@@ -410,7 +402,7 @@ impl RippleCompensator {
                     0.0
                 }
             } else {
-                min(1.0, self.fade[k] + fade_step)
+                (self.fade[k] + fade_step).min(1.0)
             };
             let applied = base.scale(self.fade[k]);
             self.applied.torque_nm[k] = applied;
@@ -424,10 +416,10 @@ impl RippleCompensator {
             }
             // Averages span at least LMS_CYCLES (learning) and AVERAGING_CYCLES (back-off) periods of the order.
             let cycles = cycles_per_tick * self.applied.orders[k] as f32;
-            let step = min(LMS_STEP, cycles * (1.0 / LMS_CYCLES));
+            let step = LMS_STEP.min(cycles * (1.0 / LMS_CYCLES));
             // Strategy 4 learns four times slower: its error is an estimate with a loop of its own.
             let step = if self.strategy == Strategy::CarObserver { 0.25 * step } else { step };
-            let averaging = min(RESIDUAL_AVERAGING, cycles * (1.0 / AVERAGING_CYCLES));
+            let averaging = RESIDUAL_AVERAGING.min(cycles * (1.0 / AVERAGING_CYCLES));
             self.demodulated[k] = self.demodulated[k] + (demodulated - self.demodulated[k]).scale(averaging);
             let g = self.response[k];
             // An order the error hardly responds to is not learned at all:
