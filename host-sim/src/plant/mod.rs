@@ -9,6 +9,7 @@
 //! The paper's Eqn 3 counts the sheave angle the other way; the equations
 //! are the same with that sign flipped.
 
+pub mod effects;
 pub mod free_decay;
 pub mod inverter;
 pub mod mechanics;
