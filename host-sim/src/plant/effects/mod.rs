@@ -134,7 +134,7 @@ const CAR_FRAME_MODE: [ParamSpec; 3] = [
 ];
 const COULOMB_GUIDE_FRICTION: [ParamSpec; 2] = [
     p("friction_n", "N", 20.0, 0.0, 150.0, Linear, true, "dry friction force at each guide (car and counterweight)"),
-    p("slip_speed_mps", "m/s", 0.002, 1.0e-4, 0.05, Log, false, "speed over which the friction force builds up (tanh)"),
+    p("slip_speed_mps", "m/s", 0.002, 1.0e-3, 0.05, Log, false, "speed over which the friction force builds up (tanh)"),
 ];
 const BRAKE_STOP: [ParamSpec; 2] = [
     p(
