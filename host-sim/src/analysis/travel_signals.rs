@@ -108,3 +108,57 @@ mod tests {
         assert!((lw[1000] - 1.13).abs() < 1e-12);
     }
 }
+
+/// The machine torque of a travel recording (paper 3.3) and the signals it
+/// rests on, as `analyze` and `identify` both use them.
+pub struct TravelTorque {
+    /// Shaft speed from the encoder, rad/s.
+    pub speed_radps: Vec<f64>,
+    /// Unwrapped shaft angle (the `angle_rad` column, or the integrated speed), rad.
+    pub shaft_angle_rad: Vec<f64>,
+    /// Electrical angle offset estimated from `i_d = 0`, rad.
+    pub electrical_offset_rad: f64,
+    /// Machine torque from the phase currents (dq0), N m.
+    pub torque_nm: Vec<f64>,
+    /// Samples of the constant-speed stage.
+    pub constant_speed: std::ops::Range<usize>,
+}
+
+/// [`TravelTorque`] of the travel recording `stem` for the machine of `rig`.
+pub fn travel_torque(
+    rig: &crate::config::RigConfig,
+    recording: &crate::recording::Recording,
+    stem: &str,
+) -> anyhow::Result<TravelTorque> {
+    use crate::recording::{ANGLE, I_A, I_B, I_C, SPEED};
+    let column = |name: &str| -> anyhow::Result<&[f64]> {
+        recording
+            .column(name)
+            .map(|c| c.values.as_slice())
+            .ok_or_else(|| anyhow::anyhow!("recording `{stem}`: column `{name}` missing"))
+    };
+    let fs = recording.meta.sample_rate_hz;
+    let mo = &rig.motor;
+    let speed = column(SPEED)?;
+    let (i_a, i_b, i_c) = (column(I_A)?, column(I_B)?, column(I_C)?);
+    let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
+    let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
+    let torque = crate::analysis::machine_torque_nm(
+        i_a,
+        i_b,
+        i_c,
+        &angle,
+        mo.pole_pairs,
+        mo.flux_linkage_wb,
+        mo.ld_h,
+        mo.lq_h,
+        offset,
+    )?;
+    Ok(TravelTorque {
+        constant_speed: crate::analysis::constant_speed_stage(speed, fs)?,
+        speed_radps: speed.to_vec(),
+        shaft_angle_rad: angle,
+        electrical_offset_rad: offset,
+        torque_nm: torque,
+    })
+}

@@ -112,50 +112,7 @@ pub fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::R
         .with_context(|| format!("recording `{stem}`: column `{name}` missing"))
 }
 
-/// The machine torque of a travel recording (paper 3.3) and the signals it
-/// rests on, as `analyze` and `identify` both use them.
-pub struct TravelTorque {
-    /// Shaft speed from the encoder, rad/s.
-    pub speed_radps: Vec<f64>,
-    /// Unwrapped shaft angle (the `angle_rad` column, or the integrated speed), rad.
-    pub shaft_angle_rad: Vec<f64>,
-    /// Electrical angle offset estimated from `i_d = 0`, rad.
-    pub electrical_offset_rad: f64,
-    /// Machine torque from the phase currents (dq0), N m.
-    pub torque_nm: Vec<f64>,
-    /// Samples of the constant-speed stage.
-    pub constant_speed: std::ops::Range<usize>,
-}
-
-/// [`TravelTorque`] of the travel recording `stem` for the machine of `rig`.
-pub fn travel_torque(rig: &RigConfig, recording: &Recording, stem: &str) -> anyhow::Result<TravelTorque> {
-    use crate::analysis::travel_signals::{electrical_offset_rad, shaft_angle_rad};
-    use crate::recording::{ANGLE, I_A, I_B, I_C, SPEED};
-    let fs = recording.meta.sample_rate_hz;
-    let mo = &rig.motor;
-    let speed = column(recording, SPEED, stem)?;
-    let (i_a, i_b, i_c) = (column(recording, I_A, stem)?, column(recording, I_B, stem)?, column(recording, I_C, stem)?);
-    let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
-    let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
-    let torque = crate::analysis::machine_torque_nm(
-        i_a,
-        i_b,
-        i_c,
-        &angle,
-        mo.pole_pairs,
-        mo.flux_linkage_wb,
-        mo.ld_h,
-        mo.lq_h,
-        offset,
-    )?;
-    Ok(TravelTorque {
-        constant_speed: crate::analysis::constant_speed_stage(speed, fs)?,
-        speed_radps: speed.to_vec(),
-        shaft_angle_rad: angle,
-        electrical_offset_rad: offset,
-        torque_nm: torque,
-    })
-}
+pub use crate::analysis::travel_signals::{travel_torque, TravelTorque};
 
 /// Creates the output directory.
 pub fn create_out_dir(dir: &Path) -> anyhow::Result<()> {
