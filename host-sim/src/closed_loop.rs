@@ -12,6 +12,7 @@ use shared::config::Direction;
 use shared::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 
 use crate::config::RigConfig;
+use crate::plant::effects::Effects;
 use crate::plant::{Plant, PlantInputs, PlantObservation};
 use crate::recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta};
 
@@ -51,16 +52,20 @@ pub struct SimOptions {
     pub tail_s: f64,
     /// Stop after this many control steps (a partial travel), if set.
     pub max_control_steps: Option<u64>,
+    /// The library's effects on the simulated plant (none: the nominal plant).
+    pub effects: Effects,
 }
 
 impl SimOptions {
-    /// Defaults for `rig`: step `Ts/4`, the rig's sample rate, 0.5 s tail.
+    /// Defaults for `rig`: step `Ts/4`, the rig's sample rate, 0.5 s tail,
+    /// the nominal plant.
     pub fn for_rig(rig: &RigConfig) -> Self {
         Self {
             max_step_s: 0.25 / rig.control.current_loop_hz,
             sample_rate_hz: rig.measurement.sample_rate_hz,
             tail_s: 0.5,
             max_control_steps: None,
+            effects: Effects::none(),
         }
     }
 }
@@ -296,7 +301,7 @@ pub fn simulate_travel_faulted(
     if let Some(log) = log.as_deref_mut() {
         log.command = Some(command);
     }
-    let mut plant = Plant::new(rig, spec.m_car_kg, spec.lw_start_m);
+    let mut plant = Plant::with_effects(rig, spec.m_car_kg, spec.lw_start_m, &options.effects);
 
     let ts = 1.0 / rig.control.current_loop_hz;
     let sample_period = 1.0 / options.sample_rate_hz;

@@ -7,7 +7,8 @@ use clap::Args;
 
 use super::{check_open_range, create_out_dir};
 use crate::config::RigConfig;
-use crate::plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay, FreeDecaySpec};
+use crate::plant::effects::Effects;
+use crate::plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay_with, FreeDecaySpec};
 use crate::recording::write::write_recording;
 use crate::recording::{Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
 
@@ -41,6 +42,15 @@ pub struct DecayArgs {
     /// Output directory (the dataset).
     #[arg(long, value_name = "DIR", default_value = "out/decay")]
     pub out: PathBuf,
+    /// Effects of the library, from a TOML file (`[name]` tables); of them
+    /// a free decay has tension stiffening, the car frame mode and dry
+    /// guide friction, the others are ignored.
+    #[arg(long = "effects", value_name = "FILE")]
+    pub effects_file: Option<PathBuf>,
+    /// One effect, `NAME` or `NAME:param=value,...`; repeatable, applied
+    /// after `--effects`.
+    #[arg(long = "effect", value_name = "NAME[:PARAM=VALUE,...]")]
+    pub effect: Vec<String>,
 }
 
 /// Runs `decay`.
@@ -48,6 +58,13 @@ pub fn run(rig: &RigConfig, args: &DecayArgs) -> anyhow::Result<()> {
     let m = &rig.mechanics;
     let masses = if args.masses_kg.is_empty() { m.m_car_kg.clone() } else { args.masses_kg.clone() };
     check_open_range("--duration", args.duration_s, 0.0, 600.0)?;
+    let requested = Effects::from_file_and_flags(args.effects_file.as_deref(), &args.effect)?;
+    let effects = requested.for_free_decay();
+    let ignored: Vec<&str> =
+        requested.enabled().into_iter().filter(|k| effects.values(*k).is_none()).map(|k| k.name()).collect();
+    if !ignored.is_empty() {
+        println!("effects a free decay does not have, ignored: {}", ignored.join(", "));
+    }
     create_out_dir(&args.out)?;
     let fs = rig.measurement.sample_rate_hz;
     for &mass in &masses {
@@ -63,15 +80,19 @@ pub fn run(rig: &RigConfig, args: &DecayArgs) -> anyhow::Result<()> {
                 initial_acceleration_mps2: 2.0,
                 elements: args.elements,
             };
-            let acc = simulate_free_decay(&spec, fs, args.duration_s)?;
+            let acc = simulate_free_decay_with(&spec, &effects, fs, args.duration_s)?;
             let time: Vec<f64> = (0..acc.len()).map(|i| i as f64 / fs).collect();
             let recording = Recording {
                 meta: RecordingMeta {
                     kind: RecordingKind::FreeDecay { mass_kg: mass, rope_length_m: length },
                     sample_rate_hz: fs,
                     description: Some(format!(
-                        "host-sim free decay: EA {} N, mu {} kg/m, damping {} kg/s, {} rope elements",
-                        spec.rope_ea_n, spec.rope_mass_per_length_kg_per_m, spec.damping_kg_per_s, spec.elements
+                        "host-sim free decay: EA {} N, mu {} kg/m, damping {} kg/s, {} rope elements, {}",
+                        spec.rope_ea_n,
+                        spec.rope_mass_per_length_kg_per_m,
+                        spec.damping_kg_per_s,
+                        spec.elements,
+                        effects.summary()
                     )),
                 },
                 columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, acc)],

@@ -14,6 +14,7 @@ use crate::analysis::{highpass_zero_phase, stft_spectrogram};
 use crate::closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
 use crate::compensation::{compensator, rig_ripple_table};
 use crate::config::RigConfig;
+use crate::plant::effects::Effects;
 use crate::plant::modes::natural_modes;
 use crate::plant::rope::{ChainParams, DOF};
 use crate::plots::{line_plot, spectrogram_plot, Series};
@@ -61,6 +62,14 @@ pub struct TravelArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Effects of the library on the simulated plant, from a TOML file
+    /// (`[name]` tables of parameters; see `plant::effects`).
+    #[arg(long = "effects", value_name = "FILE")]
+    pub effects_file: Option<PathBuf>,
+    /// One effect on the simulated plant, `NAME` (default parameters) or
+    /// `NAME:param=value,...`; repeatable, applied after `--effects`.
+    #[arg(long = "effect", value_name = "NAME[:PARAM=VALUE,...]")]
+    pub effect: Vec<String>,
 }
 
 /// Ripple compensation on the command line.
@@ -96,6 +105,7 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         spec.lw_end_m = lw;
     }
     let mut options = SimOptions::for_rig(rig);
+    options.effects = Effects::from_file_and_flags(args.effects_file.as_deref(), &args.effect)?;
     if let Some(step) = args.max_step_s {
         check_open_range("--max-step", step, 0.0, 0.5 / rig.control.current_loop_hz + 1e-15)?;
         options.max_step_s = step;
@@ -127,10 +137,11 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     let run = simulate_travel_with(rig, &spec, &options, &mut controller, Some(&bar), None)?;
     let wall = started.elapsed().as_secs_f64();
     println!(
-        "simulated {:.2} s of travel (m_car = {m_car} kg, {direction:?}, lw {} -> {} m) in {wall:.2} s: {:.1}x real time",
+        "simulated {:.2} s of travel (m_car = {m_car} kg, {direction:?}, lw {} -> {} m, {}) in {wall:.2} s: {:.1}x real time",
         run.duration_s(),
         spec.lw_start_m,
         spec.lw_end_m,
+        options.effects.summary(),
         run.duration_s() / wall
     );
 
@@ -141,7 +152,11 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     let recording = run.to_recording(
         &spec,
         rig.mechanics.m_cw_kg,
-        format!("host-sim closed-loop travel, nominal plant, step {:.3e} s, {description}", options.max_step_s),
+        format!(
+            "host-sim closed-loop travel, {}, step {:.3e} s, {description}",
+            options.effects.summary(),
+            options.max_step_s
+        ),
     );
     let (toml_path, csv_path) = write_recording(&args.out, &stem, &recording)?;
     println!("recording: {} and {}", toml_path.display(), csv_path.display());

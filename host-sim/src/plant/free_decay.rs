@@ -7,6 +7,9 @@
 //! accelerometer records. With many elements the first natural frequency
 //! tends to the continuous rope's, the root of Eqn 9.
 
+use super::effects::tension_stiffening::static_tension_n;
+use super::effects::Effects;
+
 /// One free-decay test.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FreeDecaySpec {
@@ -59,6 +62,34 @@ pub fn simulate_free_decay(
     sample_rate_hz: f64,
     duration_s: f64,
 ) -> Result<Vec<f64>, FreeDecayError> {
+    simulate_free_decay_with(spec, &Effects::none(), sample_rate_hz, duration_s)
+}
+
+/// [`simulate_free_decay`] with the library's `effects` that apply to a
+/// mass hanging on a rope with a fixed top:
+///
+/// - `tension_stiffening`: each rope spring's EA is taken at its static
+///   tension, `(m + mu l_below) g` with `l_below` the rope below the middle
+///   of the spring's segment (`spec.rope_ea_n` is `EA0`, gravity 9.81 m/s^2);
+/// - `car_frame_mode`: the hanging mass is split like the car, a hitch
+///   `(1 - beta) m` on the rope (which carries the guide damping and
+///   friction) and a body `beta m` on the frame spring and damper, which
+///   carries the accelerometer; the static force of the release is spread
+///   over both in proportion to their masses, so that they start with the
+///   same acceleration;
+/// - `coulomb_guide_friction`: `-F tanh(v / v_slip)` on the mass (hitch).
+///
+/// The other effects concern the sheave, the pulley, the travel's rope
+/// discretisation (the decay has its own `spec.elements`), the brake, the
+/// inverter or the drive's sensors, none of which a free decay has: they
+/// are ignored. With none of the three the result is
+/// [`simulate_free_decay`]'s, bit for bit.
+pub fn simulate_free_decay_with(
+    spec: &FreeDecaySpec,
+    effects: &Effects,
+    sample_rate_hz: f64,
+    duration_s: f64,
+) -> Result<Vec<f64>, FreeDecayError> {
     check("mass_kg", spec.mass_kg, spec.mass_kg > 0.0, "> 0 kg")?;
     check("rope_length_m", spec.rope_length_m, spec.rope_length_m > 0.0, "> 0 m")?;
     check("rope_ea_n", spec.rope_ea_n, spec.rope_ea_n > 0.0, "> 0 N")?;
@@ -73,48 +104,112 @@ pub fn simulate_free_decay(
     check("duration_s", duration_s, duration_s > 0.0 && duration_s * sample_rate_hz < 1.0e8, "> 0 s, < 1e8 samples")?;
 
     let k = spec.rope_ea_n * n as f64 / spec.rope_length_m;
+    // Spring i joins node i - 1 (the fixed top for i = 0) and node i.
+    let springs: Vec<f64> = match &effects.tension_stiffening {
+        None => vec![k; n],
+        Some(stiffening) => (0..n)
+            .map(|i| {
+                let below = spec.rope_length_m * (1.0 - (i as f64 + 0.5) / n as f64);
+                let tension = static_tension_n(spec.mass_kg, mu, below, DECAY_GRAVITY_MPS2);
+                stiffening.ea_n(spec.rope_ea_n, tension) * n as f64 / spec.rope_length_m
+            })
+            .collect(),
+    };
     let segment = mu * spec.rope_length_m / n as f64;
-    let mut masses = vec![segment; n];
-    masses[n - 1] = 0.5 * segment + spec.mass_kg;
+    let frame = effects.car_frame_mode;
+    let (hitch_mass, body_mass) = match &frame {
+        None => (spec.mass_kg, 0.0),
+        Some(f) => (f.hitch_mass_kg(spec.mass_kg), f.body_mass_kg(spec.mass_kg)),
+    };
+    let (k_frame, c_frame) = match &frame {
+        None => (0.0, 0.0),
+        Some(f) => (f.stiffness_n_per_m(spec.mass_kg), f.damping_kg_per_s(spec.mass_kg)),
+    };
+    // Nodes: n rope nodes (the last the hitch), then the body with a frame.
+    let nodes = if frame.is_some() { n + 1 } else { n };
+    let mut masses = vec![segment; nodes];
+    masses[n - 1] = 0.5 * segment + hitch_mass;
+    if frame.is_some() {
+        masses[n] = body_mass;
+    }
+    let friction = effects.coulomb_guide_friction;
     // The chain's highest frequency sets the step: h w_max <= 1 (RK4 is
     // stable below 2.78 and accurate well below it).
-    let w_max = 2.0 * (k / masses.iter().copied().fold(f64::INFINITY, f64::min)).sqrt();
+    let k_max = springs.iter().copied().fold(0.0f64, f64::max);
+    let mut w_max = 2.0 * (k_max / masses[..n].iter().copied().fold(f64::INFINITY, f64::min)).sqrt();
+    if frame.is_some() {
+        w_max = w_max
+            .max((2.0 * (k_max + k_frame) / masses[n - 1]).sqrt())
+            .max((2.0 * k_frame / body_mass).sqrt())
+            .max(2.0 * c_frame / body_mass.min(masses[n - 1]));
+    }
+    if let Some(f) = &friction {
+        w_max = w_max.max(f.stiffness_rate_per_s(masses[n - 1]));
+    }
     let substeps = (w_max / sample_rate_hz).ceil().max(1.0) as usize;
     let h = 1.0 / sample_rate_hz / substeps as f64;
 
     // Static deflection under the force F0 = m a0 at the mass: u_i = F0 i / k.
     let force = spec.mass_kg * spec.initial_acceleration_mps2;
-    let mut state = vec![0.0; 2 * n];
-    for (i, u) in state.iter_mut().take(n).enumerate() {
-        *u = -force * (i + 1) as f64 / k;
+    let mut state = vec![0.0; 2 * nodes];
+    match &effects.tension_stiffening {
+        None => {
+            for (i, u) in state.iter_mut().take(n).enumerate() {
+                *u = -force * (i + 1) as f64 / k;
+            }
+        }
+        Some(_) => {
+            let mut u = 0.0;
+            for i in 0..n {
+                u -= force / springs[i];
+                state[i] = u;
+            }
+        }
+    }
+    if frame.is_some() {
+        // The body's share of the static force stretches the frame spring.
+        state[n] = state[n - 1] - body_mass * spec.initial_acceleration_mps2 / k_frame;
     }
     let c = spec.damping_kg_per_s;
     let acceleration = |y: &[f64], out: &mut [f64]| {
         for i in 0..n {
             let below = if i == 0 { 0.0 } else { y[i - 1] };
-            let above = if i + 1 < n { y[i + 1] } else { y[i] };
-            let mut f = -k * (y[i] - below) + k * (above - y[i]);
+            let (above, k_above) = if i + 1 < n { (y[i + 1], springs[i + 1]) } else { (y[i], springs[i]) };
+            let mut f = -springs[i] * (y[i] - below) + k_above * (above - y[i]);
             if i == n - 1 {
-                f -= c * y[n + i];
+                f -= c * y[nodes + i];
+                if let Some(friction) = &friction {
+                    f += friction.force_n(y[nodes + i]);
+                }
+                if frame.is_some() {
+                    f += k_frame * (y[n] - y[i]) + c_frame * (y[nodes + n] - y[nodes + i]);
+                }
             }
             out[i] = f / masses[i];
+        }
+        if frame.is_some() {
+            let f = -k_frame * (y[n] - y[n - 1]) - c_frame * (y[nodes + n] - y[nodes + n - 1]);
+            out[n] = f / masses[n];
         }
     };
     let samples = (duration_s * sample_rate_hz).round() as usize;
     let mut record = Vec::with_capacity(samples);
-    let mut accel = vec![0.0; n];
+    let mut accel = vec![0.0; nodes];
     for _ in 0..samples {
         acceleration(&state, &mut accel);
-        record.push(accel[n - 1]);
+        record.push(accel[nodes - 1]);
         for _ in 0..substeps {
             state = rk4_vec(&state, h, |y, dy| {
-                dy[..n].copy_from_slice(&y[n..]);
-                acceleration(y, &mut dy[n..]);
+                dy[..nodes].copy_from_slice(&y[nodes..]);
+                acceleration(y, &mut dy[nodes..]);
             });
         }
     }
     Ok(record)
 }
+
+/// Gravity of the decay rig (tension stiffening's static tensions), m/s^2.
+pub const DECAY_GRAVITY_MPS2: f64 = 9.81;
 
 /// RK4 on a heap state (the chain's length is chosen at run time).
 fn rk4_vec(y: &[f64], h: f64, f: impl Fn(&[f64], &mut [f64])) -> Vec<f64> {

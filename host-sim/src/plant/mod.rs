@@ -1,7 +1,15 @@
 //! The nominal plant of the seed paper: the 5-DOF rope chain with car,
 //! counterweight and sheave (`mechanics`, `rope`, `modes`), the PMSM in the dq
 //! frame (`pmsm`) behind an averaged inverter (`inverter`), the angle-locked
-//! torque ripple (`ripple`) and the drive's sensors (`sensors`).
+//! torque ripple (`ripple`) and the drive's sensors (`sensors`); with the
+//! library of unmodelled effects (`effects`) switched on through
+//! [`Plant::with_effects`], the chain becomes a longer line of masses and
+//! springs (`line`) and the inverter and sensors get their errors.
+//!
+//! State: positions and velocities of the line's nodes, then `i_d`, `i_q`,
+//! in a fixed array of [`MAX_STATE_LEN`] of which the first
+//! `2 * nodes + 2` are used (12 for the nominal plant, laid out as before:
+//! `u_w, u_1, u_sh, u_2, u_c`, their velocities, `i_d`, `i_q`).
 //!
 //! Sign convention: every mechanical coordinate is positive in the direction
 //! of the rope when the car goes up (counterweight down, sheave edge towards
@@ -12,6 +20,7 @@
 pub mod effects;
 pub mod free_decay;
 pub mod inverter;
+pub mod line;
 pub mod mechanics;
 pub mod modes;
 pub mod pmsm;
@@ -25,14 +34,19 @@ pub use rope::ChainParams;
 use shared::SensorFrame;
 
 use crate::config::RigConfig;
+use effects::Effects;
 use inverter::{alpha_beta_v, phase_voltages_v};
+use line::{BrakeAction, Line, MAX_NODES};
 use pmsm::{park_v, phase_currents_a, PmsmParams};
 use ripple::RippleTorque;
-use rope::{CAR, CW, DOF, SHEAVE};
+use rope::{CAR, CW, DOF, ROPE_CAR, ROPE_CW, SHEAVE};
 use sensors::Sensors;
 
-/// Size of the plant's state vector: 5 positions, 5 velocities, `i_d`, `i_q`.
+/// Size of the nominal plant's state vector: 5 positions, 5 velocities, `i_d`, `i_q`.
 pub const STATE_LEN: usize = 2 * DOF + 2;
+
+/// Largest state vector, with every degree of freedom the effects add.
+pub const MAX_STATE_LEN: usize = 2 * MAX_NODES + 2;
 
 /// What the controller's outputs do to the plant, held between updates.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -120,7 +134,17 @@ pub struct Plant {
     pub pwm_period_counts: u16,
     /// Injected faults (none in the nominal plant).
     pub faults: PlantFaults,
-    state: [f64; STATE_LEN],
+    /// The effects of the library switched on (none: the nominal plant).
+    /// Set at construction ([`Plant::with_effects`]): the line's layout
+    /// follows from them.
+    effects: Effects,
+    /// The chain as a line of masses and springs.
+    line: Line,
+    /// PWM frequency, Hz (dead time).
+    pub pwm_hz: f64,
+    /// Clamp angle of the elastic brake (`brake_stop`), rad.
+    clamp_angle_rad: f64,
+    state: [f64; MAX_STATE_LEN],
     inputs: PlantInputs,
     v_alpha_beta: (f64, f64),
     phase_v: [f64; 3],
@@ -132,15 +156,38 @@ impl Plant {
     /// The nominal plant of `rig` with a car of `m_car_kg`, at rest at
     /// counterweight-side rope length `lw_start_m`, brake applied, PWM off.
     pub fn new(rig: &RigConfig, m_car_kg: f64, lw_start_m: f64) -> Self {
+        Self::with_effects(rig, m_car_kg, lw_start_m, &Effects::none())
+    }
+
+    /// The plant of `rig` with the library's `effects` switched on, a car of
+    /// `m_car_kg` (kg), at rest at counterweight-side rope length
+    /// `lw_start_m` (m), brake applied, PWM off. With `brake_stop` the
+    /// clamp starts pre-deflected so that it carries the out-of-balance
+    /// torque (the plant starts at rest).
+    pub fn with_effects(rig: &RigConfig, m_car_kg: f64, lw_start_m: f64, effects: &Effects) -> Self {
+        let chain = Chain::new(ChainParams::from_rig(rig, m_car_kg), lw_start_m);
+        let line = Line::new(effects);
+        let clamp_angle_rad = match &effects.brake_stop {
+            Some(b) => {
+                let lever = effects.sheave_eccentricity.map_or(1.0, |e| e.lever_ratio(0.0));
+                let lumped = line.lumped(&chain, 0.0);
+                b.preloaded_clamp_angle_rad(0.0, chain.params.out_of_balance_torque_nm(lumped.lw_m) * lever)
+            }
+            None => 0.0,
+        };
         Self {
-            chain: Chain::new(ChainParams::from_rig(rig, m_car_kg), lw_start_m),
+            chain,
             pmsm: PmsmParams::from_rig(rig),
             ripple: RippleTorque::from_rig(&rig.ripple),
             sensors: Sensors::from_rig(rig),
             dc_bus_v: rig.inverter.dc_bus_v,
             pwm_period_counts: rig.pwm_period_counts(),
             faults: PlantFaults::default(),
-            state: [0.0; STATE_LEN],
+            effects: *effects,
+            line,
+            pwm_hz: rig.inverter.pwm_hz,
+            clamp_angle_rad,
+            state: [0.0; MAX_STATE_LEN],
             inputs: PlantInputs { brake_engaged: true, ..PlantInputs::default() },
             v_alpha_beta: (0.0, 0.0),
             phase_v: [0.0; 3],
@@ -149,14 +196,81 @@ impl Plant {
         }
     }
 
+    /// The effects switched on.
+    pub fn effects(&self) -> &Effects {
+        &self.effects
+    }
+
+    /// The line of masses and springs the chain is simulated as.
+    pub fn line(&self) -> &Line {
+        &self.line
+    }
+
+    /// Number of mechanical coordinates (5 for the nominal chain).
+    pub fn nodes(&self) -> usize {
+        self.line.layout.nodes
+    }
+
+    fn state_len(&self) -> usize {
+        2 * self.nodes() + 2
+    }
+
+    /// Positions (m) and velocities (m/s) of every node of the line, in
+    /// [`line::Layout`] order.
+    pub fn node_state(&self) -> (&[f64], &[f64]) {
+        let n = self.nodes();
+        (&self.state[..n], &self.state[n..2 * n])
+    }
+
+    /// Sets the positions (m) and velocities (m/s) of the line's nodes (for
+    /// tests and initial conditions); extra or missing values are ignored.
+    pub fn set_node_state(&mut self, position_m: &[f64], velocity_mps: &[f64]) {
+        let n = self.nodes();
+        for (slot, v) in self.state[..n].iter_mut().zip(position_m) {
+            *slot = *v;
+        }
+        for (slot, v) in self.state[n..2 * n].iter_mut().zip(velocity_mps) {
+            *slot = *v;
+        }
+    }
+
+    /// Clamp angle of the elastic brake, rad (`brake_stop`; meaningless without it).
+    pub fn clamp_angle_rad(&self) -> f64 {
+        self.clamp_angle_rad
+    }
+
+    /// Mechanical energy, J: [`Line::mechanical_energy_j`] with the clamp's
+    /// when the brake is applied through `brake_stop`.
+    pub fn mechanical_energy_j(&self) -> f64 {
+        let (position, velocity) = self.node_state();
+        let clamp = (self.inputs.brake_engaged && self.effects.brake_stop.is_some()).then_some(self.clamp_angle_rad);
+        self.line.mechanical_energy_j(&self.chain, position, velocity, clamp)
+    }
+
     /// Simulated time, s.
     pub fn time_s(&self) -> f64 {
         self.time_s
     }
 
-    /// Mechanical state.
+    /// Mechanical state in the nominal chain's five coordinates. With
+    /// effects that add coordinates it is a projection: counterweight,
+    /// the middle rope node of each side, the sheave and the car body.
     pub fn chain_state(&self) -> ChainState {
-        split(&self.state).0
+        let layout = &self.line.layout;
+        let n = layout.nodes;
+        let mut chain = ChainState::default();
+        let picks = [
+            (CW, layout.counterweight()),
+            (ROPE_CW, layout.middle_cw_rope()),
+            (SHEAVE, layout.sheave),
+            (ROPE_CAR, layout.middle_car_rope()),
+            (CAR, layout.body),
+        ];
+        for (to, from) in picks {
+            chain.position_m[to] = self.state[from];
+            chain.velocity_mps[to] = self.state[n + from];
+        }
+        chain
     }
 
     /// Inputs now in force.
@@ -167,15 +281,24 @@ impl Plant {
     /// Applies new controller outputs. Switching the PWM off opens every
     /// switch (currents to zero, see [`inverter`]); engaging the brake stops
     /// the sheave.
+    ///
+    /// With `brake_stop` the brake clamps the sheave elastically at the
+    /// angle it has when the brake engages instead of stopping it.
     pub fn set_inputs(&mut self, mut inputs: PlantInputs) {
         inputs.brake_engaged |= self.faults.brake_stuck_closed;
+        let n = self.nodes();
         if !inputs.pwm_enabled {
-            self.state[2 * DOF] = 0.0;
-            self.state[2 * DOF + 1] = 0.0;
+            self.state[2 * n] = 0.0;
+            self.state[2 * n + 1] = 0.0;
             self.short_current_a = 0.0;
         }
         if inputs.brake_engaged && !self.inputs.brake_engaged {
-            self.state[DOF + SHEAVE] = 0.0;
+            let sheave = self.line.layout.sheave;
+            if self.effects.brake_stop.is_some() {
+                self.clamp_angle_rad = self.state[sheave] / self.chain.params.sheave_radius_m;
+            } else {
+                self.state[n + sheave] = 0.0;
+            }
         }
         self.phase_v = phase_voltages_v(inputs.pwm_compare, self.pwm_period_counts, self.dc_bus_v);
         self.v_alpha_beta = alpha_beta_v(self.phase_v);
@@ -189,13 +312,15 @@ impl Plant {
         self.faults.open_phase = phase.map(|p| p.min(2));
         if let Some(p) = self.faults.open_phase {
             let theta_e = self.pmsm.pole_pairs * self.shaft_angle_rad(&self.state);
-            let (id, iq) = (self.state[2 * DOF], self.state[2 * DOF + 1]);
+            let n = self.nodes();
+            let (id, iq) = (self.state[2 * n], self.state[2 * n + 1]);
             let (s, c) = theta_e.sin_cos();
             let (alpha, beta) = (id * c - iq * s, id * s + iq * c);
             let n = open_phase_direction(p);
             let i_n = alpha * n.0 + beta * n.1;
-            self.state[2 * DOF] = i_n * (n.0 * c + n.1 * s);
-            self.state[2 * DOF + 1] = i_n * (-n.0 * s + n.1 * c);
+            let nodes = self.nodes();
+            self.state[2 * nodes] = i_n * (n.0 * c + n.1 * s);
+            self.state[2 * nodes + 1] = i_n * (-n.0 * s + n.1 * c);
         }
     }
 
@@ -204,43 +329,64 @@ impl Plant {
         self.short_current_a
     }
 
-    fn shaft_angle_rad(&self, state: &[f64; STATE_LEN]) -> f64 {
-        state[SHEAVE] / self.chain.params.sheave_radius_m
+    fn shaft_angle_rad(&self, state: &[f64]) -> f64 {
+        state[self.line.layout.sheave] / self.chain.params.sheave_radius_m
     }
 
-    /// Time derivative of the state vector.
-    fn derivative(&self, y: &[f64; STATE_LEN]) -> [f64; STATE_LEN] {
-        let (chain_state, id, iq) = split(y);
+    /// Stationary-frame voltages (V) applied to the machine: the averaged
+    /// inverter's, plus the dead time's error (`dead_time`) for the machine
+    /// currents `(i_d, i_q)` (A) at electrical angle `theta_e` (rad).
+    fn machine_v_alpha_beta(&self, id: f64, iq: f64, theta_e: f64) -> (f64, f64) {
+        match &self.effects.dead_time {
+            None => self.v_alpha_beta,
+            Some(d) => {
+                let errors = d.phase_voltage_errors_v(phase_currents_a(id, iq, theta_e), self.dc_bus_v, self.pwm_hz);
+                let (ea, eb) = alpha_beta_v(errors);
+                (self.v_alpha_beta.0 + ea, self.v_alpha_beta.1 + eb)
+            }
+        }
+    }
+
+    /// Time derivative `dy` of the state vector `y` (the first
+    /// `2 * nodes + 2` entries of each).
+    fn derivative(&self, y: &[f64], dy: &mut [f64]) {
+        let n = self.nodes();
+        let sheave = self.line.layout.sheave;
+        let (id, iq) = (y[2 * n], y[2 * n + 1]);
         let r = self.chain.params.sheave_radius_m;
-        let theta_m = y[SHEAVE] / r;
-        let omega_m = y[DOF + SHEAVE] / r;
+        let theta_m = y[sheave] / r;
+        let omega_m = y[n + sheave] / r;
         let p = self.pmsm.pole_pairs;
         let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
             (false, _) => (0.0, 0.0),
             (true, None) => {
-                let (vd, vq) = park_v(self.v_alpha_beta.0, self.v_alpha_beta.1, p * theta_m);
+                let (va, vb) = self.machine_v_alpha_beta(id, iq, p * theta_m);
+                let (vd, vq) = park_v(va, vb, p * theta_m);
                 self.pmsm.current_derivative(id, iq, vd, vq, p * omega_m)
             }
             (true, Some(phase)) => self.open_phase_current_derivative(phase, id, iq, p * theta_m, p * omega_m),
         };
         let torque = self.pmsm.torque_nm(id, iq) + self.ripple.torque_nm(theta_m);
-        let mut accel = self.chain.acceleration_mps2(&chain_state, torque, self.inputs.brake_engaged);
-        if self.faults.car_extra_force_n != 0.0 {
-            let lw = self.chain.counterweight_side_length_m(&chain_state).clamp(
-                mechanics::MIN_ROPE_LENGTH_M,
-                self.chain.params.rope_total_length_m - mechanics::MIN_ROPE_LENGTH_M,
-            );
-            accel[CAR] += self.faults.car_extra_force_n / self.chain.params.masses_kg(lw)[CAR];
+        let brake = match (self.inputs.brake_engaged, self.effects.brake_stop.is_some()) {
+            (false, _) => BrakeAction::Released,
+            (true, false) => BrakeAction::Held,
+            (true, true) => BrakeAction::Clamped { angle_rad: self.clamp_angle_rad },
+        };
+        dy[..n].copy_from_slice(&y[n..2 * n]);
+        if brake == BrakeAction::Held {
+            dy[sheave] = 0.0;
         }
-        let mut dy = [0.0; STATE_LEN];
-        dy[..DOF].copy_from_slice(&chain_state.velocity_mps);
-        if self.inputs.brake_engaged {
-            dy[SHEAVE] = 0.0;
-        }
-        dy[DOF..2 * DOF].copy_from_slice(&accel);
-        dy[2 * DOF] = did;
-        dy[2 * DOF + 1] = diq;
-        dy
+        self.line.accelerations(
+            &self.chain,
+            &y[..n],
+            &y[n..2 * n],
+            torque,
+            brake,
+            self.faults.car_extra_force_n,
+            &mut dy[n..2 * n],
+        );
+        dy[2 * n] = did;
+        dy[2 * n + 1] = diq;
     }
 
     /// `(d/dt i_d, d/dt i_q)` (A/s) with phase `phase` open: the current is
@@ -253,7 +399,8 @@ impl Plant {
         let i_n = (id * c - iq * s) * n.0 + (id * s + iq * c) * n.1;
         let m = &self.pmsm;
         let l = 0.5 * (m.ld_h + m.lq_h);
-        let v_n = self.v_alpha_beta.0 * n.0 + self.v_alpha_beta.1 * n.1;
+        let v_alpha_beta = self.machine_v_alpha_beta(id, iq, theta_e);
+        let v_n = v_alpha_beta.0 * n.0 + v_alpha_beta.1 * n.1;
         let e_n = omega_e * m.flux_linkage_wb * (-s * n.0 + c * n.1);
         let di_n = (v_n - m.resistance_ohm * i_n - e_n) / l;
         let (dalpha, dbeta) = (di_n * n.0, di_n * n.1);
@@ -261,18 +408,33 @@ impl Plant {
         (dalpha * c + dbeta * s + omega_e * iq, -dalpha * s + dbeta * c - omega_e * id)
     }
 
+    /// Longest RK4 step (s) that keeps `h omega_max <= 1` for the line now
+    /// ([`Line::omega_max_radps`]).
+    pub fn stable_step_s(&self) -> f64 {
+        let clamped = self.inputs.brake_engaged && self.effects.brake_stop.is_some();
+        1.0 / self.line.omega_max_radps(&self.chain, self.state[self.line.layout.sheave], clamped)
+    }
+
     /// Integrates over `duration_s` with the inputs held, in equal classical
-    /// Runge-Kutta (RK4) steps no longer than `max_step_s`; a phase-to-phase
-    /// short's current follows its exact first-order solution.
+    /// Runge-Kutta (RK4) steps no longer than `max_step_s` nor than
+    /// [`Self::stable_step_s`] (so any `max_step_s` is stable); a
+    /// phase-to-phase short's current follows its exact first-order
+    /// solution.
     pub fn advance(&mut self, duration_s: f64, max_step_s: f64) {
         if duration_s <= 0.0 {
             return;
         }
-        let steps = (duration_s / max_step_s).ceil().max(1.0) as usize;
+        // `min` keeps `max_step_s` if the bound is NaN (a diverged state).
+        let step = max_step_s.min(self.stable_step_s());
+        let steps = (duration_s / step).ceil();
+        let steps = if steps.is_nan() { 1 } else { steps.clamp(1.0, 1.0e7) as usize };
         let h = duration_s / steps as f64;
+        let len = self.state_len();
+        let mut state = self.state;
         for _ in 0..steps {
-            self.state = rk4_step(&self.state, h, |y| self.derivative(y));
+            rk4_step_slice(&mut state[..len], h, |y, dy| self.derivative(y, dy));
         }
+        self.state = state;
         if let (Some(short), true) = (self.faults.phase_short, self.inputs.pwm_enabled) {
             let r = short.resistance_ohm.max(1e-6);
             let settled = (self.phase_v[short.from.min(2)] - self.phase_v[short.to.min(2)]) / r;
@@ -282,12 +444,21 @@ impl Plant {
         self.time_s += duration_s;
     }
 
-    /// The sensor readings the drive takes now.
+    /// The sensor readings the drive takes now (with the transducer errors
+    /// of `current_sensor_error` and the encoder's of `encoder_error`).
     pub fn sensor_frame(&self) -> SensorFrame {
         let o = self.observe();
+        let currents = match &self.effects.current_sensor_error {
+            None => o.phase_currents_a,
+            Some(e) => e.measured_a(o.phase_currents_a),
+        };
+        let angle = match &self.effects.encoder_error {
+            None => o.shaft_angle_rad,
+            Some(e) => e.measured_angle_rad(o.shaft_angle_rad),
+        };
         SensorFrame {
-            phase_current_codes: o.phase_currents_a.map(|i| self.sensors.current_code(i)),
-            encoder_count: self.sensors.encoder_count(o.shaft_angle_rad),
+            phase_current_codes: currents.map(|i| self.sensors.current_code(i)),
+            encoder_count: self.sensors.encoder_count(angle),
             dc_bus_code: self.sensors.dc_bus_code(self.dc_bus_v),
             time_us: Sensors::time_us(self.time_s),
         }
@@ -303,22 +474,26 @@ impl Plant {
         machine_a
     }
 
-    /// What the rig's instruments see now.
+    /// What the rig's instruments see now (the car's accelerometer is on
+    /// the car body: the frame's body with `car_frame_mode`).
     pub fn observe(&self) -> PlantObservation {
-        let (chain_state, id, iq) = split(&self.state);
+        let n = self.nodes();
+        let layout = &self.line.layout;
+        let (id, iq) = (self.state[2 * n], self.state[2 * n + 1]);
         let theta_m = self.shaft_angle_rad(&self.state);
-        let dy = self.derivative(&self.state);
+        let mut dy = [0.0; MAX_STATE_LEN];
+        self.derivative(&self.state, &mut dy);
         let r = self.chain.params.sheave_radius_m;
         PlantObservation {
-            car_acceleration_mps2: dy[DOF + CAR],
-            counterweight_acceleration_mps2: -dy[DOF + CW],
+            car_acceleration_mps2: dy[n + layout.body],
+            counterweight_acceleration_mps2: -dy[n + layout.counterweight()],
             phase_currents_a: self.leg_currents_a(phase_currents_a(id, iq, self.pmsm.pole_pairs * theta_m)),
             motor_torque_nm: self.pmsm.torque_nm(id, iq),
             ripple_torque_nm: self.ripple.torque_nm(theta_m),
-            shaft_speed_radps: chain_state.velocity_mps[SHEAVE] / r,
+            shaft_speed_radps: self.state[n + layout.sheave] / r,
             shaft_angle_rad: theta_m,
-            counterweight_side_length_m: self.chain.counterweight_side_length_m(&chain_state),
-            car_position_m: chain_state.position_m[CAR],
+            counterweight_side_length_m: self.line.counterweight_side_length_m(&self.chain, self.state[layout.sheave]),
+            car_position_m: self.state[layout.body],
         }
     }
 }
@@ -334,11 +509,31 @@ fn open_phase_direction(phase: usize) -> (f64, f64) {
     }
 }
 
-fn split(y: &[f64; STATE_LEN]) -> (ChainState, f64, f64) {
-    let mut chain = ChainState::default();
-    chain.position_m.copy_from_slice(&y[..DOF]);
-    chain.velocity_mps.copy_from_slice(&y[DOF..2 * DOF]);
-    (chain, y[2 * DOF], y[2 * DOF + 1])
+/// One classical fourth-order Runge-Kutta step of `y' = f(y)` over `h`,
+/// in place, for a state of at most [`MAX_STATE_LEN`] values; `f(y, dy)`
+/// writes the derivative of `y` into `dy`.
+pub fn rk4_step_slice(y: &mut [f64], h: f64, f: impl Fn(&[f64], &mut [f64])) {
+    let len = y.len();
+    assert!(len <= MAX_STATE_LEN, "state of {len} values: at most {MAX_STATE_LEN}");
+    let (mut k1, mut k2, mut k3, mut k4) =
+        ([0.0; MAX_STATE_LEN], [0.0; MAX_STATE_LEN], [0.0; MAX_STATE_LEN], [0.0; MAX_STATE_LEN]);
+    let mut tmp = [0.0; MAX_STATE_LEN];
+    f(y, &mut k1[..len]);
+    for i in 0..len {
+        tmp[i] = y[i] + h / 2.0 * k1[i];
+    }
+    f(&tmp[..len], &mut k2[..len]);
+    for i in 0..len {
+        tmp[i] = y[i] + h / 2.0 * k2[i];
+    }
+    f(&tmp[..len], &mut k3[..len]);
+    for i in 0..len {
+        tmp[i] = y[i] + h * k3[i];
+    }
+    f(&tmp[..len], &mut k4[..len]);
+    for i in 0..len {
+        y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
 }
 
 /// One classical fourth-order Runge-Kutta step of `y' = f(y)` over `h`.

@@ -8,3 +8,40 @@ pub struct BrakeStop {
     /// Damping of the clamp, N m s/rad.
     pub clamp_damping_nms_per_rad: f64,
 }
+
+impl BrakeStop {
+    /// Torque (N m) of the clamped brake on the sheave at angle `theta_rad`
+    /// (rad) and speed `omega_radps` (rad/s), clamped at `clamp_angle_rad`:
+    /// `-k (theta - theta_clamp) - c omega`.
+    pub fn torque_nm(&self, theta_rad: f64, clamp_angle_rad: f64, omega_radps: f64) -> f64 {
+        -self.clamp_stiffness_nm_per_rad * (theta_rad - clamp_angle_rad) - self.clamp_damping_nms_per_rad * omega_radps
+    }
+
+    /// Clamp angle (rad) at which the clamp holds `holding_torque_nm` (N m)
+    /// with the sheave at `theta_rad` (rad): the plant starts at rest with
+    /// the brake carrying the out-of-balance torque, so its clamp is
+    /// pre-deflected by `tau / k`.
+    pub fn preloaded_clamp_angle_rad(&self, theta_rad: f64, holding_torque_nm: f64) -> f64 {
+        theta_rad + holding_torque_nm / self.clamp_stiffness_nm_per_rad
+    }
+
+    /// Natural frequency (Hz) of a rigid sheave of `inertia_kg_m2` (kg m^2)
+    /// on the clamp alone: `sqrt(k / I) / 2 pi`.
+    pub fn clamp_frequency_hz(&self, inertia_kg_m2: f64) -> f64 {
+        (self.clamp_stiffness_nm_per_rad / inertia_kg_m2).sqrt() / std::f64::consts::TAU
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_clamp_is_a_torsion_spring_and_damper() {
+        let b = BrakeStop { clamp_stiffness_nm_per_rad: 3.0e4, clamp_damping_nms_per_rad: 5.0 };
+        assert!((b.torque_nm(0.001, 0.0, 0.0) + 30.0).abs() < 1e-9);
+        assert!((b.torque_nm(0.0, 0.0, 2.0) + 10.0).abs() < 1e-12);
+        let c = b.preloaded_clamp_angle_rad(0.0, 24.0);
+        assert!((b.torque_nm(0.0, c, 0.0) - 24.0).abs() < 1e-9);
+    }
+}

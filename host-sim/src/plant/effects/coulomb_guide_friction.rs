@@ -8,3 +8,33 @@ pub struct CoulombGuideFriction {
     /// Speed over which the force builds up (tanh law), m/s.
     pub slip_speed_mps: f64,
 }
+
+impl CoulombGuideFriction {
+    /// Friction force (N) on a body moving at `velocity_mps` (m/s, in any
+    /// coordinate; the force is in the same one): `-F tanh(v / v_slip)`.
+    pub fn force_n(&self, velocity_mps: f64) -> f64 {
+        -self.friction_n * (velocity_mps / self.slip_speed_mps).tanh()
+    }
+
+    /// Largest slope `|dF/dv| / m` (1/s) the friction gives a body of
+    /// `mass_kg` (kg): `F / (v_slip m)`, the rate an explicit integrator's
+    /// step must resolve.
+    pub fn stiffness_rate_per_s(&self, mass_kg: f64) -> f64 {
+        self.friction_n / (self.slip_speed_mps * mass_kg)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn friction_opposes_the_motion_and_saturates() {
+        let f = CoulombGuideFriction { friction_n: 20.0, slip_speed_mps: 0.002 };
+        assert!((f.force_n(0.4) + 20.0).abs() < 1e-9);
+        assert!((f.force_n(-0.4) - 20.0).abs() < 1e-9);
+        assert_eq!(f.force_n(0.0), 0.0);
+        assert!((f.force_n(0.001) + 20.0 * 0.5f64.tanh()).abs() < 1e-12);
+        assert!((f.stiffness_rate_per_s(10.0) - 1000.0).abs() < 1e-9);
+    }
+}

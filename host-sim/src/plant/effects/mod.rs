@@ -92,6 +92,7 @@ pub struct ParamSpec {
     pub doc: &'static str,
 }
 
+#[allow(clippy::too_many_arguments)]
 const fn p(
     name: &'static str,
     unit: &'static str,
@@ -508,6 +509,61 @@ impl Effects {
     }
 }
 
+impl Effects {
+    /// The effects of an optional TOML file (`file`, see
+    /// [`Effects::from_toml_str`]) and then of command-line flags (`flags`,
+    /// see [`Effects::apply_flag`]), which override the file's values.
+    /// Errors name the file or flag, the parameter and the accepted range.
+    pub fn from_file_and_flags(file: Option<&std::path::Path>, flags: &[String]) -> Result<Self, EffectError> {
+        let mut effects = match file {
+            None => Effects::none(),
+            Some(path) => {
+                let origin = path.display().to_string();
+                let text = std::fs::read_to_string(path).map_err(|e| EffectError::Syntax {
+                    origin: origin.clone(),
+                    message: format!("cannot read the effects file: {e}"),
+                })?;
+                Effects::from_toml_str(&text, &origin)?
+            }
+        };
+        for flag in flags {
+            effects.apply_flag(flag)?;
+        }
+        Ok(effects)
+    }
+
+    /// The effects on with their values, for reports and recordings:
+    /// `nominal plant (no effect)` or `effects: name(param=value, ...), ...`.
+    pub fn summary(&self) -> String {
+        let on = self.enabled();
+        if on.is_empty() {
+            return "nominal plant (no effect)".to_string();
+        }
+        let parts: Vec<String> = on
+            .iter()
+            .map(|&kind| {
+                let values = self.values(kind).unwrap_or_default();
+                let params: Vec<String> =
+                    kind.parameters().iter().zip(&values).map(|(spec, v)| format!("{}={v}", spec.name)).collect();
+                format!("{}({})", kind.name(), params.join(", "))
+            })
+            .collect();
+        format!("effects: {}", parts.join(", "))
+    }
+
+    /// These effects restricted to those a free decay has
+    /// (`tension_stiffening`, `car_frame_mode`, `coulomb_guide_friction`,
+    /// see `free_decay::simulate_free_decay_with`).
+    pub fn for_free_decay(&self) -> Self {
+        Self {
+            tension_stiffening: self.tension_stiffening,
+            car_frame_mode: self.car_frame_mode,
+            coulomb_guide_friction: self.coulomb_guide_friction,
+            ..Self::none()
+        }
+    }
+}
+
 fn known_kind(name: &str, origin: &str) -> Result<EffectKind, EffectError> {
     EffectKind::from_name(name).ok_or_else(|| EffectError::UnknownEffect {
         origin: origin.to_string(),
@@ -559,5 +615,32 @@ mod tests {
         assert!(err.contains("freq") && err.contains("frequency_hz"), "{err}");
         let err = f.apply_flag("dead_time:dead_time_s=abc").unwrap_err().to_string();
         assert!(err.contains("abc"), "{err}");
+    }
+
+    #[test]
+    fn files_and_flags_combine_and_errors_name_their_origin() {
+        let dir = std::env::temp_dir().join(format!("effects-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("e.toml");
+        std::fs::write(&path, "[brake_stop]\nclamp_stiffness_nm_per_rad = 5e4\n").unwrap();
+        let e = Effects::from_file_and_flags(Some(&path), &["encoder_error:eccentricity_rad=0.001".into()]).unwrap();
+        assert_eq!(e.brake_stop.unwrap().clamp_stiffness_nm_per_rad, 5e4);
+        assert_eq!(e.encoder_error.unwrap().eccentricity_rad, 0.001);
+        let summary = e.summary();
+        assert!(summary.contains("brake_stop(clamp_stiffness_nm_per_rad=50000"), "{summary}");
+        assert!(summary.contains("encoder_error(eccentricity_rad=0.001"), "{summary}");
+        assert_eq!(Effects::none().summary(), "nominal plant (no effect)");
+        let err = Effects::from_file_and_flags(Some(&dir.join("missing.toml")), &[]).unwrap_err().to_string();
+        assert!(err.contains("missing.toml"), "{err}");
+        let err = Effects::from_file_and_flags(None, &["brake_stop:clamp_stiffness_nm_per_rad=-1".into()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("--effect") && err.contains("clamp_stiffness_nm_per_rad") && err.contains("[1000"),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
+        let d = e.for_free_decay();
+        assert!(d.is_nominal());
     }
 }
