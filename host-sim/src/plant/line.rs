@@ -23,7 +23,7 @@
 //! is that of [`super::mechanics::Chain::acceleration_mps2`] operation for
 //! operation, so the plant reproduces it bit for bit.
 
-use super::effects::rope_discretization::{elements_per_side, lumped_side, MAX_ELEMENTS};
+use super::effects::rope_discretization::{element_mass_kg, elements_per_side, spring_n_per_m, MAX_ELEMENTS};
 use super::effects::tension_stiffening::{rope_ea_n, static_tension_n};
 use super::effects::Effects;
 use super::mechanics::{Chain, MIN_ROPE_LENGTH_M};
@@ -172,10 +172,14 @@ impl Line {
             frame_damping_kg_per_s: 0.0,
         };
         // Counterweight side, listed from the counterweight up.
-        let cw_side = lumped_side(lw, n, mu, p.rope_ea_n, p.m_cw_kg, g, stiffening);
         out.masses_kg[0] = p.m_cw_kg;
-        out.masses_kg[1..=n].copy_from_slice(&cw_side.masses_kg[..n]);
-        out.springs_n_per_m[..=n].copy_from_slice(&cw_side.springs_n_per_m[..=n]);
+        let cw_element = element_mass_kg(lw, n, mu);
+        for j in 0..n {
+            out.masses_kg[1 + j] = cw_element;
+        }
+        for j in 0..=n {
+            out.springs_n_per_m[j] = spring_n_per_m(lw, n, j, mu, p.rope_ea_n, p.m_cw_kg, g, stiffening);
+        }
         let r = p.sheave_radius_m;
         out.masses_kg[layout.sheave] = p.sheave_inertia_kg_m2 / (r * r);
         // Car side, from the sheave (or pulley) down.
@@ -189,13 +193,14 @@ impl Line {
             out.masses_kg[node] = pulley.equivalent_mass_kg(mu);
             top = node;
         }
-        let car_side = lumped_side(hanging, n, mu, p.rope_ea_n, p.m_car_kg, g, stiffening);
+        let car_element = element_mass_kg(hanging, n, mu);
         for j in 0..n {
-            // Node top + 1 + j is element n - 1 - j counted from the car.
-            out.masses_kg[top + 1 + j] = car_side.masses_kg[n - 1 - j];
+            out.masses_kg[top + 1 + j] = car_element;
         }
         for j in 0..=n {
-            out.springs_n_per_m[top + j] = car_side.springs_n_per_m[n - j];
+            // Spring top + j is the side's spring n - j counted from the car.
+            out.springs_n_per_m[top + j] =
+                spring_n_per_m(hanging, n, n - j, mu, p.rope_ea_n, p.m_car_kg, g, stiffening);
         }
         match &e.car_frame_mode {
             None => out.masses_kg[layout.hitch] = p.m_car_kg,
@@ -244,17 +249,15 @@ impl Line {
         let k = &lumped.springs_n_per_m;
         let r = p.sheave_radius_m;
         // Spring end positions: the rope at the sheave sits at g(theta).
-        let mut ends = [0.0; MAX_NODES];
-        ends[..nodes].copy_from_slice(&position_m[..nodes]);
         let eccentricity = self.effects.sheave_eccentricity.as_ref();
-        let lever = match eccentricity {
-            None => 1.0,
+        let (sheave_end, lever) = match eccentricity {
+            None => (position_m[sheave], 1.0),
             Some(e) => {
                 let theta = position_m[sheave] / r;
-                ends[sheave] = e.rope_displacement_m(r, theta);
-                e.lever_ratio(theta)
+                (e.rope_displacement_m(r, theta), e.lever_ratio(theta))
             }
         };
+        let ends = |i: usize| if i == sheave { sheave_end } else { position_m[i] };
         let mut torque = shaft_torque_nm;
         if let BrakeAction::Clamped { angle_rad } = brake {
             if let Some(clamp) = &self.effects.brake_stop {
@@ -267,15 +270,15 @@ impl Line {
             let mut elastic = 0.0;
             let mut diagonal = 0.0;
             if i > 0 {
-                elastic += -k[i - 1] * ends[i - 1];
+                elastic += -k[i - 1] * ends(i - 1);
                 diagonal += k[i - 1];
             }
             if i + 1 < nodes {
                 diagonal += k[i];
             }
-            elastic += diagonal * ends[i];
+            elastic += diagonal * ends(i);
             if i + 1 < nodes {
-                elastic += -k[i] * ends[i + 1];
+                elastic += -k[i] * ends(i + 1);
             }
             let force = if i == sheave {
                 if eccentricity.is_some() {

@@ -431,8 +431,9 @@ impl Plant {
         let h = duration_s / steps as f64;
         let len = self.state_len();
         let mut state = self.state;
+        let mut scratch = Rk4Scratch::new();
         for _ in 0..steps {
-            rk4_step_slice(&mut state[..len], h, |y, dy| self.derivative(y, dy));
+            scratch.step(&mut state[..len], h, |y, dy| self.derivative(y, dy));
         }
         self.state = state;
         if let (Some(short), true) = (self.faults.phase_short, self.inputs.pwm_enabled) {
@@ -513,26 +514,41 @@ fn open_phase_direction(phase: usize) -> (f64, f64) {
 /// in place, for a state of at most [`MAX_STATE_LEN`] values; `f(y, dy)`
 /// writes the derivative of `y` into `dy`.
 pub fn rk4_step_slice(y: &mut [f64], h: f64, f: impl Fn(&[f64], &mut [f64])) {
-    let len = y.len();
-    assert!(len <= MAX_STATE_LEN, "state of {len} values: at most {MAX_STATE_LEN}");
-    let (mut k1, mut k2, mut k3, mut k4) =
-        ([0.0; MAX_STATE_LEN], [0.0; MAX_STATE_LEN], [0.0; MAX_STATE_LEN], [0.0; MAX_STATE_LEN]);
-    let mut tmp = [0.0; MAX_STATE_LEN];
-    f(y, &mut k1[..len]);
-    for i in 0..len {
-        tmp[i] = y[i] + h / 2.0 * k1[i];
+    Rk4Scratch::new().step(y, h, f);
+}
+
+/// Work space of [`rk4_step_slice`], reused over many steps.
+struct Rk4Scratch {
+    k: [[f64; MAX_STATE_LEN]; 4],
+    tmp: [f64; MAX_STATE_LEN],
+}
+
+impl Rk4Scratch {
+    fn new() -> Self {
+        Self { k: [[0.0; MAX_STATE_LEN]; 4], tmp: [0.0; MAX_STATE_LEN] }
     }
-    f(&tmp[..len], &mut k2[..len]);
-    for i in 0..len {
-        tmp[i] = y[i] + h / 2.0 * k2[i];
-    }
-    f(&tmp[..len], &mut k3[..len]);
-    for i in 0..len {
-        tmp[i] = y[i] + h * k3[i];
-    }
-    f(&tmp[..len], &mut k4[..len]);
-    for i in 0..len {
-        y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+
+    fn step(&mut self, y: &mut [f64], h: f64, f: impl Fn(&[f64], &mut [f64])) {
+        let len = y.len();
+        assert!(len <= MAX_STATE_LEN, "state of {len} values: at most {MAX_STATE_LEN}");
+        let [k1, k2, k3, k4] = &mut self.k;
+        let tmp = &mut self.tmp;
+        f(y, &mut k1[..len]);
+        for i in 0..len {
+            tmp[i] = y[i] + h / 2.0 * k1[i];
+        }
+        f(&tmp[..len], &mut k2[..len]);
+        for i in 0..len {
+            tmp[i] = y[i] + h / 2.0 * k2[i];
+        }
+        f(&tmp[..len], &mut k3[..len]);
+        for i in 0..len {
+            tmp[i] = y[i] + h * k3[i];
+        }
+        f(&tmp[..len], &mut k4[..len]);
+        for i in 0..len {
+            y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
     }
 }
 

@@ -76,24 +76,51 @@ pub fn lumped_side(
     stiffening: Option<&TensionStiffening>,
 ) -> LumpedSide {
     let n = elements.clamp(1, MAX_ELEMENTS);
-    let nf = n as f64;
     let mut side = LumpedSide { elements: n, masses_kg: [0.0; MAX_ELEMENTS], springs_n_per_m: [0.0; MAX_ELEMENTS + 1] };
-    for m in side.masses_kg.iter_mut().take(n) {
-        *m = mu_kg_per_m * length_m / nf;
+    for j in 0..n {
+        side.masses_kg[j] = element_mass_kg(length_m, n, mu_kg_per_m);
     }
     for j in 0..=n {
-        let ea = match stiffening {
-            None => ea0_n,
-            Some(_) => {
-                let below = spring_midpoint_from_end_m(length_m, n, j);
-                rope_ea_n(stiffening, ea0_n, static_tension_n(end_mass_kg, mu_kg_per_m, below, gravity_mps2))
-            }
-        };
-        // End springs cover half an element: 2 N EA / l; inner ones N EA / l.
-        let factor = if j == 0 || j == n { 2.0 * nf } else { nf };
-        side.springs_n_per_m[j] = factor * ea / length_m;
+        side.springs_n_per_m[j] =
+            spring_n_per_m(length_m, n, j, mu_kg_per_m, ea0_n, end_mass_kg, gravity_mps2, stiffening);
     }
     side
+}
+
+/// Mass of one of the `elements` elements of a side of `length_m` (m) of
+/// rope of `mu_kg_per_m` (kg/m), kg: `mu l / N`.
+#[inline]
+pub fn element_mass_kg(length_m: f64, elements: usize, mu_kg_per_m: f64) -> f64 {
+    mu_kg_per_m * length_m / elements as f64
+}
+
+/// Stiffness (N/m) of spring `j` (0 at the hanging end, `elements` at the
+/// sheave) of a side as in [`lumped_side`]: `2 N EA / l` at the ends,
+/// `N EA / l` between elements, EA at the spring's static tension with
+/// `stiffening`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub fn spring_n_per_m(
+    length_m: f64,
+    elements: usize,
+    j: usize,
+    mu_kg_per_m: f64,
+    ea0_n: f64,
+    end_mass_kg: f64,
+    gravity_mps2: f64,
+    stiffening: Option<&TensionStiffening>,
+) -> f64 {
+    let nf = elements as f64;
+    let ea = match stiffening {
+        None => ea0_n,
+        Some(_) => {
+            let below = spring_midpoint_from_end_m(length_m, elements, j);
+            rope_ea_n(stiffening, ea0_n, static_tension_n(end_mass_kg, mu_kg_per_m, below, gravity_mps2))
+        }
+    };
+    // End springs cover half an element: 2 N EA / l; inner ones N EA / l.
+    let factor = if j == 0 || j == elements { 2.0 * nf } else { nf };
+    factor * ea / length_m
 }
 
 #[cfg(test)]
