@@ -14,7 +14,9 @@ impl TensionStiffening {
     /// tension `tension_n` (N), `ea0_n` (N) the rig's configured EA. A
     /// tension at or below zero (a slack rope) is taken as the smallest
     /// positive tension, so the result is finite and never NaN; `alpha = 0`
-    /// returns `ea0_n` exactly.
+    /// returns `ea0_n` exactly. (Never inlined: LLVM would otherwise
+    /// speculate the `powf` into the nominal plant's path.)
+    #[inline(never)]
     pub fn ea_n(&self, ea0_n: f64, tension_n: f64) -> f64 {
         let ratio = tension_n.max(f64::MIN_POSITIVE) / self.reference_tension_n;
         ea0_n * ratio.powf(self.alpha)
