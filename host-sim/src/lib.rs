@@ -12,11 +12,13 @@ pub mod analysis;
 pub mod cli;
 pub mod closed_loop;
 pub mod compensation;
+pub mod diagnosis;
 pub mod faults;
 pub mod pil;
 pub mod plant;
 pub mod plots;
 pub mod recording;
+pub mod synthetic;
 
 /// The rig description (re-exported from `rig-config`).
 pub use rig_config as config;

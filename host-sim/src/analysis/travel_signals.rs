@@ -75,40 +75,6 @@ pub fn electrical_offset_rad(
     Ok(sy.atan2(sx))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::plant::pmsm::phase_currents_a;
-
-    #[test]
-    fn offset_of_q_axis_currents_is_found() {
-        for offset in [0.0, 0.4, -1.2] {
-            let (mut a, mut b, mut c, mut theta) = (vec![], vec![], vec![], vec![]);
-            for k in 0..5000 {
-                let t = k as f64 * 1e-3;
-                let iq = if k < 2500 { 12.0 } else { -7.0 };
-                let th = 6.15 * t;
-                let abc = phase_currents_a(0.0, iq, 6.0 * th + offset);
-                a.push(abc[0]);
-                b.push(abc[1]);
-                c.push(abc[2]);
-                theta.push(th);
-            }
-            let got = electrical_offset_rad(&a, &b, &c, &theta, 6).unwrap();
-            assert!((got - offset).abs() < 1e-9, "{got} vs {offset}");
-        }
-    }
-
-    #[test]
-    fn angle_from_speed_and_rope_length() {
-        let speed = vec![2.0; 1001];
-        let theta = shaft_angle_rad(None, &speed, 1000.0);
-        assert!((theta[1000] - 2.0).abs() < 1e-12);
-        let lw = counterweight_side_length_m(&theta, 1.0, 0.065);
-        assert!((lw[1000] - 1.13).abs() < 1e-12);
-    }
-}
-
 /// The machine torque of a travel recording (paper 3.3) and the signals it
 /// rests on, as `analyze` and `identify` both use them.
 pub struct TravelTorque {
@@ -161,4 +127,38 @@ pub fn travel_torque(
         electrical_offset_rad: offset,
         torque_nm: torque,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plant::pmsm::phase_currents_a;
+
+    #[test]
+    fn offset_of_q_axis_currents_is_found() {
+        for offset in [0.0, 0.4, -1.2] {
+            let (mut a, mut b, mut c, mut theta) = (vec![], vec![], vec![], vec![]);
+            for k in 0..5000 {
+                let t = k as f64 * 1e-3;
+                let iq = if k < 2500 { 12.0 } else { -7.0 };
+                let th = 6.15 * t;
+                let abc = phase_currents_a(0.0, iq, 6.0 * th + offset);
+                a.push(abc[0]);
+                b.push(abc[1]);
+                c.push(abc[2]);
+                theta.push(th);
+            }
+            let got = electrical_offset_rad(&a, &b, &c, &theta, 6).unwrap();
+            assert!((got - offset).abs() < 1e-9, "{got} vs {offset}");
+        }
+    }
+
+    #[test]
+    fn angle_from_speed_and_rope_length() {
+        let speed = vec![2.0; 1001];
+        let theta = shaft_angle_rad(None, &speed, 1000.0);
+        assert!((theta[1000] - 2.0).abs() < 1e-12);
+        let lw = counterweight_side_length_m(&theta, 1.0, 0.065);
+        assert!((lw[1000] - 1.13).abs() < 1e-12);
+    }
 }

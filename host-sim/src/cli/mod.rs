@@ -3,8 +3,10 @@
 pub mod analyze;
 pub mod bench;
 pub mod compare;
+pub mod dataset;
 pub mod decay;
 pub mod faults;
+pub mod gap;
 pub mod identify;
 pub mod modes;
 pub mod pil;
@@ -68,6 +70,13 @@ pub enum Command {
     /// travels and model mismatches: ride quality, car vibration at 12, 36
     /// and 72 x f_mech, peak current, learning time.
     Compare(compare::CompareArgs),
+    /// Rig-like recordings made by the full plant: travels and free decays
+    /// with effects of the library on and sensor noise.
+    Dataset(dataset::DatasetArgs),
+    /// The sim-to-real gap diagnosis of a dataset: calibration, where the
+    /// gap lies, which effect of the library explains it (cross-validated),
+    /// verdict; gap.json, gap.md and plots.
+    Gap(gap::GapArgs),
 }
 
 /// Runs a parsed command line.
@@ -84,6 +93,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pil(args) => pil::run(&rig, &args),
         Command::Faults(args) => faults::run(&rig, &args),
         Command::Compare(args) => compare::run(&rig, &args),
+        Command::Dataset(args) => dataset::run(&rig, &args),
+        Command::Gap(args) => gap::run(&rig, &args),
     }
 }
 

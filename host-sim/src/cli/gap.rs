@@ -1,0 +1,143 @@
+//! `host-sim gap DATASET --out DIR`: the sim-to-real gap diagnosis.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::create_out_dir;
+use crate::analysis::{decimate, stft_spectrogram};
+use crate::config::RigConfig;
+use crate::diagnosis::signals::decimation_factor;
+use crate::diagnosis::simulate::simulate_recording;
+use crate::diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
+use crate::plant::effects::{EffectKind, Effects};
+use crate::plots::spectrogram_plot;
+use crate::recording::{read_dataset, ACC_CAR};
+
+/// Arguments of `gap`.
+#[derive(Debug, Args)]
+pub struct GapArgs {
+    /// The dataset: a directory of recordings in the measurement format.
+    pub dataset: PathBuf,
+    /// Output directory for gap.json, gap.md, CSV tables and plots.
+    #[arg(long, value_name = "DIR", default_value = "out/gap")]
+    pub out: PathBuf,
+    /// Effects to try, comma separated (default: the whole library).
+    #[arg(long = "effects", value_name = "NAMES", value_delimiter = ',')]
+    pub effects: Vec<String>,
+    /// Largest mean excess gap (dB) of the calibrated nominal model still
+    /// called `nominal`.
+    #[arg(long, value_name = "DB", default_value_t = crate::diagnosis::NOMINAL_EXCESS_DB)]
+    pub nominal_excess_db: f64,
+    /// Smallest held-out shrink of the gap (0-1) for `explained`.
+    #[arg(long, value_name = "FRACTION", default_value_t = crate::diagnosis::EXPLAINED_SHRINK)]
+    pub explained_shrink: f64,
+}
+
+/// Runs `gap`.
+pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
+    super::check_open_range("--nominal-excess-db", args.nominal_excess_db, 0.0, 100.0)?;
+    super::check_open_range("--explained-shrink", args.explained_shrink, 0.0, 1.0)?;
+    let effects = if args.effects.is_empty() {
+        EffectKind::ALL.to_vec()
+    } else {
+        args.effects
+            .iter()
+            .map(|n| {
+                EffectKind::from_name(n.trim()).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--effects: unknown effect `{n}`; the library has: {}",
+                        EffectKind::ALL.map(EffectKind::name).join(", ")
+                    )
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?
+    };
+    let dataset = read_dataset(&args.dataset, rig.mechanics.rope_total_length_m)?;
+    create_out_dir(&args.out)?;
+    let bar = ProgressBar::new(1);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:24} [{elapsed_precise}] {wide_bar} {pos}/{len} runs")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let progress = |step: &str, done: usize, total: usize| {
+        bar.set_message(step.to_string());
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let options =
+        GapOptions { effects, nominal_excess_db: args.nominal_excess_db, explained_shrink: args.explained_shrink };
+    let name = args.dataset.display().to_string();
+    let report = diagnose(rig, &name, &dataset, &options, &progress)?;
+    bar.finish_and_clear();
+
+    // Spectrograms of the car acceleration, data and model side by side, for
+    // the recording with the largest nominal gap.
+    let mut plots = Vec::new();
+    if let Some(worst) = report.recordings.iter().max_by(|a, b| a.nominal_excess_db.total_cmp(&b.nominal_excess_db)) {
+        if let Some((stem, recording)) = dataset.iter().find(|(s, _)| *s == worst.recording) {
+            let factor = decimation_factor(recording.meta.sample_rate_hz);
+            let rate = recording.meta.sample_rate_hz / factor as f64;
+            let mut model_rig = rig.clone();
+            model_rig.mechanics.rope_ea_n = report.calibration.rope_ea_n;
+            model_rig.mechanics.c_car_kg_per_s = report.calibration.guide_damping_kg_per_s;
+            model_rig.mechanics.c_cw_kg_per_s = report.calibration.guide_damping_kg_per_s;
+            model_rig.mechanics.c_sheave_nms_per_rad = report.calibration.sheave_damping_nms_per_rad;
+            let explaining = report.ranking.first().filter(|_| report.verdict == Verdict::Explained).map(|c| c.effects);
+            let mut series = vec![("data".to_string(), recording.column(ACC_CAR).map(|c| c.values.clone()), factor)];
+            for (label, effects) in
+                [("nominal model".to_string(), Some(Effects::none())), ("explaining model".to_string(), explaining)]
+            {
+                if let Some(effects) = effects {
+                    let sim = simulate_recording(&model_rig, &effects, recording, stem, rate)?;
+                    series.push((label, sim.column(ACC_CAR).map(|c| c.values.clone()), 1));
+                }
+            }
+            for (label, values, f) in series {
+                let Some(values) = values else { continue };
+                let values = if f > 1 { decimate(&values, f)? } else { values };
+                let spectrogram = stft_spectrogram(&values, rate, 0.5, 0.75, 400.0)?;
+                let file = format!("spectrogram_{}.png", label.replace(' ', "_"));
+                spectrogram_plot(
+                    &args.out.join(&file),
+                    &format!("car acceleration, {stem}: {label} (dB re 1 (m/s^2)^2/Hz)"),
+                    &spectrogram,
+                    &[],
+                    None,
+                )?;
+                plots.push((format!("car acceleration spectrogram of `{stem}`, {label}"), file));
+            }
+        }
+    }
+    let written = write_report(&args.out, &report, &plots)?;
+    println!(
+        "verdict: {:?}{}",
+        report.verdict,
+        report.explained_by.as_ref().map_or(String::new(), |e| format!(" by {e}"))
+    );
+    println!(
+        "nominal excess gap {:.2} dB (noise {:.2} dB); located in {:?}, {}, {}, {:.1}-{:.1} Hz",
+        report.nominal_excess_db,
+        report.noise_gap_db,
+        report.location.subsystem,
+        report.location.channel.name(),
+        report.location.phase.name(),
+        report.location.band_hz.0,
+        report.location.band_hz.1
+    );
+    for c in report.ranking.iter().take(5) {
+        println!(
+            "  {:<48} held-out {:.2} -> {:.2} dB ({:+.0} %)",
+            c.name,
+            c.held_out_gap_before_db,
+            c.held_out_gap_after_db,
+            -100.0 * c.held_out_shrink
+        );
+    }
+    println!("{} simulations in {:.1} s", report.simulations, report.runtime_s);
+    for p in written {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}

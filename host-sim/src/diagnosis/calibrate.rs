@@ -1,0 +1,139 @@
+//! Step 1 of the diagnosis: the parameters the paper itself treats as
+//! uncertain are identified from the data with the paper's procedures, so
+//! that a parameter error is not taken for a missing effect: `EA` from the
+//! free decays' first frequency (Eqn 9), guide damping from their
+//! logarithmic decrement (Eqn 11-12), the sheave's damping from the torque
+//! balance of the constant-speed stage (Eqn 13 with Eqn 4).
+
+use crate::analysis::identify::{identify_free_decay, sheave_damping_from_torque_balance};
+use crate::analysis::travel_signals::{counterweight_side_length_m, travel_torque};
+use crate::config::RigConfig;
+use crate::plant::ChainParams;
+use crate::recording::{Recording, RecordingKind, ACC_CAR};
+
+/// Highest frequency searched for a decay's first mode, Hz.
+pub const DECAY_MAX_FREQUENCY_HZ: f64 = 100.0;
+
+/// What one free decay gave.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DecayCalibration {
+    /// Recording.
+    pub recording: String,
+    /// Hanging mass, kg.
+    pub mass_kg: f64,
+    /// Static tension at the mass, N.
+    pub tension_n: f64,
+    /// First natural frequency measured, Hz.
+    pub first_frequency_hz: f64,
+    /// `EA` from Eqn 9, N.
+    pub rope_ea_n: f64,
+    /// Damping ratio (Eqn 11).
+    pub damping_ratio: f64,
+    /// Guide damping (Eqn 12), kg/s.
+    pub guide_damping_kg_per_s: f64,
+}
+
+/// The calibrated parameters and where they come from.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Calibration {
+    /// Rope `EA` used, N (mean over the decays, or the rig's).
+    pub rope_ea_n: f64,
+    /// Guide damping of car and counterweight used, kg/s.
+    pub guide_damping_kg_per_s: f64,
+    /// Sheave rotational damping used, N m s/rad.
+    pub sheave_damping_nms_per_rad: f64,
+    /// Geometric mean of the decays' tensions, N: the tension at which the
+    /// calibrated `EA` holds (`tension_stiffening`'s reference).
+    pub reference_tension_n: Option<f64>,
+    /// Per free decay.
+    pub decays: Vec<DecayCalibration>,
+    /// Sheave damping per travel, N m s/rad.
+    pub travels: Vec<(String, f64)>,
+    /// Recordings that could not be used, with the reason.
+    pub skipped: Vec<String>,
+    /// The rig's values before calibration: EA (N), guide damping (kg/s), sheave damping (N m s/rad).
+    pub nominal: (f64, f64, f64),
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// Calibrates `rig` on `dataset`; returns the calibrated rig and the record.
+pub fn calibrate(rig: &RigConfig, dataset: &[(String, Recording)]) -> (RigConfig, Calibration) {
+    let m = &rig.mechanics;
+    let mut decays = Vec::new();
+    let mut skipped = Vec::new();
+    for (stem, recording) in dataset {
+        if let RecordingKind::FreeDecay { mass_kg, rope_length_m } = recording.meta.kind {
+            let Some(acc) = recording.column(ACC_CAR) else {
+                skipped.push(format!("{stem}: no {ACC_CAR}"));
+                continue;
+            };
+            match identify_free_decay(
+                &acc.values,
+                recording.meta.sample_rate_hz,
+                mass_kg,
+                rope_length_m,
+                m.rope_mass_per_length_kg_per_m,
+                m.gravity_mps2,
+                DECAY_MAX_FREQUENCY_HZ,
+            ) {
+                Ok(id) => decays.push(DecayCalibration {
+                    recording: stem.clone(),
+                    mass_kg,
+                    tension_n: id.tension_n,
+                    first_frequency_hz: id.first_frequency_hz,
+                    rope_ea_n: id.rope_ea_n,
+                    damping_ratio: id.damping_ratio,
+                    guide_damping_kg_per_s: id.damping_kg_per_s,
+                }),
+                Err(e) => skipped.push(format!("{stem}: {e}")),
+            }
+        }
+    }
+    let rope_ea_n = mean(decays.iter().map(|d| d.rope_ea_n)).unwrap_or(m.rope_ea_n);
+    let guide =
+        mean(decays.iter().map(|d| d.guide_damping_kg_per_s)).unwrap_or(0.5 * (m.c_cw_kg_per_s + m.c_car_kg_per_s));
+    let reference_tension_n = (!decays.is_empty())
+        .then(|| (decays.iter().map(|d| d.tension_n.ln()).sum::<f64>() / decays.len() as f64).exp());
+
+    let mut travels = Vec::new();
+    for (stem, recording) in dataset {
+        if let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind {
+            let result = travel_torque(rig, recording, stem).and_then(|t| {
+                let stage = t.constant_speed.clone();
+                let lw = counterweight_side_length_m(&t.shaft_angle_rad, lw_start_m, m.sheave_radius_m);
+                let n = stage.len() as f64;
+                let mut chain = ChainParams::from_rig(rig, m_car_kg);
+                chain.m_cw_kg = m_cw_kg;
+                let torque = t.torque_nm[stage.clone()].iter().sum::<f64>() / n;
+                let speed = t.speed_radps[stage.clone()].iter().sum::<f64>() / n;
+                let oob = lw[stage].iter().map(|&l| chain.out_of_balance_torque_nm(l)).sum::<f64>() / n;
+                Ok(sheave_damping_from_torque_balance(torque, speed, oob, 2.0 * guide, m.sheave_radius_m)?)
+            });
+            match result {
+                Ok(c) => travels.push((stem.clone(), c)),
+                Err(e) => skipped.push(format!("{stem}: {e:#}")),
+            }
+        }
+    }
+    let sheave = mean(travels.iter().map(|(_, c)| *c)).map_or(m.c_sheave_nms_per_rad, |c| c.max(0.0));
+    let mut calibrated = rig.clone();
+    calibrated.mechanics.rope_ea_n = rope_ea_n;
+    calibrated.mechanics.c_cw_kg_per_s = guide;
+    calibrated.mechanics.c_car_kg_per_s = guide;
+    calibrated.mechanics.c_sheave_nms_per_rad = sheave;
+    let calibration = Calibration {
+        rope_ea_n,
+        guide_damping_kg_per_s: guide,
+        sheave_damping_nms_per_rad: sheave,
+        reference_tension_n,
+        decays,
+        travels,
+        skipped,
+        nominal: (m.rope_ea_n, 0.5 * (m.c_cw_kg_per_s + m.c_car_kg_per_s), m.c_sheave_nms_per_rad),
+    };
+    (calibrated, calibration)
+}

@@ -1,0 +1,144 @@
+//! The gap measure: how far a simulation's spectra lie from a recording's,
+//! without asking the phase of a vibration to match.
+//!
+//! For every cell (channel, travel phase, third-octave band) present in
+//! both, `d = 10 log10(P_measured / (P_simulated + N))` in dB, with `N` the
+//! measured channel's noise density (the simulation has no sensor noise).
+//! The gap of a recording is the RMS of `d` over its cells, every channel
+//! weighted alike, in dB. A perfect model still leaves the scatter of the
+//! measured estimate: a cell averaging `K` bins and segments with signal
+//! power `S` and noise `N` has a log standard deviation of about
+//! `4.34 / sqrt(K) * sqrt(N (2 S + N)) / (S + N)` dB; the RMS of that over
+//! the cells is the noise gap, and the excess gap `sqrt(gap^2 - noise^2)`
+//! (dB) is what a model can still explain. Reports give all three.
+
+use super::signals::{Channel, Phase};
+use super::spectra::CellPowers;
+
+/// Dynamic range of the comparison: a floor this far below the channel's
+/// strongest measured cell (-60 dB) is added to both sides of every cell,
+/// so that content a data-acquisition system would not resolve (and
+/// integration details of the model far below the signal) does not count.
+const FLOOR: f64 = 1e-6;
+
+/// One cell's comparison.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CellGap {
+    /// Channel.
+    pub channel: Channel,
+    /// Travel phase.
+    pub phase: Phase,
+    /// Band index.
+    pub band: usize,
+    /// Measured density, unit^2/Hz.
+    pub measured: f64,
+    /// Simulated density plus the measured noise density, unit^2/Hz.
+    pub simulated: f64,
+    /// `10 log10(measured / simulated)`, dB.
+    pub d_db: f64,
+    /// Expected scatter of `d` from the measurement's own noise, dB.
+    pub noise_db: f64,
+}
+
+/// The gap of one recording.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct GapValue {
+    /// RMS of `d` over the cells, dB.
+    pub gap_db: f64,
+    /// RMS of the expected scatter from noise, dB.
+    pub noise_db: f64,
+}
+
+impl GapValue {
+    /// The gap beyond the noise, `sqrt(max(gap^2 - noise^2, 0))`, dB.
+    pub fn excess_db(&self) -> f64 {
+        (self.gap_db * self.gap_db - self.noise_db * self.noise_db).max(0.0).sqrt()
+    }
+}
+
+fn cell(measured: f64, averages: f64, simulated: f64, noise: f64, floor: f64) -> (f64, f64) {
+    let sim = simulated + noise;
+    let d = 10.0 * ((measured + floor) / (sim + floor)).log10();
+    let s = (measured - noise).max(0.0);
+    let effective = if averages > 1.0 { 0.6 * averages } else { 1.0 };
+    let sigma = 4.34 / effective.sqrt() * (noise * (2.0 * s + noise)).sqrt() / (s + noise + floor);
+    (d, sigma)
+}
+
+fn channel_floors(measured: &CellPowers) -> Vec<(Channel, f64)> {
+    let mut out: Vec<(Channel, f64)> = Vec::new();
+    for ((channel, _, _), (p, _)) in &measured.cells {
+        match out.iter_mut().find(|(c, _)| c == channel) {
+            Some(e) => e.1 = e.1.max(*p),
+            None => out.push((*channel, *p)),
+        }
+    }
+    out.into_iter().map(|(c, max)| (c, FLOOR * max + 1e-30)).collect()
+}
+
+/// Every cell's comparison between `measured` (with its noise densities in
+/// `noise`) and `simulated`.
+pub fn cell_gaps(measured: &CellPowers, noise: &[(Channel, f64)], simulated: &CellPowers) -> Vec<CellGap> {
+    let floors = channel_floors(measured);
+    let mut out = Vec::new();
+    for ((channel, phase, band), (p, k)) in &measured.cells {
+        let Some((q, _)) = simulated.get((*channel, *phase, *band)) else { continue };
+        let floor = floors.iter().find(|(c, _)| c == channel).map_or(1e-30, |(_, f)| *f);
+        let n = noise.iter().find(|(c, _)| c == channel).map_or(0.0, |(_, n)| *n);
+        let (d, sigma) = cell(*p, *k, q, n, floor);
+        out.push(CellGap {
+            channel: *channel,
+            phase: *phase,
+            band: *band,
+            measured: *p,
+            simulated: q + n,
+            d_db: d,
+            noise_db: sigma,
+        });
+    }
+    out
+}
+
+/// The gap over `cells`, every channel weighted alike.
+pub fn gap_of_cells<'a>(cells: impl Iterator<Item = &'a CellGap>) -> GapValue {
+    let mut per: Vec<(Channel, f64, f64, usize)> = Vec::new();
+    for c in cells {
+        match per.iter_mut().find(|(ch, ..)| *ch == c.channel) {
+            Some(e) => {
+                e.1 += c.d_db * c.d_db;
+                e.2 += c.noise_db * c.noise_db;
+                e.3 += 1;
+            }
+            None => per.push((c.channel, c.d_db * c.d_db, c.noise_db * c.noise_db, 1)),
+        }
+    }
+    if per.is_empty() {
+        return GapValue::default();
+    }
+    let m = per.len() as f64;
+    GapValue {
+        gap_db: (per.iter().map(|(_, d, _, n)| d / *n as f64).sum::<f64>() / m).sqrt(),
+        noise_db: (per.iter().map(|(_, _, s, n)| s / *n as f64).sum::<f64>() / m).sqrt(),
+    }
+}
+
+/// The gap between `measured` and `simulated` (see the module docs).
+pub fn gap(measured: &CellPowers, noise: &[(Channel, f64)], simulated: &CellPowers) -> GapValue {
+    gap_of_cells(cell_gaps(measured, noise, simulated).iter())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cell_of_pure_noise_scatters_by_the_chi_square_law() {
+        // Signal-free cell: sigma = 4.34 / sqrt(0.6 K).
+        let (d, s) = cell(1.0, 100.0, 0.0, 1.0, 1e-30);
+        assert!(d.abs() < 1e-9);
+        assert!((s - 4.34 / 60f64.sqrt()).abs() < 1e-9, "{s}");
+        // Signal far above the noise: no scatter, d is the level ratio.
+        let (d, s) = cell(1000.0, 100.0, 100.0, 0.0, 1e-30);
+        assert!((d - 10.0).abs() < 1e-9 && s == 0.0);
+    }
+}

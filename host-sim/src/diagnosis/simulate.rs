@@ -1,0 +1,112 @@
+//! The model's counterpart of a recording: the same travel in closed loop
+//! (the project's controller on the plant with the given effects), or the
+//! same free decay, sampled at the analysis rate.
+
+use anyhow::Context;
+use shared::config::Direction;
+
+use super::signals::{chain_signals, decimation_factor, ChainSignals};
+use crate::closed_loop::{simulate_travel, SimOptions, TravelSpec};
+use crate::config::RigConfig;
+use crate::plant::effects::Effects;
+use crate::plant::free_decay::{simulate_free_decay_with, FreeDecaySpec};
+use crate::recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
+
+/// Rope elements of the decay model (a continuous rope for Eqn 9).
+pub const DECAY_ROPE_ELEMENTS: usize = 40;
+
+/// Simulates the counterpart of `measured` (named `stem`) on `rig` with
+/// `effects` as chain signals: sampled at the control rate (synchronous with
+/// the PWM updates, so the averaged inverter's steps do not alias), then
+/// decimated to the analysis rate like the data.
+pub fn simulate_counterpart(
+    rig: &RigConfig,
+    effects: &Effects,
+    measured: &Recording,
+    stem: &str,
+) -> anyhow::Result<ChainSignals> {
+    let rate = model_sample_rate_hz(rig);
+    let recording = simulate_recording(rig, effects, measured, stem, rate)?;
+    chain_signals(rig, &recording, stem, decimation_factor(rate), false)
+}
+
+/// Sample rate of the model's runs, Hz: the rig's control rate.
+pub fn model_sample_rate_hz(rig: &RigConfig) -> f64 {
+    rig.control.current_loop_hz
+}
+
+/// As [`simulate_counterpart`], the recording itself.
+pub fn simulate_recording(
+    rig: &RigConfig,
+    effects: &Effects,
+    measured: &Recording,
+    stem: &str,
+    sample_rate_hz: f64,
+) -> anyhow::Result<Recording> {
+    match measured.meta.kind {
+        RecordingKind::Travel { m_car_kg, m_cw_kg, direction, lw_start_m, lw_end_m } => {
+            let mut rig = rig.clone();
+            rig.mechanics.m_cw_kg = m_cw_kg;
+            let spec = TravelSpec {
+                m_car_kg,
+                direction: match direction {
+                    CarDirection::Up => Direction::Up,
+                    CarDirection::Down => Direction::Down,
+                },
+                lw_start_m,
+                lw_end_m,
+            };
+            let options = SimOptions {
+                max_step_s: 1.0 / rig.control.current_loop_hz,
+                sample_rate_hz,
+                effects: *effects,
+                ..SimOptions::for_rig(&rig)
+            };
+            let run = simulate_travel(&rig, &spec, &options, None)
+                .with_context(|| format!("`{stem}`: simulating the travel with {}", describe(effects)))?;
+            Ok(run.to_recording(&spec, m_cw_kg, format!("model of {stem}")))
+        }
+        RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
+            let acc = measured.column(ACC_CAR).with_context(|| format!("`{stem}`: no {ACC_CAR}"))?;
+            let duration_s = acc.values.len() as f64 / measured.meta.sample_rate_hz;
+            let m = &rig.mechanics;
+            let spec = FreeDecaySpec {
+                mass_kg,
+                rope_length_m,
+                rope_ea_n: m.rope_ea_n,
+                rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
+                damping_kg_per_s: m.c_car_kg_per_s,
+                initial_acceleration_mps2: acc.values.first().copied().unwrap_or(0.0),
+                elements: DECAY_ROPE_ELEMENTS,
+            };
+            let values = simulate_free_decay_with(&spec, effects, sample_rate_hz, duration_s)
+                .with_context(|| format!("`{stem}`: simulating the free decay"))?;
+            let time = (0..values.len()).map(|i| i as f64 / sample_rate_hz).collect();
+            Ok(Recording {
+                meta: RecordingMeta {
+                    kind: measured.meta.kind.clone(),
+                    sample_rate_hz,
+                    description: Some(format!("model of {stem}")),
+                },
+                columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, values)],
+            })
+        }
+    }
+}
+
+/// The effects as text: `nominal` or `name(param=value, ...) + ...`.
+pub fn describe(effects: &Effects) -> String {
+    let on = effects.enabled();
+    if on.is_empty() {
+        return "the nominal model".to_string();
+    }
+    on.iter()
+        .map(|k| {
+            let values = effects.values(*k).unwrap_or_default();
+            let params: Vec<String> =
+                k.parameters().iter().zip(values).map(|(s, v)| format!("{}={:.4e}", s.name, v)).collect();
+            format!("{}({})", k.name(), params.join(", "))
+        })
+        .collect::<Vec<_>>()
+        .join(" + ")
+}

@@ -1,0 +1,329 @@
+//! Short-time spectra of the chain signals and their powers in cells of
+//! (channel, travel phase, third-octave band). The transform is linear, so
+//! the spectra of a linear combination of simulations are the same
+//! combination of their spectra: the attribution fits effects whose
+//! influence is small by combining a few simulations instead of running one
+//! per trial value.
+
+use std::ops::Range;
+
+use realfft::num_complex::Complex64;
+use realfft::RealFftPlanner;
+
+use super::signals::{ChainSignals, Channel, Phase};
+
+/// Lowest band edge, Hz (accelerometers are not trusted below 0.5 Hz).
+pub const LOWEST_BAND_HZ: f64 = 1.0;
+/// Highest band edge, Hz.
+pub const HIGHEST_BAND_HZ: f64 = 1000.0;
+/// Segment length, s (1 Hz bins).
+pub const SEGMENT_S: f64 = 1.0;
+
+/// Third-octave bands from [`LOWEST_BAND_HZ`] to [`HIGHEST_BAND_HZ`] (or 45 %
+/// of the sample rate), each holding at least one bin of the segment's
+/// transform.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bands {
+    /// `[lo, hi)` edges of every band, Hz.
+    pub edges_hz: Vec<(f64, f64)>,
+    /// For every bin of the transform, its band.
+    pub bin_band: Vec<Option<usize>>,
+}
+
+impl Bands {
+    /// The bands for segments of `segment_len` samples at `sample_rate_hz`.
+    pub fn new(sample_rate_hz: f64, segment_len: usize) -> Self {
+        let df = sample_rate_hz / segment_len as f64;
+        let top = HIGHEST_BAND_HZ.min(0.45 * sample_rate_hz);
+        let bins = segment_len / 2 + 1;
+        let mut edges_hz = Vec::new();
+        let mut bin_band = vec![None; bins];
+        let mut k = 0;
+        loop {
+            let lo = LOWEST_BAND_HZ * 2f64.powf(k as f64 / 3.0);
+            let hi = LOWEST_BAND_HZ * 2f64.powf((k + 1) as f64 / 3.0);
+            if lo >= top {
+                break;
+            }
+            let hi = hi.min(top);
+            let members: Vec<usize> = (0..bins).filter(|&b| (b as f64 * df) >= lo && (b as f64 * df) < hi).collect();
+            if !members.is_empty() {
+                for b in members {
+                    bin_band[b] = Some(edges_hz.len());
+                }
+                edges_hz.push((lo, hi));
+            }
+            k += 1;
+        }
+        Self { edges_hz, bin_band }
+    }
+
+    /// Number of bands.
+    pub fn len(&self) -> usize {
+        self.edges_hz.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.edges_hz.is_empty()
+    }
+
+    /// Geometric centre of band `b`, Hz.
+    pub fn centre_hz(&self, b: usize) -> f64 {
+        let (lo, hi) = self.edges_hz[b];
+        (lo * hi).sqrt()
+    }
+}
+
+/// Where the segments of a recording lie: Hann segments of [`SEGMENT_S`]
+/// with half overlap inside each phase; a phase shorter than a segment gets
+/// one shorter, zero-padded segment.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Segmentation {
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// Transform length, samples.
+    pub segment_len: usize,
+    /// Every segment: its phase, its sample range.
+    pub segments: Vec<(Phase, Range<usize>)>,
+}
+
+impl Segmentation {
+    /// The segmentation of `signals`' phases.
+    pub fn of(signals: &ChainSignals) -> Self {
+        let n = (SEGMENT_S * signals.sample_rate_hz).round().max(16.0) as usize;
+        let mut segments = Vec::new();
+        for (phase, range) in &signals.phases {
+            let len = range.len();
+            if len < n / 8 {
+                continue;
+            }
+            if len < n {
+                segments.push((*phase, range.clone()));
+                continue;
+            }
+            let mut start = range.start;
+            while start + n <= range.end {
+                segments.push((*phase, start..start + n));
+                start += n / 2;
+            }
+        }
+        Self { sample_rate_hz: signals.sample_rate_hz, segment_len: n, segments }
+    }
+
+    /// The phases that have segments, in order.
+    pub fn phases(&self) -> Vec<Phase> {
+        let mut out: Vec<Phase> = self.segments.iter().map(|(p, _)| *p).collect();
+        out.dedup();
+        out
+    }
+}
+
+/// The short-time spectra of one channel on a segmentation.
+#[derive(Clone, Debug)]
+pub struct ChannelSpectra {
+    /// Bins kept per segment (up to the top band).
+    pub bins: usize,
+    /// Density scale of each segment, `2 / (fs sum(w^2))`, s/unit-free.
+    pub scale: Vec<f64>,
+    /// Segment-major transforms, `bins` per segment.
+    pub data: Vec<Complex64>,
+}
+
+/// The spectra of every channel of a recording on one segmentation.
+#[derive(Clone, Debug)]
+pub struct ChainSpectra {
+    /// The segmentation.
+    pub segmentation: Segmentation,
+    /// Per channel.
+    pub channels: Vec<(Channel, ChannelSpectra)>,
+}
+
+impl ChainSpectra {
+    /// Spectra of `signals` on `segmentation` (samples beyond the end of a
+    /// signal count as zero).
+    pub fn compute(signals: &ChainSignals, segmentation: &Segmentation, bands: &Bands) -> Self {
+        let n = segmentation.segment_len;
+        let mut planner = RealFftPlanner::<f64>::new();
+        let fft = planner.plan_fft_forward(n);
+        let bins = bands.bin_band.iter().rposition(|b| b.is_some()).map_or(0, |b| b + 1);
+        let mut input = fft.make_input_vec();
+        let mut output = fft.make_output_vec();
+        let mut channels = Vec::new();
+        for (channel, values) in &signals.channels {
+            let mut scale = Vec::with_capacity(segmentation.segments.len());
+            let mut data = Vec::with_capacity(segmentation.segments.len() * bins);
+            for (_, range) in &segmentation.segments {
+                let len = range.len();
+                let window: Vec<f64> =
+                    (0..len).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / len as f64).cos()).collect();
+                let seg: Vec<f64> = range.clone().map(|i| values.get(i).copied().unwrap_or(0.0)).collect();
+                let mean = seg.iter().sum::<f64>() / len as f64;
+                input.iter_mut().for_each(|x| *x = 0.0);
+                for i in 0..len {
+                    input[i] = (seg[i] - mean) * window[i];
+                }
+                // Input length matches the plan, so the transform cannot fail.
+                if fft.process(&mut input, &mut output).is_err() {
+                    output.iter_mut().for_each(|x| *x = Complex64::new(0.0, 0.0));
+                }
+                let w2: f64 = window.iter().map(|w| w * w).sum();
+                scale.push(2.0 / (segmentation.sample_rate_hz * w2.max(1e-12)));
+                data.extend_from_slice(&output[..bins]);
+            }
+            channels.push((*channel, ChannelSpectra { bins, scale, data }));
+        }
+        Self { segmentation: segmentation.clone(), channels }
+    }
+
+    /// The spectra of `channel`, if present.
+    pub fn channel(&self, channel: Channel) -> Option<&ChannelSpectra> {
+        self.channels.iter().find(|(c, _)| *c == channel).map(|(_, s)| s)
+    }
+}
+
+/// A cell: channel, travel phase, band index.
+pub type CellKey = (Channel, Phase, usize);
+
+/// Mean power density of every (channel, phase, band) cell, unit^2/Hz, and
+/// the number of bins times segments averaged in it.
+#[derive(Clone, Debug, Default)]
+pub struct CellPowers {
+    /// `(channel, phase, band) -> (density, averages)`.
+    pub cells: Vec<(CellKey, (f64, f64))>,
+}
+
+impl CellPowers {
+    /// The cell's density and averages, if present.
+    pub fn get(&self, key: CellKey) -> Option<(f64, f64)> {
+        self.cells.binary_search_by(|(k, _)| k.cmp(&key)).ok().map(|i| self.cells[i].1)
+    }
+}
+
+/// Cell powers of the linear combination `sum(coefficient * spectra)` of
+/// spectra on one segmentation (the first part's).
+pub fn cell_powers(parts: &[(&ChainSpectra, f64)], bands: &Bands) -> CellPowers {
+    let Some((first, _)) = parts.first() else {
+        return CellPowers::default();
+    };
+    let segs = &first.segmentation.segments;
+    let phases = first.segmentation.phases();
+    let mut cells = Vec::new();
+    for (channel, spectra) in &first.channels {
+        let others: Vec<(&ChannelSpectra, f64)> =
+            parts.iter().filter_map(|(s, c)| s.channel(*channel).map(|cs| (cs, *c))).collect();
+        if others.len() != parts.len() {
+            continue;
+        }
+        let bins = spectra.bins;
+        let mut sum = vec![vec![0.0; bands.len()]; phases.len()];
+        let mut count = vec![vec![0.0; bands.len()]; phases.len()];
+        for (s, (phase, _)) in segs.iter().enumerate() {
+            let p = phases.iter().position(|q| q == phase).unwrap_or(0);
+            for b in 0..bins {
+                let Some(band) = bands.bin_band[b] else { continue };
+                let mut x = Complex64::new(0.0, 0.0);
+                for (cs, c) in &others {
+                    x += cs.data[s * bins + b] * *c;
+                }
+                sum[p][band] += x.norm_sqr() * spectra.scale[s];
+                count[p][band] += 1.0;
+            }
+        }
+        for (p, phase) in phases.iter().enumerate() {
+            for band in 0..bands.len() {
+                if count[p][band] > 0.0 {
+                    cells.push(((*channel, *phase, band), (sum[p][band] / count[p][band], count[p][band])));
+                }
+            }
+        }
+    }
+    cells.sort_by_key(|a| a.0);
+    CellPowers { cells }
+}
+
+/// The cross powers of several spectra on one segmentation, per cell:
+/// `S_ij = mean over the cell's bins and segments of scale Re(X_i conj(X_j))`,
+/// so that the cell power of `sum(w_i X_i)` is `w^T S w` without touching
+/// the spectra again.
+#[derive(Clone, Debug, Default)]
+pub struct CrossPowers {
+    /// Number of spectra.
+    pub parts: usize,
+    /// `(cell, averages, S row-major parts x parts)`, sorted by cell.
+    pub cells: Vec<(CellKey, f64, Vec<f64>)>,
+}
+
+impl CrossPowers {
+    /// Cross powers of `parts` (all on the first one's segmentation).
+    pub fn compute(parts: &[&ChainSpectra], bands: &Bands) -> Self {
+        let Some(first) = parts.first() else {
+            return Self::default();
+        };
+        let n = parts.len();
+        let segs = &first.segmentation.segments;
+        let phases = first.segmentation.phases();
+        let mut cells = Vec::new();
+        for (channel, spectra) in &first.channels {
+            let all: Vec<&ChannelSpectra> = parts.iter().filter_map(|s| s.channel(*channel)).collect();
+            if all.len() != n {
+                continue;
+            }
+            let bins = spectra.bins;
+            let mut sum = vec![vec![vec![0.0; n * n]; bands.len()]; phases.len()];
+            let mut count = vec![vec![0.0; bands.len()]; phases.len()];
+            for (s, (phase, _)) in segs.iter().enumerate() {
+                let p = phases.iter().position(|q| q == phase).unwrap_or(0);
+                let scale = spectra.scale[s];
+                for b in 0..bins {
+                    let Some(band) = bands.bin_band[b] else { continue };
+                    let acc = &mut sum[p][band];
+                    for i in 0..n {
+                        let xi = all[i].data[s * bins + b];
+                        for j in i..n {
+                            let v = scale * (xi * all[j].data[s * bins + b].conj()).re;
+                            acc[i * n + j] += v;
+                        }
+                    }
+                    count[p][band] += 1.0;
+                }
+            }
+            for (p, phase) in phases.iter().enumerate() {
+                for band in 0..bands.len() {
+                    let k = count[p][band];
+                    if k > 0.0 {
+                        let mut m = sum[p][band].clone();
+                        for i in 0..n {
+                            for j in i..n {
+                                m[i * n + j] /= k;
+                                m[j * n + i] = m[i * n + j];
+                            }
+                        }
+                        cells.push(((*channel, *phase, band), k, m));
+                    }
+                }
+            }
+        }
+        cells.sort_by_key(|a| a.0);
+        Self { parts: n, cells }
+    }
+
+    /// Cell powers of `sum(weights_i X_i)`.
+    pub fn powers(&self, weights: &[f64]) -> CellPowers {
+        let n = self.parts;
+        let cells = self
+            .cells
+            .iter()
+            .map(|(key, k, m)| {
+                let mut p = 0.0;
+                for i in 0..n {
+                    for j in 0..n {
+                        p += weights[i] * weights[j] * m[i * n + j];
+                    }
+                }
+                (*key, (p.max(0.0), *k))
+            })
+            .collect();
+        CellPowers { cells }
+    }
+}
