@@ -494,3 +494,35 @@ fn brake_stop_rings_at_the_stop() {
     assert!((ringing.frequency_hz - sheave_mode).abs() < 0.03 * sheave_mode);
     assert!((sheave_mode - simple).abs() < 0.15 * simple);
 }
+
+/// Every mechanical effect on, 8 elements per side on the shortest
+/// counterweight side: the closed loop with a coarse `max_step_s` (one PWM
+/// period) and a 2048 Hz recording stays stable (the plant limits its own
+/// step) and agrees with a run at an eighth of that step.
+#[test]
+fn the_extended_plant_is_stable_and_accurate_with_a_coarse_step() {
+    let rig = rig();
+    let mut effects = Effects::none();
+    for kind in [
+        EffectKind::TensionStiffening,
+        EffectKind::DivertingPulley,
+        EffectKind::CarFrameMode,
+        EffectKind::CoulombGuideFriction,
+        EffectKind::BrakeStop,
+        EffectKind::SheaveEccentricity,
+    ] {
+        effects.set(kind, &kind.defaults()).unwrap();
+    }
+    effects.set(EffectKind::RopeDiscretization, &[8.0]).unwrap();
+    let run = |max_step_s: f64| {
+        let options = SimOptions { max_step_s, sample_rate_hz: 2048.0, ..options(&rig, effects, 3.0) };
+        travel(&rig, 70.5, Direction::Up, &options)
+    };
+    let coarse = run(1.0 / 16000.0);
+    let fine = run(1.0 / 128000.0);
+    let rms = (fine.acc_car_mps2.iter().map(|a| a * a).sum::<f64>() / fine.acc_car_mps2.len() as f64).sqrt();
+    let worst = coarse.acc_car_mps2.iter().zip(&fine.acc_car_mps2).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    println!("car acceleration: rms {rms:.4e} m/s^2, largest coarse - fine difference {worst:.3e} m/s^2");
+    assert!(coarse.acc_car_mps2.iter().all(|a| a.is_finite()));
+    assert!(rms > 1e-3 && worst < 0.02 * rms);
+}
