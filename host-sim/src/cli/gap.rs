@@ -9,7 +9,7 @@ use super::create_out_dir;
 use crate::analysis::{decimate, stft_spectrogram};
 use crate::config::RigConfig;
 use crate::diagnosis::signals::decimation_factor;
-use crate::diagnosis::simulate::simulate_recording;
+use crate::diagnosis::simulate::{model_step_s, simulate_recording};
 use crate::diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
 use crate::plant::effects::{EffectKind, Effects};
 use crate::plots::spectrogram_plot;
@@ -90,7 +90,8 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
                 [("nominal model".to_string(), Some(Effects::none())), ("explaining model".to_string(), explaining)]
             {
                 if let Some(effects) = effects {
-                    let sim = simulate_recording(&model_rig, &effects, recording, stem, rate)?;
+                    let sim =
+                        simulate_recording(&model_rig, &effects, recording, stem, rate, model_step_s(&model_rig))?;
                     series.push((label, sim.column(ACC_CAR).map(|c| c.values.clone()), 1));
                 }
             }

@@ -26,9 +26,9 @@ use std::f64::consts::TAU;
 
 use rayon::prelude::*;
 
-use super::measure::gap;
+use super::measure::{gap, Tolerances};
 use super::signals::Channel;
-use super::simulate::simulate_counterpart;
+use super::simulate::{model_step_s, simulate_counterpart};
 use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers, Segmentation};
 use crate::config::RigConfig;
 use crate::plant::effects::{EffectKind, Effects, ParamScale};
@@ -53,6 +53,8 @@ pub struct Target {
     pub measured: CellPowers,
     /// Measured noise densities, unit^2/Hz.
     pub noise: Vec<(Channel, f64)>,
+    /// The model's reproducibility per cell, dB.
+    pub tolerances: Tolerances,
     /// Segmentation of the model's runs (the nominal run's, aligned).
     pub segmentation: Segmentation,
     /// Sample rate of the model's runs, Hz.
@@ -282,7 +284,7 @@ impl Lab<'_> {
             .par_iter()
             .map(|&(m, t)| {
                 let target = &self.targets[t];
-                simulate_counterpart(self.rig, &models[m], &target.recording, &target.stem)
+                simulate_counterpart(self.rig, &models[m], &target.recording, &target.stem, model_step_s(self.rig))
                     .ok()
                     .map(|signals| ChainSpectra::compute(&signals, &target.segmentation, self.bands))
             })
@@ -297,7 +299,7 @@ impl Lab<'_> {
     }
 
     fn excess(&self, t: usize, powers: &CellPowers) -> f64 {
-        gap(&self.targets[t].measured, &self.targets[t].noise, powers).excess_db()
+        gap(&self.targets[t].measured, &self.targets[t].noise, &self.targets[t].tolerances, powers).excess_db()
     }
 
     /// The nominal model's excess gap on every recording, dB.

@@ -55,6 +55,49 @@ pub struct Calibration {
     pub nominal: (f64, f64, f64),
 }
 
+/// Smallest relative perturbation of each calibrated parameter when the
+/// model's sensitivity is probed (EA, guide damping, sheave damping).
+pub const MIN_PERTURBATION: [f64; 3] = [0.005, 0.03, 0.03];
+
+impl Calibration {
+    /// Relative standard errors of EA, guide damping and sheave damping
+    /// (spread of the per-recording values over the square root of their
+    /// number), at least [`MIN_PERTURBATION`].
+    pub fn relative_uncertainty(&self) -> [f64; 3] {
+        let se = |v: Vec<f64>| -> f64 {
+            let n = v.len() as f64;
+            if n < 2.0 {
+                return 0.0;
+            }
+            let m = v.iter().sum::<f64>() / n;
+            let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            if m.abs() > 0.0 {
+                sd / n.sqrt() / m.abs()
+            } else {
+                0.0
+            }
+        };
+        [
+            se(self.decays.iter().map(|d| d.rope_ea_n).collect()).max(MIN_PERTURBATION[0]),
+            se(self.decays.iter().map(|d| d.guide_damping_kg_per_s).collect()).max(MIN_PERTURBATION[1]),
+            se(self.travels.iter().map(|t| t.1).collect()).max(MIN_PERTURBATION[2]),
+        ]
+    }
+
+    /// `model` with EA, guide and sheave damping moved by `sign` (+1 or -1)
+    /// times their relative uncertainty: how much of the data the
+    /// calibration cannot pin down.
+    pub fn perturbed(&self, model: &RigConfig, sign: f64) -> RigConfig {
+        let [ea, guide, sheave] = self.relative_uncertainty().map(|u| sign * u);
+        let mut out = model.clone();
+        out.mechanics.rope_ea_n *= 1.0 + ea;
+        out.mechanics.c_car_kg_per_s *= 1.0 + guide;
+        out.mechanics.c_cw_kg_per_s *= 1.0 + guide;
+        out.mechanics.c_sheave_nms_per_rad *= 1.0 + sheave;
+        out
+    }
+}
+
 fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
     let v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)

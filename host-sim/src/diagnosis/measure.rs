@@ -13,13 +13,13 @@
 //! (dB) is what a model can still explain. Reports give all three.
 
 use super::signals::{Channel, Phase};
-use super::spectra::CellPowers;
+use super::spectra::{CellKey, CellPowers};
 
 /// Dynamic range of the comparison: a floor this far below the channel's
-/// strongest measured cell (-60 dB) is added to both sides of every cell,
+/// strongest measured cell (-80 dB) is added to both sides of every cell,
 /// so that content a data-acquisition system would not resolve (and
 /// integration details of the model far below the signal) does not count.
-const FLOOR: f64 = 1e-6;
+const FLOOR: f64 = 1e-8;
 
 /// One cell's comparison.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -38,6 +38,49 @@ pub struct CellGap {
     pub d_db: f64,
     /// Expected scatter of `d` from the measurement's own noise, dB.
     pub noise_db: f64,
+    /// The model's reproducibility in this cell, dB.
+    pub tolerance_db: f64,
+}
+
+/// How far (dB) a cell may stray beyond twice its noise scatter before it
+/// counts, at least: the model's reproducibility on data from the same
+/// model. Cells whose content hangs on details the calibration cannot pin
+/// down get more: 1.5 times the change the model shows there when its
+/// calibrated parameters move by their uncertainty (the ringing after the
+/// brake sets moves by several dB when the drive's stop sequence shifts by
+/// one control period).
+pub const TOLERANCE_DB: f64 = 0.5;
+
+/// Tolerance of every cell, dB, sorted by cell.
+pub type Tolerances = Vec<(CellKey, f64)>;
+
+fn tolerance_of(tolerances: &Tolerances, key: CellKey) -> f64 {
+    tolerances.binary_search_by(|(k, _)| k.cmp(&key)).map_or(TOLERANCE_DB, |i| tolerances[i].1)
+}
+
+/// The tolerances from the nominal model and the same with its calibrated
+/// parameters perturbed by their uncertainty (`perturbed`, up and down),
+/// against the measured noise and floor.
+pub fn tolerances(
+    measured: &CellPowers,
+    noise: &[(Channel, f64)],
+    nominal: &CellPowers,
+    perturbed: &[CellPowers],
+) -> Tolerances {
+    let floors = channel_floors(measured);
+    let mut out = Vec::new();
+    for (key, (p_nominal, _)) in &nominal.cells {
+        let floor = floors.iter().find(|(c, _)| *c == key.0).map_or(1e-30, |(_, f)| *f);
+        let n = noise.iter().find(|(c, _)| *c == key.0).map_or(0.0, |(_, n)| *n);
+        let change = perturbed
+            .iter()
+            .filter_map(|p| p.get(*key))
+            .map(|(q, _)| (10.0 * ((q + n + floor) / (p_nominal + n + floor)).log10()).abs())
+            .fold(0.0, f64::max);
+        out.push((*key, TOLERANCE_DB.max(1.5 * change)));
+    }
+    out.sort_by_key(|a| a.0);
+    out
 }
 
 /// The gap of one recording.
@@ -47,12 +90,16 @@ pub struct GapValue {
     pub gap_db: f64,
     /// RMS of the expected scatter from noise, dB.
     pub noise_db: f64,
+    /// RMS over the cells of `max(|d| - 2 sigma - tolerance, 0)`: the gap
+    /// beyond what noise and the model's reproducibility explain, dB.
+    pub beyond_db: f64,
 }
 
 impl GapValue {
-    /// The gap beyond the noise, `sqrt(max(gap^2 - noise^2, 0))`, dB.
+    /// The gap beyond noise and tolerance ([`GapValue::beyond_db`]), dB:
+    /// the figure the verdict and the attribution use.
     pub fn excess_db(&self) -> f64 {
-        (self.gap_db * self.gap_db - self.noise_db * self.noise_db).max(0.0).sqrt()
+        self.beyond_db
     }
 }
 
@@ -78,7 +125,12 @@ fn channel_floors(measured: &CellPowers) -> Vec<(Channel, f64)> {
 
 /// Every cell's comparison between `measured` (with its noise densities in
 /// `noise`) and `simulated`.
-pub fn cell_gaps(measured: &CellPowers, noise: &[(Channel, f64)], simulated: &CellPowers) -> Vec<CellGap> {
+pub fn cell_gaps(
+    measured: &CellPowers,
+    noise: &[(Channel, f64)],
+    tolerances: &Tolerances,
+    simulated: &CellPowers,
+) -> Vec<CellGap> {
     let floors = channel_floors(measured);
     let mut out = Vec::new();
     for ((channel, phase, band), (p, k)) in &measured.cells {
@@ -94,6 +146,7 @@ pub fn cell_gaps(measured: &CellPowers, noise: &[(Channel, f64)], simulated: &Ce
             simulated: q + n,
             d_db: d,
             noise_db: sigma,
+            tolerance_db: tolerance_of(tolerances, (*channel, *phase, *band)),
         });
     }
     out
@@ -101,30 +154,36 @@ pub fn cell_gaps(measured: &CellPowers, noise: &[(Channel, f64)], simulated: &Ce
 
 /// The gap over `cells`, every channel weighted alike.
 pub fn gap_of_cells<'a>(cells: impl Iterator<Item = &'a CellGap>) -> GapValue {
-    let mut per: Vec<(Channel, f64, f64, usize)> = Vec::new();
+    let mut per: Vec<(Channel, [f64; 3], usize)> = Vec::new();
     for c in cells {
+        let beyond = (c.d_db.abs() - 2.0 * c.noise_db - c.tolerance_db).max(0.0);
+        let add = [c.d_db * c.d_db, c.noise_db * c.noise_db, beyond * beyond];
         match per.iter_mut().find(|(ch, ..)| *ch == c.channel) {
             Some(e) => {
-                e.1 += c.d_db * c.d_db;
-                e.2 += c.noise_db * c.noise_db;
-                e.3 += 1;
+                for k in 0..3 {
+                    e.1[k] += add[k];
+                }
+                e.2 += 1;
             }
-            None => per.push((c.channel, c.d_db * c.d_db, c.noise_db * c.noise_db, 1)),
+            None => per.push((c.channel, add, 1)),
         }
     }
     if per.is_empty() {
         return GapValue::default();
     }
     let m = per.len() as f64;
-    GapValue {
-        gap_db: (per.iter().map(|(_, d, _, n)| d / *n as f64).sum::<f64>() / m).sqrt(),
-        noise_db: (per.iter().map(|(_, _, s, n)| s / *n as f64).sum::<f64>() / m).sqrt(),
-    }
+    let mean = |k: usize| (per.iter().map(|(_, s, n)| s[k] / *n as f64).sum::<f64>() / m).sqrt();
+    GapValue { gap_db: mean(0), noise_db: mean(1), beyond_db: mean(2) }
 }
 
 /// The gap between `measured` and `simulated` (see the module docs).
-pub fn gap(measured: &CellPowers, noise: &[(Channel, f64)], simulated: &CellPowers) -> GapValue {
-    gap_of_cells(cell_gaps(measured, noise, simulated).iter())
+pub fn gap(
+    measured: &CellPowers,
+    noise: &[(Channel, f64)],
+    tolerances: &Tolerances,
+    simulated: &CellPowers,
+) -> GapValue {
+    gap_of_cells(cell_gaps(measured, noise, tolerances, simulated).iter())
 }
 
 #[cfg(test)]

@@ -33,13 +33,13 @@ use attribute::{attribute, Candidate, Lab, Target};
 use calibrate::{calibrate, Calibration};
 use locate::{locate, Location};
 use measure::{cell_gaps, gap_of_cells, CellGap, GapValue};
-use signals::{chain_signals, decimation_factor, ChainSignals, Phase};
-use simulate::{describe, simulate_counterpart};
+use signals::{chain_signals, decimation_factor, ChainSignals};
+use simulate::{describe, model_step_s, simulate_counterpart};
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 
 /// Largest nominal excess gap (dB, mean over the recordings) that the
 /// verdict still calls `nominal`.
-pub const NOMINAL_EXCESS_DB: f64 = 1.0;
+pub const NOMINAL_EXCESS_DB: f64 = 0.15;
 /// Smallest held-out shrink of the gap for `explained`.
 pub const EXPLAINED_SHRINK: f64 = 0.5;
 
@@ -149,23 +149,52 @@ fn light_copy(recording: &Recording) -> Recording {
     Recording { meta: recording.meta.clone(), columns }
 }
 
-/// Trims the start phase of both to the same length (its end kept) and the
-/// stop phase to the same length (its beginning kept), so that a phase's
-/// mean power compares like with like.
-fn align_phases(a: &mut ChainSignals, b: &mut ChainSignals) {
-    for phase in [Phase::Start, Phase::Stop] {
-        let seconds = |s: &ChainSignals| {
-            s.phases.iter().find(|(p, _)| *p == phase).map_or(0.0, |(_, r)| r.len() as f64 / s.sample_rate_hz)
-        };
-        let l = seconds(a).min(seconds(b));
-        for s in [&mut *a, &mut *b] {
-            let samples = (l * s.sample_rate_hz).floor() as usize;
-            if let Some((_, r)) = s.phases.iter_mut().find(|(p, _)| *p == phase) {
-                let samples = samples.min(r.len());
-                *r = if phase == Phase::Start { r.end - samples..r.end } else { r.start..r.start + samples };
-            }
-        }
+/// Time (s) at which the speed first reaches half its largest magnitude,
+/// interpolated between samples.
+fn half_speed_time_s(signals: &ChainSignals) -> Option<f64> {
+    let speed = signals.channel(signals::Channel::Speed)?;
+    let top = speed.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let half = 0.5 * top;
+    let k = speed.iter().position(|v| v.abs() >= half)?;
+    if k == 0 || top <= 0.0 {
+        return Some(0.0);
     }
+    let (a, b) = (speed[k - 1].abs(), speed[k].abs());
+    let frac = if b > a { (half - a) / (b - a) } else { 0.0 };
+    Some((k as f64 - 1.0 + frac) / signals.sample_rate_hz)
+}
+
+/// Gives the model's run the measured phases, shifted by the time offset
+/// between the two runs (where the speed first reaches half its peak), and
+/// trims both so that every phase covers the same stretch of the travel in
+/// each: a phase's mean power then compares like with like.
+fn align_phases(measured: &mut ChainSignals, model: &mut ChainSignals) {
+    let offset_s = match (half_speed_time_s(measured), half_speed_time_s(model)) {
+        (Some(m), Some(s)) => m - s,
+        _ => 0.0,
+    };
+    let (fm, fs) = (measured.sample_rate_hz, model.sample_rate_hz);
+    let (len_m, len_s) = (measured.len(), model.len());
+    let mut model_phases = Vec::new();
+    for (phase, range) in measured.phases.iter_mut() {
+        let t0 = range.start as f64 / fm - offset_s;
+        let t1 = range.end as f64 / fm - offset_s;
+        // Clip to the model's run, then back to the measured one.
+        let c0 = t0.max(0.0);
+        let c1 = t1.min(len_s as f64 / fs);
+        if c1 <= c0 {
+            *range = range.start..range.start;
+            model_phases.push((*phase, 0..0));
+            continue;
+        }
+        let m0 = (((c0 + offset_s) * fm).round() as usize).min(len_m);
+        let m1 = (((c1 + offset_s) * fm).round() as usize).clamp(m0, len_m);
+        *range = m0..m1;
+        let n = ((m1 - m0) as f64 / fm * fs).round() as usize;
+        let s0 = ((c0 * fs).round() as usize).min(len_s);
+        model_phases.push((*phase, s0..(s0 + n).min(len_s)));
+    }
+    model.phases = model_phases;
 }
 
 /// Runs the diagnosis of `dataset` (named `name`) on `rig`; `progress`
@@ -183,24 +212,35 @@ pub fn diagnose(
     }
     progress("calibrating", 0, 1);
     let (model, calibration) = calibrate(rig, dataset);
+    let perturbed_models = [calibration.perturbed(&model, 1.0), calibration.perturbed(&model, -1.0)];
 
     // Measured signals and the nominal closed loop, per recording.
     progress("nominal model", 0, dataset.len());
-    let prepared: Vec<anyhow::Result<(ChainSignals, ChainSignals)>> = dataset
+    let prepared: Vec<anyhow::Result<(ChainSignals, ChainSignals, [ChainSignals; 2])>> = dataset
         .par_iter()
         .map(|(stem, recording)| {
             let factor = decimation_factor(recording.meta.sample_rate_hz);
             let measured = chain_signals(rig, recording, stem, factor, true)?;
-            let nominal = simulate_counterpart(&model, &Effects::none(), recording, stem)?;
-            Ok((measured, nominal))
+            let step = model_step_s(&model);
+            let nominal = simulate_counterpart(&model, &Effects::none(), recording, stem, step)?;
+            let perturbed = [
+                simulate_counterpart(&perturbed_models[0], &Effects::none(), recording, stem, step)?,
+                simulate_counterpart(&perturbed_models[1], &Effects::none(), recording, stem, step)?,
+            ];
+            Ok((measured, nominal, perturbed))
         })
         .collect();
     let mut targets = Vec::new();
     let mut measured_all = Vec::new();
     let mut bands_all: Option<Bands> = None;
     for ((stem, recording), prepared) in dataset.iter().zip(prepared) {
-        let (mut measured, mut nominal) = prepared.with_context(|| format!("dataset {name}, recording `{stem}`"))?;
+        let (mut measured, mut nominal, mut perturbed) =
+            prepared.with_context(|| format!("dataset {name}, recording `{stem}`"))?;
+        let measured_for_perturbed = measured.clone();
         align_phases(&mut measured, &mut nominal);
+        for p in perturbed.iter_mut() {
+            align_phases(&mut measured_for_perturbed.clone(), p);
+        }
         let seg_measured = Segmentation::of(&measured);
         let seg_model = Segmentation::of(&nominal);
         let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len);
@@ -213,6 +253,14 @@ pub fn diagnose(
         }
         let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
         let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
+        let measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
+        let nominal_cells = cell_powers(&[(&nominal_spectra, 1.0)], &bands);
+        let perturbed_cells: Vec<_> = perturbed
+            .iter()
+            .map(|p| cell_powers(&[(&ChainSpectra::compute(p, &Segmentation::of(p), &bands), 1.0)], &bands))
+            .collect();
+        let tolerances =
+            measure::tolerances(&measured_cells, &measured.noise_density, &nominal_cells, &perturbed_cells);
         let group = match recording.meta.kind {
             RecordingKind::Travel { m_car_kg, .. } => format!("{m_car_kg:.1} kg"),
             RecordingKind::FreeDecay { mass_kg, .. } => format!("{mass_kg:.1} kg"),
@@ -221,8 +269,9 @@ pub fn diagnose(
             stem: stem.clone(),
             group,
             recording: light_copy(recording),
-            measured: cell_powers(&[(&measured_spectra, 1.0)], &bands),
+            measured: measured_cells,
             noise: measured.noise_density.clone(),
+            tolerances,
             segmentation: seg_model,
             sample_rate_hz: measured.sample_rate_hz,
             nominal: nominal_spectra,
@@ -234,8 +283,10 @@ pub fn diagnose(
     progress("nominal model", dataset.len(), dataset.len());
 
     // Gap of the nominal model, and the replay of the travels.
-    let nominal_cells: Vec<Vec<CellGap>> =
-        targets.iter().map(|t| cell_gaps(&t.measured, &t.noise, &cell_powers(&[(&t.nominal, 1.0)], &bands))).collect();
+    let nominal_cells: Vec<Vec<CellGap>> = targets
+        .iter()
+        .map(|t| cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&t.nominal, 1.0)], &bands)))
+        .collect();
     let replays: Vec<Option<Vec<CellGap>>> = dataset
         .par_iter()
         .zip(measured_all.par_iter())
@@ -306,9 +357,10 @@ pub fn diagnose(
         let after: Vec<Option<Vec<CellGap>>> = targets
             .par_iter()
             .map(|t| {
-                let s = simulate_counterpart(&model, &best.effects, &t.recording, &t.stem).ok()?;
+                let s =
+                    simulate_counterpart(&model, &best.effects, &t.recording, &t.stem, model_step_s(&model)).ok()?;
                 let spectra = ChainSpectra::compute(&s, &t.segmentation, &bands);
-                Some(cell_gaps(&t.measured, &t.noise, &cell_powers(&[(&spectra, 1.0)], &bands)))
+                Some(cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&spectra, 1.0)], &bands)))
             })
             .collect();
         simulations += targets.len();

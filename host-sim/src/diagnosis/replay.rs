@@ -135,5 +135,10 @@ pub fn replay_cells(
     };
     let seg = Segmentation::of(measured);
     let spectra = ChainSpectra::compute(&replay, &seg, bands);
-    Ok(super::measure::cell_gaps(&target.measured, &target.noise, &cell_powers(&[(&spectra, 1.0)], bands)))
+    Ok(super::measure::cell_gaps(
+        &target.measured,
+        &target.noise,
+        &target.tolerances,
+        &cell_powers(&[(&spectra, 1.0)], bands),
+    ))
 }

@@ -24,10 +24,17 @@ pub fn simulate_counterpart(
     effects: &Effects,
     measured: &Recording,
     stem: &str,
+    max_step_s: f64,
 ) -> anyhow::Result<ChainSignals> {
     let rate = model_sample_rate_hz(rig);
-    let recording = simulate_recording(rig, effects, measured, stem, rate)?;
+    let recording = simulate_recording(rig, effects, measured, stem, rate, max_step_s)?;
     chain_signals(rig, &recording, stem, decimation_factor(rate), false)
+}
+
+/// Longest integration step of the model's runs, s: one PWM period (the
+/// plant still subdivides it for its stiffest mode).
+pub fn model_step_s(rig: &RigConfig) -> f64 {
+    1.0 / rig.control.current_loop_hz
 }
 
 /// Sample rate of the model's runs, Hz: the rig's control rate.
@@ -35,13 +42,15 @@ pub fn model_sample_rate_hz(rig: &RigConfig) -> f64 {
     rig.control.current_loop_hz
 }
 
-/// As [`simulate_counterpart`], the recording itself.
+/// As [`simulate_counterpart`], the recording itself, sampled at
+/// `sample_rate_hz`, integrated with steps of at most `max_step_s` (travels).
 pub fn simulate_recording(
     rig: &RigConfig,
     effects: &Effects,
     measured: &Recording,
     stem: &str,
     sample_rate_hz: f64,
+    max_step_s: f64,
 ) -> anyhow::Result<Recording> {
     match measured.meta.kind {
         RecordingKind::Travel { m_car_kg, m_cw_kg, direction, lw_start_m, lw_end_m } => {
@@ -56,12 +65,7 @@ pub fn simulate_recording(
                 lw_start_m,
                 lw_end_m,
             };
-            let options = SimOptions {
-                max_step_s: 1.0 / rig.control.current_loop_hz,
-                sample_rate_hz,
-                effects: *effects,
-                ..SimOptions::for_rig(&rig)
-            };
+            let options = SimOptions { max_step_s, sample_rate_hz, effects: *effects, ..SimOptions::for_rig(&rig) };
             let run = simulate_travel(&rig, &spec, &options, None)
                 .with_context(|| format!("`{stem}`: simulating the travel with {}", describe(effects)))?;
             Ok(run.to_recording(&spec, m_cw_kg, format!("model of {stem}")))
