@@ -118,14 +118,13 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         report.explained_by.as_ref().map_or(String::new(), |e| format!(" by {e}"))
     );
     println!(
-        "nominal excess gap {:.2} dB (noise {:.2} dB); located in {:?}, {}, {}, {:.1}-{:.1} Hz",
+        "nominal excess gap {:.2} dB (noise {:.2} dB); located in {:?}, {}, {}, {}",
         report.nominal_excess_db,
         report.noise_gap_db,
         report.location.subsystem,
         report.location.channel.name(),
         report.location.phase.name(),
-        report.location.band_hz.0,
-        report.location.band_hz.1
+        report.location.band
     );
     for c in report.ranking.iter().take(5) {
         println!(

@@ -38,6 +38,9 @@ use crate::recording::Recording;
 pub const PARAMETER_PENALTY: f64 = 0.03;
 /// Pairs are tried when the best single effect shrinks the held-out gap by less.
 pub const PAIR_TRIGGER_SHRINK: f64 = 0.7;
+/// A pair is kept only when its held-out gap after the fit is below this
+/// fraction of its better member's.
+pub const PAIR_MARGIN: f64 = 0.8;
 
 /// One recording as the attribution sees it.
 #[derive(Clone, Debug)]
@@ -129,7 +132,7 @@ enum Search {
 
 const FRICTION_PROBE_N: f64 = 40.0;
 const ECCENTRICITY_PROBE: f64 = 0.005;
-const DEAD_TIME_PROBE_S: f64 = 1.0e-6;
+const DEAD_TIME_PROBE_S: f64 = 0.3e-6;
 const OFFSET_PROBE_A: f64 = 0.2;
 const GAIN_PROBE: f64 = 0.01;
 const ENCODER_PROBE_RAD: f64 = 0.002;
@@ -161,16 +164,14 @@ fn search(kind: EffectKind, reference_tension_n: Option<f64>) -> Search {
     match kind {
         EffectKind::TensionStiffening => {
             let t = reference_tension_n.unwrap_or(d[1]).clamp(10.0, 1.0e4);
-            Search::Grid([0.15, 0.35, 0.6, 0.9].iter().map(|&a| with(&[(0, a), (1, t)])).collect())
+            Search::Grid([0.2, 0.5, 0.85].iter().map(|&a| with(&[(0, a), (1, t)])).collect())
         }
-        EffectKind::DivertingPulley => {
-            Search::Grid([0.004, 0.015, 0.05, 0.15].iter().map(|&j| with(&[(0, j)])).collect())
-        }
-        EffectKind::RopeDiscretization => Search::Grid([2.0, 3.0, 5.0, 8.0].iter().map(|&n| with(&[(0, n)])).collect()),
+        EffectKind::DivertingPulley => Search::Grid([0.006, 0.025, 0.1].iter().map(|&j| with(&[(0, j)])).collect()),
+        EffectKind::RopeDiscretization => Search::Grid([2.0, 4.0, 8.0].iter().map(|&n| with(&[(0, n)])).collect()),
         EffectKind::CarFrameMode => Search::Grid(
             [110.0, 170.0, 260.0, 400.0].iter().flat_map(|&f| [0.015, 0.06].map(|z| with(&[(0, f), (1, z)]))).collect(),
         ),
-        EffectKind::BrakeStop => Search::Grid([3.0e3, 1.5e4, 7.0e4, 3.0e5].iter().map(|&k| with(&[(0, k)])).collect()),
+        EffectKind::BrakeStop => Search::Grid([4.0e3, 3.0e4, 2.0e5].iter().map(|&k| with(&[(0, k)])).collect()),
         EffectKind::CoulombGuideFriction => Search::Linear {
             probes: vec![with(&[(0, FRICTION_PROBE_N)])],
             map: |c| vec![(FRICTION_PROBE_N * c[0]).clamp(0.0, 150.0), 0.002],
@@ -393,7 +394,24 @@ impl Family {
                         (x0, s0) = (x, s);
                     }
                 }
-                nelder_mead(|x| self.score(lab, b, x, set), &x0, 0.5, 60 * d + 40)
+                // Coordinate sweeps: the components of a many-parameter
+                // effect act on different lines, nearly independently.
+                if d >= 3 {
+                    for _ in 0..2 {
+                        for i in 0..d {
+                            for v in [-4.0, -2.5, -1.5, -0.75, -0.25, 0.0, 0.25, 0.75, 1.5, 2.5, 4.0] {
+                                let mut x = x0.clone();
+                                x[i] = v;
+                                let s = self.score(lab, b, &x, set);
+                                if s < s0 {
+                                    (x0, s0) = (x, s);
+                                }
+                            }
+                        }
+                    }
+                }
+                let (x1, _) = nelder_mead(|x| self.score(lab, b, x, set), &x0, 0.5, 60 * d + 40);
+                nelder_mead(|x| self.score(lab, b, x, set), &x1, 0.2, 60 * d + 40)
             };
             if s < best.2 {
                 best = (b, self.clamp(&c), s);
@@ -732,7 +750,18 @@ pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
                 }
             };
             f.prepare(lab);
-            candidates.push(evaluate(lab, &f, &nominal));
+            let pair = evaluate(lab, &f, &nominal);
+            // A pair must earn its extra parameters: it is kept only when it
+            // leaves clearly less of the held-out gap than its better member.
+            let members = [a.kinds[0].name(), b.kinds[0].name()];
+            let single_best = candidates
+                .iter()
+                .filter(|c| members.contains(&c.name.as_str()))
+                .map(|c| c.held_out_gap_after_db)
+                .fold(f64::INFINITY, f64::min);
+            if pair.held_out_gap_after_db < PAIR_MARGIN * single_best {
+                candidates.push(pair);
+            }
         }
         candidates.sort_by(|a, b| a.score_db.total_cmp(&b.score_db));
     }

@@ -41,8 +41,8 @@ pub struct StrongCell {
     pub channel: Channel,
     /// Phase.
     pub phase: Phase,
-    /// Band, Hz.
-    pub band_hz: (f64, f64),
+    /// Band (`lo-hi Hz`) or line (`order n`).
+    pub band: String,
     /// `10 log10(measured / model)`, dB.
     pub d_db: f64,
 }
@@ -71,8 +71,9 @@ pub struct Location {
     pub channel: Channel,
     /// The phase with the largest RMS gap on that channel.
     pub phase: Phase,
-    /// The band with the largest RMS gap on that channel, Hz.
-    pub band_hz: (f64, f64),
+    /// The band (`lo-hi Hz`) or line (`order n`) with the largest RMS gap on
+    /// that channel.
+    pub band: String,
     /// Per channel.
     pub channels: Vec<ChannelGap>,
     /// Per phase, on the located channel.
@@ -195,15 +196,15 @@ pub fn locate(
         }
     }
     let mut band_slices = Vec::new();
-    for b in 0..bands.len() {
+    for b in 0..bands.len() + super::spectra::LINE_ORDERS.len() {
         let d: Vec<f64> = on_channel.iter().filter(|c| c.band == b).map(|c| c.d_db).collect();
         if !d.is_empty() {
-            let (lo, hi) = bands.edges_hz[b];
-            band_slices.push(((lo, hi), slice(format!("{lo:.1}-{hi:.1} Hz"), d)));
+            band_slices.push((bands.label(b), slice(bands.label(b), d)));
         }
     }
     let phase = phases.iter().max_by(|a, b| a.1.rms_d_db.total_cmp(&b.1.rms_d_db)).map_or(Phase::Constant, |p| p.0);
-    let band_hz = band_slices.iter().max_by(|a, b| a.1.rms_d_db.total_cmp(&b.1.rms_d_db)).map_or((0.0, 0.0), |b| b.0);
+    let band =
+        band_slices.iter().max_by(|a, b| a.1.rms_d_db.total_cmp(&b.1.rms_d_db)).map_or(String::new(), |b| b.0.clone());
     let mut strongest: Vec<StrongCell> = cells
         .iter()
         .zip(targets)
@@ -212,7 +213,7 @@ pub fn locate(
                 recording: t.stem.clone(),
                 channel: x.channel,
                 phase: x.phase,
-                band_hz: bands.edges_hz[x.band],
+                band: bands.label(x.band),
                 d_db: x.d_db,
             })
         })
@@ -233,7 +234,7 @@ pub fn locate(
         reasoning,
         channel,
         phase,
-        band_hz,
+        band,
         channels,
         phases: phases.into_iter().map(|p| p.1).collect(),
         bands: band_slices.into_iter().map(|b| b.1).collect(),

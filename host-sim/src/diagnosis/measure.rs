@@ -69,13 +69,13 @@ pub fn tolerances(
 ) -> Tolerances {
     let floors = channel_floors(measured);
     let mut out = Vec::new();
-    for (key, (p_nominal, _)) in &nominal.cells {
-        let floor = floors.iter().find(|(c, _)| *c == key.0).map_or(1e-30, |(_, f)| *f);
-        let n = noise.iter().find(|(c, _)| *c == key.0).map_or(0.0, |(_, n)| *n);
+    for (key, (p_nominal, _, scale)) in &nominal.cells {
+        let floor = floors.iter().find(|(c, _)| *c == key.0).map_or(1e-30, |(_, f)| *f) * scale;
+        let n = noise.iter().find(|(c, _)| *c == key.0).map_or(0.0, |(_, n)| *n) * scale;
         let change = perturbed
             .iter()
             .filter_map(|p| p.get(*key))
-            .map(|(q, _)| (10.0 * ((q + n + floor) / (p_nominal + n + floor)).log10()).abs())
+            .map(|(q, _, _)| (10.0 * ((q + n + floor) / (p_nominal + n + floor)).log10()).abs())
             .fold(0.0, f64::max);
         out.push((*key, TOLERANCE_DB.max(1.5 * change)));
     }
@@ -114,7 +114,10 @@ fn cell(measured: f64, averages: f64, simulated: f64, noise: f64, floor: f64) ->
 
 fn channel_floors(measured: &CellPowers) -> Vec<(Channel, f64)> {
     let mut out: Vec<(Channel, f64)> = Vec::new();
-    for ((channel, _, _), (p, _)) in &measured.cells {
+    for ((channel, _, _), (p, _, scale)) in &measured.cells {
+        if *scale != 1.0 {
+            continue;
+        }
         match out.iter_mut().find(|(c, _)| c == channel) {
             Some(e) => e.1 = e.1.max(*p),
             None => out.push((*channel, *p)),
@@ -133,10 +136,10 @@ pub fn cell_gaps(
 ) -> Vec<CellGap> {
     let floors = channel_floors(measured);
     let mut out = Vec::new();
-    for ((channel, phase, band), (p, k)) in &measured.cells {
-        let Some((q, _)) = simulated.get((*channel, *phase, *band)) else { continue };
-        let floor = floors.iter().find(|(c, _)| c == channel).map_or(1e-30, |(_, f)| *f);
-        let n = noise.iter().find(|(c, _)| c == channel).map_or(0.0, |(_, n)| *n);
+    for ((channel, phase, band), (p, k, scale)) in &measured.cells {
+        let Some((q, _, _)) = simulated.get((*channel, *phase, *band)) else { continue };
+        let floor = floors.iter().find(|(c, _)| c == channel).map_or(1e-30, |(_, f)| *f) * scale;
+        let n = noise.iter().find(|(c, _)| c == channel).map_or(0.0, |(_, n)| *n) * scale;
         let (d, sigma) = cell(*p, *k, q, n, floor);
         out.push(CellGap {
             channel: *channel,

@@ -41,7 +41,7 @@ use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 /// verdict still calls `nominal`.
 pub const NOMINAL_EXCESS_DB: f64 = 0.15;
 /// Smallest held-out shrink of the gap for `explained`.
-pub const EXPLAINED_SHRINK: f64 = 0.5;
+pub const EXPLAINED_SHRINK: f64 = 0.7;
 
 /// The verdict.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -295,8 +295,11 @@ pub fn diagnose(
             replay::replay_cells(&model, recording, stem, measured, target, &bands).ok()
         })
         .collect();
-    let low_acc =
-        |c: &&CellGap| c.channel.subsystem() == signals::Subsystem::Mechanical && bands.edges_hz[c.band].1 <= 80.0;
+    let low_acc = |c: &&CellGap| {
+        c.channel.subsystem() == signals::Subsystem::Mechanical
+            && !bands.is_line(c.band)
+            && bands.edges_hz[c.band].1 <= 80.0
+    };
     let mut recordings: Vec<RecordingGap> = targets
         .iter()
         .zip(&nominal_cells)

@@ -132,6 +132,7 @@ pub fn replay_cells(
         channels,
         phases: measured.phases.clone(),
         noise_density: Vec::new(),
+        angle_rad: measured.angle_rad.clone(),
     };
     let seg = Segmentation::of(measured);
     let spectra = ChainSpectra::compute(&replay, &seg, bands);

@@ -183,13 +183,12 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
     let _ = writeln!(s, "## Where the gap lies\n");
     let _ = writeln!(
         s,
-        "Subsystem: **{:?}** ({}). Channel `{}`, phase `{}`, band {:.1}-{:.1} Hz.\n",
+        "Subsystem: **{:?}** ({}). Channel `{}`, phase `{}`, {}.\n",
         l.subsystem,
         l.reasoning,
         l.channel.name(),
         l.phase.name(),
-        l.band_hz.0,
-        l.band_hz.1
+        l.band
     );
     let _ = writeln!(s, "| channel | subsystem | excess gap (dB) |\n|---|---|---|");
     for c in &l.channels {
@@ -201,17 +200,16 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
     }
     let _ = writeln!(
         s,
-        "\nStrongest cells:\n\n| recording | channel | phase | band (Hz) | d (dB) |\n|---|---|---|---|---|"
+        "\nStrongest cells:\n\n| recording | channel | phase | band or line | d (dB) |\n|---|---|---|---|---|"
     );
     for c in &l.strongest_cells {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.1}-{:.1} | {:+.1} |",
+            "| {} | {} | {} | {} | {:+.1} |",
             c.recording,
             c.channel.name(),
             c.phase.name(),
-            c.band_hz.0,
-            c.band_hz.1,
+            c.band,
             c.d_db
         );
     }

@@ -123,6 +123,9 @@ pub struct ChainSignals {
     /// One-sided noise density of each channel, unit^2/Hz (measured
     /// recordings; zero for simulations).
     pub noise_density: Vec<(Channel, f64)>,
+    /// Shaft angle from the encoder, rad, one value per sample (travels;
+    /// empty for decays): the reference of the angle-locked lines.
+    pub angle_rad: Vec<f64>,
 }
 
 impl ChainSignals {
@@ -192,9 +195,11 @@ pub fn chain_signals(
 ) -> anyhow::Result<ChainSignals> {
     let fs = recording.meta.sample_rate_hz;
     let mut full: Vec<(Channel, Vec<f64>)> = Vec::new();
+    let mut angle = Vec::new();
     let is_travel = matches!(recording.meta.kind, RecordingKind::Travel { .. });
     if is_travel {
         let torque = travel_torque(rig, recording, stem)?;
+        angle = torque.shaft_angle_rad.clone();
         full.push((Channel::Torque, torque.torque_nm));
         full.push((Channel::Speed, torque.speed_radps));
     }
@@ -226,6 +231,8 @@ pub fn chain_signals(
     for (_, v) in channels.iter_mut() {
         v.truncate(len);
     }
+    let mut angle_rad: Vec<f64> = angle.iter().step_by(factor).copied().collect();
+    angle_rad.truncate(len);
     let phases = if is_travel {
         let speed = channels.iter().find(|(c, _)| *c == Channel::Speed).map(|(_, v)| v.as_slice()).unwrap_or(&[]);
         let p = travel_phases(speed, rate).with_context(|| format!("`{stem}`: travel phases"))?;
@@ -239,5 +246,5 @@ pub fn chain_signals(
     } else {
         vec![(Phase::Decay, 0..len)]
     };
-    Ok(ChainSignals { sample_rate_hz: rate, channels, phases, noise_density: noise })
+    Ok(ChainSignals { sample_rate_hz: rate, channels, phases, noise_density: noise, angle_rad })
 }

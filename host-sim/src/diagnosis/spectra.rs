@@ -19,9 +19,15 @@ pub const HIGHEST_BAND_HZ: f64 = 1000.0;
 /// Segment length, s (1 Hz bins).
 pub const SEGMENT_S: f64 = 1.0;
 
+/// Mechanical orders whose angle-locked lines are cells of their own in the
+/// constant-speed stage (machine imbalance and eccentricities at 1, the
+/// ripple orders of the rig): a 1 s segment cannot resolve a 1 Hz line.
+pub const LINE_ORDERS: [u32; 7] = [1, 2, 3, 6, 12, 36, 72];
+
 /// Third-octave bands from [`LOWEST_BAND_HZ`] to [`HIGHEST_BAND_HZ`] (or 45 %
 /// of the sample rate), each holding at least one bin of the segment's
-/// transform.
+/// transform; after them, as cells `len()..len() + LINE_ORDERS.len()`, the
+/// lines of [`LINE_ORDERS`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bands {
     /// `[lo, hi)` edges of every band, Hz.
@@ -68,6 +74,19 @@ impl Bands {
         self.edges_hz.is_empty()
     }
 
+    /// Whether cell index `b` is a line (not a band).
+    pub fn is_line(&self, b: usize) -> bool {
+        b >= self.len()
+    }
+
+    /// Cell index `b` as text: `lo-hi Hz` or `order n`.
+    pub fn label(&self, b: usize) -> String {
+        match self.edges_hz.get(b) {
+            Some((lo, hi)) => format!("{lo:.1}-{hi:.1} Hz"),
+            None => format!("order {}", LINE_ORDERS.get(b - self.len()).copied().unwrap_or(0)),
+        }
+    }
+
     /// Geometric centre of band `b`, Hz.
     pub fn centre_hz(&self, b: usize) -> f64 {
         let (lo, hi) = self.edges_hz[b];
@@ -86,6 +105,8 @@ pub struct Segmentation {
     pub segment_len: usize,
     /// Every segment: its phase, its sample range.
     pub segments: Vec<(Phase, Range<usize>)>,
+    /// The constant-speed stage, where the lines are measured.
+    pub constant: Option<Range<usize>>,
 }
 
 impl Segmentation {
@@ -108,7 +129,9 @@ impl Segmentation {
                 start += n / 2;
             }
         }
-        Self { sample_rate_hz: signals.sample_rate_hz, segment_len: n, segments }
+        let constant =
+            signals.phases.iter().find(|(p, r)| *p == Phase::Constant && r.len() >= n).map(|(_, r)| r.clone());
+        Self { sample_rate_hz: signals.sample_rate_hz, segment_len: n, segments, constant }
     }
 
     /// The phases that have segments, in order.
@@ -128,6 +151,12 @@ pub struct ChannelSpectra {
     pub scale: Vec<f64>,
     /// Segment-major transforms, `bins` per segment.
     pub data: Vec<Complex64>,
+    /// Complex amplitudes of the [`LINE_ORDERS`] over the constant-speed
+    /// stage (empty without one), unit.
+    pub lines: Vec<Complex64>,
+    /// Noise scale of a line, `2 / T` (1/s, T the stage's duration): a
+    /// noise density `N` adds `2 N / T` to a line's squared amplitude.
+    pub line_noise_scale: f64,
 }
 
 /// The spectra of every channel of a recording on one segmentation.
@@ -171,7 +200,28 @@ impl ChainSpectra {
                 scale.push(2.0 / (segmentation.sample_rate_hz * w2.max(1e-12)));
                 data.extend_from_slice(&output[..bins]);
             }
-            channels.push((*channel, ChannelSpectra { bins, scale, data }));
+            let (lines, line_noise_scale) = match &segmentation.constant {
+                Some(r) if signals.angle_rad.len() >= r.end => {
+                    let x = &values[r.clone()];
+                    let theta = &signals.angle_rad[r.clone()];
+                    let mean = x.iter().sum::<f64>() / x.len() as f64;
+                    let n = x.len() as f64;
+                    let lines = LINE_ORDERS
+                        .iter()
+                        .map(|&order| {
+                            let mut a = Complex64::new(0.0, 0.0);
+                            for (v, t) in x.iter().zip(theta) {
+                                let (s, c) = (order as f64 * (t - theta[0])).sin_cos();
+                                a += Complex64::new(c, -s) * (v - mean);
+                            }
+                            a * (2.0 / n)
+                        })
+                        .collect();
+                    (lines, 2.0 * segmentation.sample_rate_hz / n)
+                }
+                _ => (Vec::new(), 0.0),
+            };
+            channels.push((*channel, ChannelSpectra { bins, scale, data, lines, line_noise_scale }));
         }
         Self { segmentation: segmentation.clone(), channels }
     }
@@ -185,17 +235,22 @@ impl ChainSpectra {
 /// A cell: channel, travel phase, band index.
 pub type CellKey = (Channel, Phase, usize);
 
-/// Mean power density of every (channel, phase, band) cell, unit^2/Hz, and
-/// the number of bins times segments averaged in it.
+/// One cell's power: a band's mean density (unit^2/Hz) or a line's squared
+/// amplitude (unit^2), the number of averages in it, and the factor that
+/// turns a noise density into the noise it adds to the cell (1 for a band,
+/// `2 / T` for a line).
+pub type CellPower = (f64, f64, f64);
+
+/// The power of every (channel, phase, band or line) cell.
 #[derive(Clone, Debug, Default)]
 pub struct CellPowers {
-    /// `(channel, phase, band) -> (density, averages)`.
-    pub cells: Vec<(CellKey, (f64, f64))>,
+    /// `(channel, phase, band) -> (power, averages, noise scale)`.
+    pub cells: Vec<(CellKey, CellPower)>,
 }
 
 impl CellPowers {
-    /// The cell's density and averages, if present.
-    pub fn get(&self, key: CellKey) -> Option<(f64, f64)> {
+    /// The cell's power, if present.
+    pub fn get(&self, key: CellKey) -> Option<CellPower> {
         self.cells.binary_search_by(|(k, _)| k.cmp(&key)).ok().map(|i| self.cells[i].1)
     }
 }
@@ -203,43 +258,9 @@ impl CellPowers {
 /// Cell powers of the linear combination `sum(coefficient * spectra)` of
 /// spectra on one segmentation (the first part's).
 pub fn cell_powers(parts: &[(&ChainSpectra, f64)], bands: &Bands) -> CellPowers {
-    let Some((first, _)) = parts.first() else {
-        return CellPowers::default();
-    };
-    let segs = &first.segmentation.segments;
-    let phases = first.segmentation.phases();
-    let mut cells = Vec::new();
-    for (channel, spectra) in &first.channels {
-        let others: Vec<(&ChannelSpectra, f64)> =
-            parts.iter().filter_map(|(s, c)| s.channel(*channel).map(|cs| (cs, *c))).collect();
-        if others.len() != parts.len() {
-            continue;
-        }
-        let bins = spectra.bins;
-        let mut sum = vec![vec![0.0; bands.len()]; phases.len()];
-        let mut count = vec![vec![0.0; bands.len()]; phases.len()];
-        for (s, (phase, _)) in segs.iter().enumerate() {
-            let p = phases.iter().position(|q| q == phase).unwrap_or(0);
-            for b in 0..bins {
-                let Some(band) = bands.bin_band[b] else { continue };
-                let mut x = Complex64::new(0.0, 0.0);
-                for (cs, c) in &others {
-                    x += cs.data[s * bins + b] * *c;
-                }
-                sum[p][band] += x.norm_sqr() * spectra.scale[s];
-                count[p][band] += 1.0;
-            }
-        }
-        for (p, phase) in phases.iter().enumerate() {
-            for band in 0..bands.len() {
-                if count[p][band] > 0.0 {
-                    cells.push(((*channel, *phase, band), (sum[p][band] / count[p][band], count[p][band])));
-                }
-            }
-        }
-    }
-    cells.sort_by_key(|a| a.0);
-    CellPowers { cells }
+    let spectra: Vec<&ChainSpectra> = parts.iter().map(|(s, _)| *s).collect();
+    let weights: Vec<f64> = parts.iter().map(|(_, w)| *w).collect();
+    CrossPowers::compute(&spectra, bands).powers(&weights)
 }
 
 /// The cross powers of several spectra on one segmentation, per cell:
@@ -250,8 +271,8 @@ pub fn cell_powers(parts: &[(&ChainSpectra, f64)], bands: &Bands) -> CellPowers 
 pub struct CrossPowers {
     /// Number of spectra.
     pub parts: usize,
-    /// `(cell, averages, S row-major parts x parts)`, sorted by cell.
-    pub cells: Vec<(CellKey, f64, Vec<f64>)>,
+    /// `(cell, averages, noise scale, S row-major parts x parts)`, sorted by cell.
+    pub cells: Vec<(CellKey, f64, f64, Vec<f64>)>,
 }
 
 impl CrossPowers {
@@ -299,8 +320,19 @@ impl CrossPowers {
                                 m[j * n + i] = m[i * n + j];
                             }
                         }
-                        cells.push(((*channel, *phase, band), k, m));
+                        cells.push(((*channel, *phase, band), k, 1.0, m));
                     }
+                }
+            }
+            if all.iter().all(|c| c.lines.len() == LINE_ORDERS.len()) {
+                for j in 0..LINE_ORDERS.len() {
+                    let mut m = vec![0.0; n * n];
+                    for i in 0..n {
+                        for k in 0..n {
+                            m[i * n + k] = (all[i].lines[j] * all[k].lines[j].conj()).re;
+                        }
+                    }
+                    cells.push(((*channel, Phase::Constant, bands.len() + j), 1.0, spectra.line_noise_scale, m));
                 }
             }
         }
@@ -314,14 +346,14 @@ impl CrossPowers {
         let cells = self
             .cells
             .iter()
-            .map(|(key, k, m)| {
+            .map(|(key, k, scale, m)| {
                 let mut p = 0.0;
                 for i in 0..n {
                     for j in 0..n {
                         p += weights[i] * weights[j] * m[i * n + j];
                     }
                 }
-                (*key, (p.max(0.0), *k))
+                (*key, (p.max(0.0), *k, *scale))
             })
             .collect();
         CellPowers { cells }
