@@ -38,6 +38,11 @@ use crate::recording::Recording;
 pub const PARAMETER_PENALTY: f64 = 0.03;
 /// Pairs are tried when the best single effect shrinks the held-out gap by less.
 pub const PAIR_TRIGGER_SHRINK: f64 = 0.7;
+/// Rounds of grid refinement around the best point.
+pub const REFINEMENT_ROUNDS: usize = 2;
+/// A grid is refined only when its best point leaves less than this
+/// fraction of the nominal model's gap (on all recordings).
+pub const REFINE_IF_BELOW: f64 = 0.9;
 /// A pair is kept only when its held-out gap after the fit is below this
 /// fraction of its better member's.
 pub const PAIR_MARGIN: f64 = 0.8;
@@ -169,7 +174,7 @@ fn search(kind: EffectKind, reference_tension_n: Option<f64>) -> Search {
         EffectKind::DivertingPulley => Search::Grid([0.006, 0.025, 0.1].iter().map(|&j| with(&[(0, j)])).collect()),
         EffectKind::RopeDiscretization => Search::Grid([2.0, 4.0, 8.0].iter().map(|&n| with(&[(0, n)])).collect()),
         EffectKind::CarFrameMode => Search::Grid(
-            [110.0, 170.0, 260.0, 400.0].iter().flat_map(|&f| [0.015, 0.06].map(|z| with(&[(0, f), (1, z)]))).collect(),
+            [120.0, 200.0, 330.0].iter().flat_map(|&f| [0.015, 0.05].map(|z| with(&[(0, f), (1, z)]))).collect(),
         ),
         EffectKind::BrakeStop => Search::Grid([4.0e3, 3.0e4, 2.0e5].iter().map(|&k| with(&[(0, k)])).collect()),
         EffectKind::CoulombGuideFriction => Search::Linear {
@@ -625,47 +630,56 @@ pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
         }
         index.push(idx);
     }
-    let refine_budget: usize =
-        searches.iter().filter(|(_, s)| matches!(s, Search::Grid(_))).map(|(k, _)| 2 * fitted_count(*k)).sum();
-    let planned = models.len() + refine_budget;
+    let mut planned = models.len();
     let mut done = 0;
     let runs = lab.run_all(&models, &mut done, planned);
     let nominal_runs: Runs = lab.targets.iter().map(|t| Some(t.nominal.clone())).collect();
 
-    // Refine the grids around their best point on all recordings.
+    // Build the families; refine the grids of the effects that reduce the
+    // gap at all, twice, around their best point on all recordings.
     let mut families: Vec<Family> = Vec::new();
     let all: Vec<usize> = (0..lab.targets.len()).collect();
-    let mut refine_models = Vec::new();
-    let mut refine_owner = Vec::new();
+    let nominal_mean = nominal.iter().sum::<f64>() / nominal.len().max(1) as f64;
     for ((kind, s), idx) in searches.iter().zip(&index) {
-        match s {
-            Search::Grid(points) => {
-                let bases: Vec<(GridPoint, Runs)> =
-                    points.iter().zip(idx).map(|(p, &m)| (vec![(*kind, p.clone())], runs[m].clone())).collect();
-                let mut f = Family { kinds: vec![*kind], bases, linear: Vec::new(), cross: Vec::new() };
-                f.prepare(lab);
-                let (best, _, _) = f.fit(lab, &all);
-                for p in refinement(*kind, points, best) {
-                    refine_models.push(effects_of(&[(*kind, p.clone())]).unwrap_or(nominal_effects));
-                    refine_owner.push((families.len(), *kind, p));
-                }
-                families.push(f);
+        let mut f = match s {
+            Search::Grid(points) => Family {
+                kinds: vec![*kind],
+                bases: points.iter().zip(idx).map(|(p, &m)| (vec![(*kind, p.clone())], runs[m].clone())).collect(),
+                linear: Vec::new(),
+                cross: Vec::new(),
+            },
+            Search::Linear { .. } => Family {
+                kinds: vec![*kind],
+                bases: vec![(Vec::new(), nominal_runs.clone())],
+                linear: vec![(*kind, s.clone(), idx.iter().map(|&m| runs[m].clone()).collect())],
+                cross: Vec::new(),
+            },
+        };
+        f.prepare(lab);
+        families.push(f);
+    }
+    for _round in 0..REFINEMENT_ROUNDS {
+        let mut refine_models = Vec::new();
+        let mut refine_owner = Vec::new();
+        for (i, f) in families.iter().enumerate() {
+            if !f.linear.is_empty() {
+                continue;
             }
-            Search::Linear { probes, .. } => {
-                let probe_runs: Vec<Runs> = idx.iter().map(|&m| runs[m].clone()).collect();
-                let _ = probes;
-                let mut f = Family {
-                    kinds: vec![*kind],
-                    bases: vec![(Vec::new(), nominal_runs.clone())],
-                    linear: vec![(*kind, s.clone(), probe_runs)],
-                    cross: Vec::new(),
-                };
-                f.prepare(lab);
-                families.push(f);
+            let (best, _, score) = f.fit(lab, &all);
+            if score >= REFINE_IF_BELOW * nominal_mean {
+                continue;
+            }
+            let kind = f.kinds[0];
+            let points: Vec<Vec<f64>> = f.bases.iter().map(|(p, _)| p[0].1.clone()).collect();
+            for p in refinement(kind, &points, best) {
+                refine_models.push(effects_of(&[(kind, p.clone())]).unwrap_or(nominal_effects));
+                refine_owner.push((i, kind, p));
             }
         }
-    }
-    if !refine_models.is_empty() {
+        if refine_models.is_empty() {
+            break;
+        }
+        planned = planned.max(done + refine_models.len());
         let extra = lab.run_all(&refine_models, &mut done, planned);
         let mut touched = Vec::new();
         for ((f, kind, p), r) in refine_owner.into_iter().zip(extra) {

@@ -163,8 +163,8 @@ pub fn gap_of_cells<'a>(cells: impl Iterator<Item = &'a CellGap>) -> GapValue {
         let add = [c.d_db * c.d_db, c.noise_db * c.noise_db, beyond * beyond];
         match per.iter_mut().find(|(ch, ..)| *ch == c.channel) {
             Some(e) => {
-                for k in 0..3 {
-                    e.1[k] += add[k];
+                for (sum, a) in e.1.iter_mut().zip(add) {
+                    *sum += a;
                 }
                 e.2 += 1;
             }

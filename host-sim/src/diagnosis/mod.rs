@@ -350,7 +350,8 @@ pub fn diagnose(
     } else {
         Verdict::Unexplained
     };
-    let mut simulations = (1 + planned.load(std::sync::atomic::Ordering::Relaxed)) * targets.len();
+    // The nominal model and its two perturbations, then the attribution's runs.
+    let mut simulations = (3 + planned.load(std::sync::atomic::Ordering::Relaxed)) * targets.len();
 
     // The explaining model on every recording: the gap after.
     let mut map_after = Vec::new();

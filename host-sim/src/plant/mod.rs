@@ -357,16 +357,24 @@ impl Plant {
         let theta_m = y[sheave] / r;
         let omega_m = y[n + sheave] / r;
         let p = self.pmsm.pole_pairs;
+        // One sin_cos of the shaft angle serves the ripple harmonics and,
+        // for a whole number of pole pairs, the Park transform.
+        let (s_m, c_m) = theta_m.sin_cos();
         let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
             (false, _) => (0.0, 0.0),
             (true, None) => {
                 let (va, vb) = self.machine_v_alpha_beta(id, iq, p * theta_m);
-                let (vd, vq) = park_v(va, vb, p * theta_m);
+                let (vd, vq) = if p.fract() == 0.0 && p > 0.0 && p <= 64.0 {
+                    let (c, s) = ripple::unit_power(c_m, s_m, p as u32);
+                    (va * c + vb * s, -va * s + vb * c)
+                } else {
+                    park_v(va, vb, p * theta_m)
+                };
                 self.pmsm.current_derivative(id, iq, vd, vq, p * omega_m)
             }
             (true, Some(phase)) => self.open_phase_current_derivative(phase, id, iq, p * theta_m, p * omega_m),
         };
-        let torque = self.pmsm.torque_nm(id, iq) + self.ripple.torque_nm(theta_m);
+        let torque = self.pmsm.torque_nm(id, iq) + self.ripple.torque_at(theta_m, s_m, c_m);
         let brake = match (self.inputs.brake_engaged, self.effects.brake_stop.is_some()) {
             (false, _) => BrakeAction::Released,
             (true, false) => BrakeAction::Held,

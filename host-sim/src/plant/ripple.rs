@@ -45,6 +45,11 @@ impl RippleTorque {
     /// this four times per integration step); others call `cos`.
     pub fn torque_nm(&self, theta_m_rad: f64) -> f64 {
         let (s, c) = theta_m_rad.sin_cos();
+        self.torque_at(theta_m_rad, s, c)
+    }
+
+    /// [`RippleTorque::torque_nm`] with `(sin, cos)` of the angle given, N m.
+    pub fn torque_at(&self, theta_m_rad: f64, s: f64, c: f64) -> f64 {
         self.harmonics
             .iter()
             .map(|h| {
@@ -52,7 +57,7 @@ impl RippleTorque {
                 let angle_cos = if n.fract() == 0.0 && n.abs() <= 1024.0 {
                     let (pc, ps) = unit_power(c, s, n.abs() as u32);
                     let ps = if n < 0.0 { -ps } else { ps };
-                    let (fs, fc) = h.phase_rad.sin_cos();
+                    let (fs, fc) = if h.phase_rad == 0.0 { (0.0, 1.0) } else { h.phase_rad.sin_cos() };
                     pc * fc - ps * fs
                 } else {
                     (n * theta_m_rad + h.phase_rad).cos()
@@ -65,7 +70,7 @@ impl RippleTorque {
 
 /// `(cos, sin)` of `n theta` from `(cos theta, sin theta)` by binary powers
 /// of the unit complex number (error about `n` ulp).
-fn unit_power(c: f64, s: f64, mut n: u32) -> (f64, f64) {
+pub fn unit_power(c: f64, s: f64, mut n: u32) -> (f64, f64) {
     let (mut rc, mut rs) = (1.0, 0.0);
     let (mut bc, mut bs) = (c, s);
     while n > 0 {
