@@ -171,7 +171,9 @@ fn search(kind: EffectKind, reference_tension_n: Option<f64>) -> Search {
             let t = reference_tension_n.unwrap_or(d[1]).clamp(10.0, 1.0e4);
             Search::Grid([0.2, 0.5, 0.85].iter().map(|&a| with(&[(0, a), (1, t)])).collect())
         }
-        EffectKind::DivertingPulley => Search::Grid([0.006, 0.025, 0.1].iter().map(|&j| with(&[(0, j)])).collect()),
+        EffectKind::DivertingPulley => {
+            Search::Grid([0.004, 0.012, 0.035, 0.1].iter().map(|&j| with(&[(0, j)])).collect())
+        }
         EffectKind::RopeDiscretization => Search::Grid([2.0, 4.0, 8.0].iter().map(|&n| with(&[(0, n)])).collect()),
         EffectKind::CarFrameMode => Search::Grid(
             [120.0, 200.0, 330.0].iter().flat_map(|&f| [0.015, 0.05].map(|z| with(&[(0, f), (1, z)]))).collect(),

@@ -52,10 +52,10 @@ pub fn gap_map_plot(
         frequency_hz: (0..bands_hz.len()).map(|b| b as f64).collect(),
         psd_db: map.iter().map(|(_, row)| row.iter().map(|v| v.unwrap_or(0.0)).collect()).collect(),
     };
-    let labels: Vec<String> = map.iter().enumerate().map(|(i, (p, _))| format!("{i}={}", p.name())).collect();
+    let labels: Vec<String> = map.iter().enumerate().map(|(i, (p, _))| format!("{i} {}", p.name())).collect();
     let title = format!(
-        "{title}; x: {}; y: band index (0 = {:.1} Hz, {} = {:.0} Hz, third octaves)",
-        labels.join(" "),
+        "{title} | x: {} | y: band 0 = {:.0} Hz .. {} = {:.0} Hz | colour: d, dB",
+        labels.join(", "),
         bands_hz[0].0,
         bands_hz.len() - 1,
         bands_hz[bands_hz.len() - 1].1
@@ -125,12 +125,12 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
 
     let mut plots = Vec::new();
     let p = out.join("gap_map_before.png");
-    gap_map_plot(&p, "gap d (dB) of the car acceleration, nominal model", &before, &report.bands_hz)?;
+    gap_map_plot(&p, "car acc., nominal", &before, &report.bands_hz)?;
     plots.push(("gap map before (nominal model)".to_string(), "gap_map_before.png".to_string()));
     written.push(p);
     if !after.is_empty() {
         let p = out.join("gap_map_after.png");
-        gap_map_plot(&p, "gap d (dB) of the car acceleration, explaining model", &after, &report.bands_hz)?;
+        gap_map_plot(&p, "car acc., explaining model", &after, &report.bands_hz)?;
         plots.push(("gap map after (explaining model)".to_string(), "gap_map_after.png".to_string()));
         written.push(p);
     }
