@@ -101,7 +101,7 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> anyhow::Result<Vec<(
             };
             let run = simulate_travel(rig, &travel, &options, None)?;
             let name = format!("travel_{}_m{m:.1}", if direction == Direction::Up { "up" } else { "down" });
-            let description = format!("full plant: {}", crate::diagnosis::simulate::describe(&spec.effects));
+            let description = format!("full plant: {}", spec.effects.summary());
             Ok((name, run.to_recording(&travel, rig.mechanics.m_cw_kg, description)))
         })
         .collect();
@@ -134,7 +134,7 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> anyhow::Result<Vec<(
             meta: RecordingMeta {
                 kind: RecordingKind::FreeDecay { mass_kg: mass, rope_length_m: spec.decay_rope_length_m },
                 sample_rate_hz: spec.sample_rate_hz,
-                description: Some(format!("full plant: {}", crate::diagnosis::simulate::describe(&spec.effects))),
+                description: Some(format!("full plant: {}", spec.effects.summary())),
             },
             columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, acc)],
         };

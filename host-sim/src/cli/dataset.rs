@@ -40,26 +40,10 @@ pub struct DatasetArgs {
     pub out: PathBuf,
 }
 
-/// The effects of `--effects FILE` and `--effect` flags.
-pub fn effects_from_args(file: Option<&std::path::Path>, flags: &[String]) -> anyhow::Result<Effects> {
-    let mut effects = match file {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| anyhow::anyhow!("cannot read the effects file {}: {e}", path.display()))?;
-            Effects::from_toml_str(&text, &path.display().to_string())?
-        }
-        None => Effects::none(),
-    };
-    for flag in flags {
-        effects.apply_flag(flag)?;
-    }
-    Ok(effects)
-}
-
 /// Runs `dataset`.
 pub fn run(rig: &RigConfig, args: &DatasetArgs) -> anyhow::Result<()> {
     let mut spec = DatasetSpec::rig(rig);
-    spec.effects = effects_from_args(args.effects_file.as_deref(), &args.effect)?;
+    spec.effects = Effects::from_file_and_flags(args.effects_file.as_deref(), &args.effect)?;
     if !args.masses_kg.is_empty() {
         for &m in &args.masses_kg {
             super::check_open_range("--mass", m, 0.0, 1.0e4)?;
@@ -81,7 +65,7 @@ pub fn run(rig: &RigConfig, args: &DatasetArgs) -> anyhow::Result<()> {
         "simulating {} travels and {} decays with {}",
         2 * spec.m_car_kg.len(),
         spec.decay_masses_kg.len(),
-        crate::diagnosis::simulate::describe(&spec.effects)
+        spec.effects.summary()
     );
     for (stem, recording) in make_dataset(rig, &spec)? {
         let (toml, _) = write_recording(&args.out, &stem, &recording)?;

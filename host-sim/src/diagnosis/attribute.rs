@@ -65,8 +65,6 @@ pub struct Target {
     pub tolerances: Tolerances,
     /// Segmentation of the model's runs (the nominal run's, aligned).
     pub segmentation: Segmentation,
-    /// Sample rate of the model's runs, Hz.
-    pub sample_rate_hz: f64,
     /// Spectra of the nominal model's run.
     pub nominal: ChainSpectra,
 }

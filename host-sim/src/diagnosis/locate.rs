@@ -8,7 +8,6 @@ use super::measure::{gap_of_cells, CellGap};
 use super::signals::{ChainSignals, Channel, Phase, Subsystem};
 use super::spectra::Bands;
 use super::RecordingGap;
-use crate::config::RigConfig;
 
 /// A channel's share of the gap.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -118,9 +117,7 @@ pub fn locate(
     bands: &Bands,
     targets: &[Target],
     measured: &[ChainSignals],
-    rig: &RigConfig,
 ) -> Location {
-    let _ = rig;
     let mut channels = Vec::new();
     for channel in Channel::ALL {
         let per: Vec<f64> = cells

@@ -34,7 +34,7 @@ use calibrate::{calibrate, Calibration};
 use locate::{locate, Location};
 use measure::{cell_gaps, gap_of_cells, CellGap, GapValue};
 use signals::{chain_signals, decimation_factor, ChainSignals};
-use simulate::{describe, model_step_s, simulate_counterpart};
+use simulate::{model_step_s, simulate_counterpart};
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 
 /// Largest nominal excess gap (dB, mean over the recordings) that the
@@ -273,7 +273,6 @@ pub fn diagnose(
             noise: measured.noise_density.clone(),
             tolerances,
             segmentation: seg_model,
-            sample_rate_hz: measured.sample_rate_hz,
             nominal: nominal_spectra,
         });
         measured_all.push(measured);
@@ -325,7 +324,7 @@ pub fn diagnose(
     let n = recordings.len() as f64;
     let nominal_excess_db = recordings.iter().map(|r| r.nominal_excess_db).sum::<f64>() / n;
     let noise_gap_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;
-    let location = locate(&nominal_cells, &recordings, &bands, &targets, &measured_all, rig);
+    let location = locate(&nominal_cells, &recordings, &bands, &targets, &measured_all);
 
     // Attribution.
     let planned = std::sync::atomic::AtomicUsize::new(0);
@@ -357,7 +356,7 @@ pub fn diagnose(
     let mut map_after = Vec::new();
     let explained_by = (verdict == Verdict::Explained).then(|| best.map(|b| b.name.clone())).flatten();
     if let (Verdict::Explained, Some(best)) = (verdict, best) {
-        progress(&format!("checking {}", describe(&best.effects)), 0, targets.len());
+        progress(&format!("checking {}", best.effects.summary()), 0, targets.len());
         let after: Vec<Option<Vec<CellGap>>> = targets
             .par_iter()
             .map(|t| {

@@ -134,11 +134,6 @@ impl ChainSignals {
         self.channels.iter().find(|(c, _)| *c == channel).map(|(_, v)| v.as_slice())
     }
 
-    /// The noise density of `channel`, unit^2/Hz (0 when unknown).
-    pub fn noise(&self, channel: Channel) -> f64 {
-        self.noise_density.iter().find(|(c, _)| *c == channel).map_or(0.0, |(_, n)| *n)
-    }
-
     /// Length in samples.
     pub fn len(&self) -> usize {
         self.channels.first().map_or(0, |(_, v)| v.len())

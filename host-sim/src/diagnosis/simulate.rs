@@ -67,7 +67,7 @@ pub fn simulate_recording(
             };
             let options = SimOptions { max_step_s, sample_rate_hz, effects: *effects, ..SimOptions::for_rig(&rig) };
             let run = simulate_travel(&rig, &spec, &options, None)
-                .with_context(|| format!("`{stem}`: simulating the travel with {}", describe(effects)))?;
+                .with_context(|| format!("`{stem}`: simulating the travel with {}", effects.summary()))?;
             Ok(run.to_recording(&spec, m_cw_kg, format!("model of {stem}")))
         }
         RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
@@ -96,21 +96,4 @@ pub fn simulate_recording(
             })
         }
     }
-}
-
-/// The effects as text: `nominal` or `name(param=value, ...) + ...`.
-pub fn describe(effects: &Effects) -> String {
-    let on = effects.enabled();
-    if on.is_empty() {
-        return "the nominal model".to_string();
-    }
-    on.iter()
-        .map(|k| {
-            let values = effects.values(*k).unwrap_or_default();
-            let params: Vec<String> =
-                k.parameters().iter().zip(values).map(|(s, v)| format!("{}={:.4e}", s.name, v)).collect();
-            format!("{}({})", k.name(), params.join(", "))
-        })
-        .collect::<Vec<_>>()
-        .join(" + ")
 }

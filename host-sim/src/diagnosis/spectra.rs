@@ -86,12 +86,6 @@ impl Bands {
             None => format!("order {}", LINE_ORDERS.get(b - self.len()).copied().unwrap_or(0)),
         }
     }
-
-    /// Geometric centre of band `b`, Hz.
-    pub fn centre_hz(&self, b: usize) -> f64 {
-        let (lo, hi) = self.edges_hz[b];
-        (lo * hi).sqrt()
-    }
 }
 
 /// Where the segments of a recording lie: Hann segments of [`SEGMENT_S`]
