@@ -129,6 +129,58 @@ pub fn travel_torque(
     })
 }
 
+/// Eqn 13 with Eqn 4 on one travel: what the constant-speed stage's torque
+/// balance gives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TorqueBalance {
+    /// Mean machine torque from the phase currents over the stage, N m.
+    pub mean_torque_nm: f64,
+    /// Mean shaft speed over the stage, rad/s.
+    pub mean_speed_radps: f64,
+    /// Mean out-of-balance torque of Eqn 4 along the stage, N m.
+    pub out_of_balance_torque_nm: f64,
+    /// Sheave rotational damping (Eqn 13), N m s/rad.
+    pub sheave_damping_nms_per_rad: f64,
+}
+
+/// The torque balance of the travel recording `stem` on `rig`, with
+/// `guide_damping_kg_per_s` the guides' total viscous damping `c_w + c_c`
+/// (kg/s): the machine torque from the currents (dq0, paper 3.3) averaged
+/// over the constant-speed stage, less the out-of-balance torque of Eqn 4,
+/// against the mean shaft speed.
+pub fn torque_balance(
+    rig: &crate::config::RigConfig,
+    recording: &crate::recording::Recording,
+    stem: &str,
+    guide_damping_kg_per_s: f64,
+) -> anyhow::Result<TorqueBalance> {
+    let crate::recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+        anyhow::bail!("recording `{stem}` is not a travel");
+    };
+    let m = &rig.mechanics;
+    let t = travel_torque(rig, recording, stem)?;
+    let stage = t.constant_speed.clone();
+    let lw = counterweight_side_length_m(&t.shaft_angle_rad, lw_start_m, m.sheave_radius_m);
+    let n = stage.len() as f64;
+    let mut chain = crate::plant::ChainParams::from_rig(rig, m_car_kg);
+    chain.m_cw_kg = m_cw_kg;
+    let mean_torque_nm = t.torque_nm[stage.clone()].iter().sum::<f64>() / n;
+    let mean_speed_radps = t.speed_radps[stage.clone()].iter().sum::<f64>() / n;
+    let out_of_balance_torque_nm = lw[stage].iter().map(|&l| chain.out_of_balance_torque_nm(l)).sum::<f64>() / n;
+    Ok(TorqueBalance {
+        mean_torque_nm,
+        mean_speed_radps,
+        out_of_balance_torque_nm,
+        sheave_damping_nms_per_rad: crate::analysis::identify::sheave_damping_from_torque_balance(
+            mean_torque_nm,
+            mean_speed_radps,
+            out_of_balance_torque_nm,
+            guide_damping_kg_per_s,
+            m.sheave_radius_m,
+        )?,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,11 +10,10 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::{column, create_out_dir, travel_torque, TravelTorque};
-use crate::analysis::identify::{identify_free_decay, sheave_damping_from_torque_balance};
-use crate::analysis::travel_signals::counterweight_side_length_m;
+use super::{column, create_out_dir};
+use crate::analysis::identify::identify_free_decay;
+use crate::analysis::travel_signals::torque_balance;
 use crate::config::RigConfig;
-use crate::plant::rope::ChainParams;
 use crate::plots::{line_plot, Series};
 use crate::recording::read::read_dataset;
 use crate::recording::{Recording, RecordingKind, ACC_CAR};
@@ -200,44 +199,28 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Eqn 13 on one travel recording: the machine torque from the phase
-/// currents (dq0, paper 3.3) averaged over the constant-speed stage, minus
-/// the out-of-balance torque of Eqn 4 along the stage, against the mean
-/// shaft speed, less the guide damping (the rig's `c_cw + c_car`, or twice
-/// the identified guide damping when free decays gave one).
+/// Eqn 13 on one travel recording ([`torque_balance`]), less the guide
+/// damping (the rig's `c_cw + c_car`, or twice the identified guide damping
+/// when free decays gave one).
 fn sheave_damping(
     rig: &RigConfig,
     stem: &str,
     recording: &Recording,
     identified_guide_damping: Option<f64>,
 ) -> anyhow::Result<SheaveResult> {
-    let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+    let RecordingKind::Travel { m_car_kg, m_cw_kg, .. } = recording.meta.kind else {
         anyhow::bail!("not a travel");
     };
     let m = &rig.mechanics;
-    let TravelTorque { speed_radps: speed, shaft_angle_rad: angle, torque_nm: torque, constant_speed: stage, .. } =
-        travel_torque(rig, recording, stem)?;
-    let lw = counterweight_side_length_m(&angle, lw_start_m, m.sheave_radius_m);
-    let n = stage.len() as f64;
-    let mean_torque = torque[stage.clone()].iter().sum::<f64>() / n;
-    let mean_speed = speed[stage.clone()].iter().sum::<f64>() / n;
-    let mut chain = ChainParams::from_rig(rig, m_car_kg);
-    chain.m_cw_kg = m_cw_kg;
-    let out_of_balance = lw[stage].iter().map(|&l| chain.out_of_balance_torque_nm(l)).sum::<f64>() / n;
     let guides = identified_guide_damping.map_or(m.c_cw_kg_per_s + m.c_car_kg_per_s, |c| 2.0 * c);
+    let b = torque_balance(rig, recording, stem, guides)?;
     Ok(SheaveResult {
         recording: stem.to_string(),
         m_car_kg,
         m_cw_kg,
-        mean_torque_nm: mean_torque,
-        mean_speed_radps: mean_speed,
-        out_of_balance_torque_nm: out_of_balance,
-        sheave_damping_nms_per_rad: sheave_damping_from_torque_balance(
-            mean_torque,
-            mean_speed,
-            out_of_balance,
-            guides,
-            m.sheave_radius_m,
-        )?,
+        mean_torque_nm: b.mean_torque_nm,
+        mean_speed_radps: b.mean_speed_radps,
+        out_of_balance_torque_nm: b.out_of_balance_torque_nm,
+        sheave_damping_nms_per_rad: b.sheave_damping_nms_per_rad,
     })
 }

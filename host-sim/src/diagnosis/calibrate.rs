@@ -5,10 +5,9 @@
 //! logarithmic decrement (Eqn 11-12), the sheave's damping from the torque
 //! balance of the constant-speed stage (Eqn 13 with Eqn 4).
 
-use crate::analysis::identify::{identify_free_decay, sheave_damping_from_torque_balance};
-use crate::analysis::travel_signals::{counterweight_side_length_m, travel_torque};
+use crate::analysis::identify::identify_free_decay;
+use crate::analysis::travel_signals::torque_balance;
 use crate::config::RigConfig;
-use crate::plant::ChainParams;
 use crate::recording::{Recording, RecordingKind, ACC_CAR};
 
 /// Highest frequency searched for a decay's first mode, Hz.
@@ -144,18 +143,8 @@ pub fn calibrate(rig: &RigConfig, dataset: &[(String, Recording)]) -> (RigConfig
 
     let mut travels = Vec::new();
     for (stem, recording) in dataset {
-        if let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind {
-            let result = travel_torque(rig, recording, stem).and_then(|t| {
-                let stage = t.constant_speed.clone();
-                let lw = counterweight_side_length_m(&t.shaft_angle_rad, lw_start_m, m.sheave_radius_m);
-                let n = stage.len() as f64;
-                let mut chain = ChainParams::from_rig(rig, m_car_kg);
-                chain.m_cw_kg = m_cw_kg;
-                let torque = t.torque_nm[stage.clone()].iter().sum::<f64>() / n;
-                let speed = t.speed_radps[stage.clone()].iter().sum::<f64>() / n;
-                let oob = lw[stage].iter().map(|&l| chain.out_of_balance_torque_nm(l)).sum::<f64>() / n;
-                Ok(sheave_damping_from_torque_balance(torque, speed, oob, 2.0 * guide, m.sheave_radius_m)?)
-            });
+        if let RecordingKind::Travel { .. } = recording.meta.kind {
+            let result = torque_balance(rig, recording, stem, 2.0 * guide).map(|b| b.sheave_damping_nms_per_rad);
             match result {
                 Ok(c) => travels.push((stem.clone(), c)),
                 Err(e) => skipped.push(format!("{stem}: {e:#}")),
