@@ -24,6 +24,8 @@ pub struct FreeDecayIdentification {
     pub damping_ratio: f64,
     /// Viscous damping `2 zeta omega m` (Eqn 12), kg/s.
     pub damping_kg_per_s: f64,
+    /// Hanging mass, kg.
+    pub mass_kg: f64,
     /// Rope tension at the mass, `m g`, N.
     pub tension_n: f64,
     /// Oscillation cycles used for the decrement.
@@ -46,14 +48,40 @@ pub fn rope_ea_from_first_frequency(f1_hz: f64, mu_kg_per_m: f64, length_m: f64,
     mu_kg_per_m * (omega / gamma).powi(2)
 }
 
+/// Fraction of the largest acceleration magnitude whose first crossing
+/// marks the release of a free decay.
+pub const RELEASE_FRACTION: f64 = 0.2;
+/// Pre-trigger samples shorter than this (s) give no noise estimate.
+const MIN_QUIET_S: f64 = 0.05;
+/// A spectral line counts as a mode when its amplitude is at least this
+/// fraction of the band's largest line ...
+const MODE_LINE_FRACTION: f64 = 0.05;
+/// ... and this many times the band's median amplitude (the noise floor).
+const MODE_LINE_OVER_FLOOR: f64 = 10.0;
+/// A first mode closer than this fraction to the top of the search band is
+/// refused: the band may have cut the mode off.
+const BAND_EDGE_FRACTION: f64 = 0.97;
+
 /// Identifies `EA`, the damping ratio and the guide damping from the
 /// acceleration of a free decay (m/s^2, sampled at `sample_rate_hz`).
 ///
-/// The first mode is the largest spectral line between 0.5 Hz and
-/// `max_frequency_hz`; the decrement is fitted (least squares on the log of
-/// the positive peaks) to the signal band-limited around that mode, from the
-/// third cycle until the peaks fall below 5 % of the largest, and turned into
+/// The decay may start anywhere in the recording: the release is the first
+/// sample whose magnitude reaches [`RELEASE_FRACTION`] of the largest, and
+/// what lies before it (a pre-trigger) gives the noise level. The first mode
+/// is the spectral line of the released part between 0.5 Hz and
+/// `max_frequency_hz` with the largest displacement amplitude (acceleration
+/// over `f^2`), among the lines that stand clear of the noise floor: the rope
+/// masses' own modes ring above it with more acceleration but far less
+/// displacement. The decrement is fitted (least squares on the log of the
+/// positive peaks) to the signal band-limited around that mode, from the
+/// second cycle after its largest peak until the peaks fall below 5 % of the
+/// largest or below three times the noise, and turned into
 /// `zeta = delta / sqrt(4 pi^2 + delta^2)` (Eqn 11 is its small-damping form).
+///
+/// # Errors
+/// A mode at the top edge of the search band (raise `max_frequency_hz`), a
+/// band holding no mode, fewer than 3 usable cycles, or an amplitude that
+/// does not decay (a negative damping is not physical).
 pub fn identify_free_decay(
     acceleration_mps2: &[f64],
     sample_rate_hz: f64,
@@ -72,42 +100,26 @@ pub fn identify_free_decay(
     if !(mu_kg_per_m >= 0.0 && mu_kg_per_m.is_finite()) {
         return Err(invalid("mu_kg_per_m", mu_kg_per_m, "a non-negative mass per length"));
     }
-    let spectrum = amplitude_spectrum(acceleration_mps2, sample_rate_hz, 4)?;
-    let band = |f: f64| f >= 0.5 && f <= max_frequency_hz.min(0.5 * sample_rate_hz);
-    let (coarse, _) = spectrum
-        .frequency_hz
-        .iter()
-        .zip(&spectrum.amplitude)
-        .filter(|(f, _)| band(**f))
-        .fold((f64::NAN, 0.0f64), |best, (f, a)| if *a > best.1 { (*f, *a) } else { best });
-    if !coarse.is_finite() {
-        return Err(invalid("max_frequency_hz", max_frequency_hz, "a band above 0.5 Hz holding the first mode"));
+    if !(max_frequency_hz > 1.0 && max_frequency_hz.is_finite()) {
+        return Err(invalid("max_frequency_hz", max_frequency_hz, "a frequency above 1 Hz"));
     }
-    let peak = spectrum.peak_near(coarse, 0.05).ok_or(AnalysisError::EmptySignal)?;
-    let f1 = peak.frequency_hz;
-
-    // Band-limit around the first mode: high-pass at f1/2, and remove what a
-    // high-pass at 2 f1 keeps (the higher rope modes).
-    let above_half = highpass_zero_phase(acceleration_mps2, sample_rate_hz, 0.5 * f1)?;
-    let above_double = highpass_zero_phase(&above_half, sample_rate_hz, (2.0 * f1).min(0.45 * sample_rate_hz))?;
-    let mode: Vec<f64> = above_half.iter().zip(&above_double).map(|(a, b)| a - b).collect();
-    let peaks = positive_peaks(&mode);
-    let largest = peaks.iter().fold(0.0f64, |m, p| m.max(*p));
-    let used: Vec<f64> = peaks.iter().copied().skip(2).take_while(|p| *p > 0.05 * largest).collect();
+    let release = release_index(acceleration_mps2)?;
+    let released = &acceleration_mps2[release..];
+    let top_hz = max_frequency_hz.min(0.5 * sample_rate_hz);
+    let f1 = first_mode_hz(released, sample_rate_hz, top_hz)?;
+    if f1 > BAND_EDGE_FRACTION * top_hz {
+        return Err(AnalysisError::ModeAtBandEdge { frequency_hz: f1, band_top_hz: top_hz });
+    }
+    let (mode, quiet) = first_mode_signal(acceleration_mps2, release, sample_rate_hz, f1)?;
+    let noise_rms = quiet.map(|q| (q.iter().map(|v| v * v).sum::<f64>() / q.len() as f64).sqrt());
+    let used = decaying_peaks(&mode[release..], noise_rms.unwrap_or(0.0));
     if used.len() < 3 {
         return Err(AnalysisError::TooShort { len: used.len(), min: 3, what: "decaying cycles of the first mode" });
     }
-    // Least-squares slope of ln(peak) against the cycle index.
-    let n = used.len() as f64;
-    let mean_k = (n - 1.0) / 2.0;
-    let logs: Vec<f64> = used.iter().map(|p| p.ln()).collect();
-    let mean_log = logs.iter().sum::<f64>() / n;
-    let (mut num, mut den) = (0.0, 0.0);
-    for (k, l) in logs.iter().enumerate() {
-        num += (k as f64 - mean_k) * (l - mean_log);
-        den += (k as f64 - mean_k).powi(2);
+    let decrement = log_decrement(&used);
+    if decrement <= 0.0 {
+        return Err(AnalysisError::NotDecaying { decrement });
     }
-    let decrement = -num / den;
     let zeta = decrement / (4.0 * std::f64::consts::PI.powi(2) + decrement * decrement).sqrt();
     let omega = std::f64::consts::TAU * f1;
     Ok(FreeDecayIdentification {
@@ -115,9 +127,90 @@ pub fn identify_free_decay(
         rope_ea_n: rope_ea_from_first_frequency(f1, mu_kg_per_m, rope_length_m, mass_kg),
         damping_ratio: zeta,
         damping_kg_per_s: 2.0 * zeta * omega * mass_kg,
+        mass_kg,
         tension_n: mass_kg * gravity_mps2,
         cycles_used: used.len(),
     })
+}
+
+/// The release of a free decay: the first sample whose magnitude reaches
+/// [`RELEASE_FRACTION`] of the largest.
+fn release_index(acceleration_mps2: &[f64]) -> Result<usize, AnalysisError> {
+    let largest = acceleration_mps2.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(largest > 0.0 && largest.is_finite()) {
+        return Err(AnalysisError::EmptySignal);
+    }
+    Ok(acceleration_mps2.iter().position(|v| v.abs() >= RELEASE_FRACTION * largest).unwrap_or(0))
+}
+
+/// The first mode (Hz) of a released decay: among the spectral lines below
+/// `top_hz` that are local maxima, at least [`MODE_LINE_FRACTION`] of the
+/// largest and [`MODE_LINE_OVER_FLOOR`] times the median, the one with the
+/// largest displacement amplitude (`A / f^2`), refined by [`peak_near`].
+///
+/// [`peak_near`]: super::spectrum::AmplitudeSpectrum::peak_near
+fn first_mode_hz(released: &[f64], sample_rate_hz: f64, top_hz: f64) -> Result<f64, AnalysisError> {
+    let spectrum = amplitude_spectrum(released, sample_rate_hz, 4)?;
+    let (f, a) = (&spectrum.frequency_hz, &spectrum.amplitude);
+    let in_band: Vec<usize> = (1..f.len().saturating_sub(1)).filter(|&i| f[i] >= 0.5 && f[i] <= top_hz).collect();
+    let largest = in_band.iter().fold(0.0f64, |m, &i| m.max(a[i]));
+    let mut sorted: Vec<f64> = in_band.iter().map(|&i| a[i]).collect();
+    sorted.sort_by(f64::total_cmp);
+    let floor = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let threshold = (MODE_LINE_FRACTION * largest).max(MODE_LINE_OVER_FLOOR * floor);
+    let best = in_band
+        .iter()
+        .filter(|&&i| a[i] >= threshold && a[i] > 0.0 && a[i] >= a[i - 1] && a[i] >= a[i + 1])
+        .max_by(|&&i, &&j| (a[i] / (f[i] * f[i])).total_cmp(&(a[j] / (f[j] * f[j]))));
+    let Some(&i) = best else {
+        return Err(invalid("max_frequency_hz", top_hz, "a band above 0.5 Hz holding the first mode"));
+    };
+    Ok(spectrum.peak_near(f[i], 0.05).map_or(f[i], |p| p.frequency_hz))
+}
+
+/// The decay band-limited to the first mode at `f1` Hz (high-pass at
+/// `f1/2`, less what a high-pass at `2 f1` keeps: the higher rope modes), and
+/// the band-limited pre-trigger before `release` when it is long enough to
+/// tell the noise.
+fn first_mode_signal(
+    acceleration_mps2: &[f64],
+    release: usize,
+    sample_rate_hz: f64,
+    f1: f64,
+) -> Result<(Vec<f64>, Option<Vec<f64>>), AnalysisError> {
+    let above_half = highpass_zero_phase(acceleration_mps2, sample_rate_hz, 0.5 * f1)?;
+    let above_double = highpass_zero_phase(&above_half, sample_rate_hz, (2.0 * f1).min(0.45 * sample_rate_hz))?;
+    let mode: Vec<f64> = above_half.iter().zip(&above_double).map(|(a, b)| a - b).collect();
+    // The zero-phase filters smear the release backwards by a few cycles.
+    let margin = (3.0 * sample_rate_hz / f1) as usize;
+    let quiet_end = release.saturating_sub(margin);
+    let quiet = (quiet_end as f64 >= MIN_QUIET_S * sample_rate_hz).then(|| mode[..quiet_end].to_vec());
+    Ok((mode, quiet))
+}
+
+/// The positive peaks of the band-limited decay used for the decrement:
+/// from the second after the largest, while above 5 % of the largest and
+/// three times `noise_rms`.
+fn decaying_peaks(mode: &[f64], noise_rms: f64) -> Vec<f64> {
+    let peaks = positive_peaks(mode);
+    let (top, largest) = peaks.iter().enumerate().fold((0, 0.0f64), |b, (i, p)| if *p > b.1 { (i, *p) } else { b });
+    let floor = (0.05 * largest).max(3.0 * noise_rms);
+    peaks.iter().copied().skip(top + 2).take_while(|p| *p > floor).collect()
+}
+
+/// Logarithmic decrement per cycle: the least-squares slope of `ln(peak)`
+/// against the cycle index, negated.
+fn log_decrement(peaks: &[f64]) -> f64 {
+    let n = peaks.len() as f64;
+    let mean_k = (n - 1.0) / 2.0;
+    let logs: Vec<f64> = peaks.iter().map(|p| p.ln()).collect();
+    let mean_log = logs.iter().sum::<f64>() / n;
+    let (mut num, mut den) = (0.0, 0.0);
+    for (k, l) in logs.iter().enumerate() {
+        num += (k as f64 - mean_k) * (l - mean_log);
+        den += (k as f64 - mean_k).powi(2);
+    }
+    -num / den
 }
 
 /// The largest value of each positive half-cycle (between zero crossings).

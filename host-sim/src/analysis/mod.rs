@@ -14,6 +14,7 @@ pub mod burg;
 pub mod dq0;
 pub mod filter;
 pub mod identify;
+pub mod identify_dataset;
 pub mod iso2631;
 pub mod ride_quality;
 pub mod spectrogram;
@@ -107,6 +108,28 @@ pub enum AnalysisError {
         value: f64,
         /// Human-readable description of the accepted range.
         expected: &'static str,
+    },
+    /// The mode searched for lies at the top edge of the search band: the
+    /// band may have cut the true mode off.
+    #[error(
+        "the first mode found, {frequency_hz:.3} Hz, lies at the top of the search band ({band_top_hz:.3} Hz); \
+         expected a band that holds the mode with room above it (raise the band's top)"
+    )]
+    ModeAtBandEdge {
+        /// Frequency of the line found, Hz.
+        frequency_hz: f64,
+        /// Top of the search band, Hz.
+        band_top_hz: f64,
+    },
+    /// The oscillation's amplitude does not decay: a negative damping is
+    /// not physical (a disturbance, or not a free decay).
+    #[error(
+        "the amplitude of the first mode does not decay (logarithmic decrement {decrement:.4}); expected a free \
+         decay, whose damping is positive"
+    )]
+    NotDecaying {
+        /// Logarithmic decrement per cycle fitted to the peaks.
+        decrement: f64,
     },
     /// Finite inputs produced a non-finite intermediate result because the
     /// signal magnitude is extreme (around 1e150 and above).

@@ -109,7 +109,7 @@ pub fn travel_torque(
     let (i_a, i_b, i_c) = (column(I_A)?, column(I_B)?, column(I_C)?);
     let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
     let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
-    let torque = crate::analysis::machine_torque_nm(
+    let mut torque = crate::analysis::machine_torque_nm(
         i_a,
         i_b,
         i_c,
@@ -120,6 +120,22 @@ pub fn travel_torque(
         mo.lq_h,
         offset,
     )?;
+    let expected = expected_torque_nm(rig, recording, &angle, speed)?;
+    let agreement = sign_agreement(&torque, &expected);
+    if agreement.abs() < MIN_SIGN_AGREEMENT {
+        anyhow::bail!(
+            "recording `{stem}`: the machine torque from the currents neither follows nor opposes the torque that \
+             the travel needs (Eqn 4, inertia and damping; correlation {agreement:.2}); expected a magnitude of \
+             at least {MIN_SIGN_AGREEMENT}: are the phase currents, the speed sign (positive with the car going \
+             up) and the masses right?"
+        );
+    }
+    let offset = if agreement < 0.0 {
+        torque.iter_mut().for_each(|t| *t = -*t);
+        offset + std::f64::consts::PI
+    } else {
+        offset
+    };
     Ok(TravelTorque {
         constant_speed: crate::analysis::constant_speed_stage(speed, fs)?,
         speed_radps: speed.to_vec(),
@@ -127,6 +143,62 @@ pub fn travel_torque(
         electrical_offset_rad: offset,
         torque_nm: torque,
     })
+}
+
+/// Smallest |correlation| between the machine torque from the currents and
+/// the torque the travel needs ([`expected_torque_nm`]) that settles the
+/// half-turn ambiguity of the electrical angle offset.
+pub const MIN_SIGN_AGREEMENT: f64 = 0.3;
+
+/// Normalised correlation of `torque` with `expected`: near +1 when the
+/// currents' torque has the right sign, near -1 when the electrical angle
+/// offset is half a turn off.
+fn sign_agreement(torque: &[f64], expected: &[f64]) -> f64 {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let norm = (dot(torque, torque) * dot(expected, expected)).sqrt();
+    if norm > 0.0 {
+        dot(torque, expected) / norm
+    } else {
+        0.0
+    }
+}
+
+/// The shaft torque (N m, positive lifts the car) that the rigid nominal
+/// chain of `rig` needs along the measured motion of a travel: the
+/// out-of-balance torque of Eqn 4 at the rope length reached, the inertia
+/// of sheave, masses and rope times the shaft acceleration (the speed's
+/// derivative over 50 ms), and the damping of Eqn 13 times the speed. The
+/// electrical angle offset found from `i_d = 0` is ambiguous by half a turn;
+/// this torque tells which of the two is right, whatever drive ran the rig.
+pub fn expected_torque_nm(
+    rig: &crate::config::RigConfig,
+    recording: &crate::recording::Recording,
+    shaft_angle_rad: &[f64],
+    speed_radps: &[f64],
+) -> anyhow::Result<Vec<f64>> {
+    let crate::recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+        anyhow::bail!("not a travel recording");
+    };
+    let m = &rig.mechanics;
+    let mut chain = crate::plant::ChainParams::from_rig(rig, m_car_kg);
+    chain.m_cw_kg = m_cw_kg;
+    let r = m.sheave_radius_m;
+    let inertia = m.sheave_inertia_kg_m2
+        + (m_car_kg + m_cw_kg + m.rope_mass_per_length_kg_per_m * m.rope_total_length_m) * r * r;
+    let damping = m.c_sheave_nms_per_rad + (m.c_cw_kg_per_s + m.c_car_kg_per_s) * r * r;
+    let lw = counterweight_side_length_m(shaft_angle_rad, lw_start_m, r);
+    let fs = recording.meta.sample_rate_hz;
+    let half = ((0.025 * fs).round() as usize).max(1);
+    let n = speed_radps.len();
+    Ok((0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(half), (k + half).min(n - 1));
+            let accel = if b > a { (speed_radps[b] - speed_radps[a]) * fs / (b - a) as f64 } else { 0.0 };
+            chain.out_of_balance_torque_nm(lw[k].clamp(0.0, m.rope_total_length_m))
+                + inertia * accel
+                + damping * speed_radps[k]
+        })
+        .collect())
 }
 
 /// Eqn 13 with Eqn 4 on one travel: what the constant-speed stage's torque

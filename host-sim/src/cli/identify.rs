@@ -10,13 +10,12 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::{column, create_out_dir};
-use crate::analysis::identify::identify_free_decay;
-use crate::analysis::travel_signals::torque_balance;
+use super::create_out_dir;
+use crate::analysis::identify_dataset::{identify_dataset, LeftOut};
 use crate::config::RigConfig;
 use crate::plots::{line_plot, Series};
 use crate::recording::read::read_dataset;
-use crate::recording::{Recording, RecordingKind, ACC_CAR};
+use crate::recording::RecordingKind;
 
 /// Options of `identify`.
 #[derive(Debug, Args)]
@@ -67,74 +66,62 @@ struct Report {
     mean_guide_damping_kg_per_s: Option<f64>,
     travels: Vec<SheaveResult>,
     mean_sheave_damping_nms_per_rad: Option<f64>,
-    skipped: Vec<String>,
-}
-
-fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
-    let v: Vec<f64> = values.collect();
-    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    left_out: Vec<LeftOut>,
 }
 
 /// Runs `identify`.
 pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
+    super::check_open_range("--max-frequency", args.max_frequency_hz, 1.0, 1.0e6)?;
     let m = &rig.mechanics;
     let dataset = read_dataset(&args.dataset, m.rope_total_length_m)?;
     create_out_dir(&args.out)?;
-    let mut report = Report {
+    let id = identify_dataset(rig, &dataset, args.max_frequency_hz);
+    let kind_of = |stem: &str| dataset.iter().find(|(s, _)| s == stem).map(|(_, r)| r.meta.kind.clone());
+    let report = Report {
         dataset: args.dataset.display().to_string(),
-        free_decays: Vec::new(),
-        mean_rope_ea_n: None,
-        mean_damping_ratio: None,
-        mean_guide_damping_kg_per_s: None,
-        travels: Vec::new(),
-        mean_sheave_damping_nms_per_rad: None,
-        skipped: Vec::new(),
-    };
-    for (stem, recording) in &dataset {
-        let fs = recording.meta.sample_rate_hz;
-        match recording.meta.kind {
-            RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
-                let acc = column(recording, ACC_CAR, stem)?;
-                match identify_free_decay(
-                    acc,
-                    fs,
-                    mass_kg,
-                    rope_length_m,
-                    m.rope_mass_per_length_kg_per_m,
-                    m.gravity_mps2,
-                    args.max_frequency_hz,
-                ) {
-                    Ok(id) => report.free_decays.push(DecayResult {
-                        recording: stem.clone(),
-                        mass_kg,
-                        rope_length_m,
-                        tension_n: id.tension_n,
-                        first_frequency_hz: id.first_frequency_hz,
-                        rope_ea_n: id.rope_ea_n,
-                        damping_ratio: id.damping_ratio,
-                        guide_damping_kg_per_s: id.damping_kg_per_s,
-                        cycles_used: id.cycles_used,
-                    }),
-                    Err(e) => report.skipped.push(format!("{stem}: {e}")),
+        free_decays: id
+            .decays
+            .iter()
+            .map(|(stem, d)| DecayResult {
+                recording: stem.clone(),
+                mass_kg: d.mass_kg,
+                rope_length_m: match kind_of(stem) {
+                    Some(RecordingKind::FreeDecay { rope_length_m, .. }) => rope_length_m,
+                    _ => f64::NAN,
+                },
+                tension_n: d.tension_n,
+                first_frequency_hz: d.first_frequency_hz,
+                rope_ea_n: d.rope_ea_n,
+                damping_ratio: d.damping_ratio,
+                guide_damping_kg_per_s: d.damping_kg_per_s,
+                cycles_used: d.cycles_used,
+            })
+            .collect(),
+        mean_rope_ea_n: id.rope_ea_n,
+        mean_damping_ratio: id.damping_ratio,
+        mean_guide_damping_kg_per_s: id.guide_damping_kg_per_s,
+        travels: id
+            .travels
+            .iter()
+            .map(|(stem, b)| {
+                let (m_car_kg, m_cw_kg) = match kind_of(stem) {
+                    Some(RecordingKind::Travel { m_car_kg, m_cw_kg, .. }) => (m_car_kg, m_cw_kg),
+                    _ => (f64::NAN, f64::NAN),
+                };
+                SheaveResult {
+                    recording: stem.clone(),
+                    m_car_kg,
+                    m_cw_kg,
+                    mean_torque_nm: b.mean_torque_nm,
+                    mean_speed_radps: b.mean_speed_radps,
+                    out_of_balance_torque_nm: b.out_of_balance_torque_nm,
+                    sheave_damping_nms_per_rad: b.sheave_damping_nms_per_rad,
                 }
-            }
-            RecordingKind::Travel { .. } => {}
-        }
-    }
-    // Travels after the free decays, so that their guide damping is used.
-    let identified_guides = mean(report.free_decays.iter().map(|d| d.guide_damping_kg_per_s));
-    for (stem, recording) in &dataset {
-        if let RecordingKind::Travel { .. } = recording.meta.kind {
-            match sheave_damping(rig, stem, recording, identified_guides) {
-                Ok(result) => report.travels.push(result),
-                Err(e) => report.skipped.push(format!("{stem}: {e:#}")),
-            }
-        }
-    }
-    report.mean_rope_ea_n = mean(report.free_decays.iter().map(|d| d.rope_ea_n));
-    report.mean_damping_ratio = mean(report.free_decays.iter().map(|d| d.damping_ratio));
-    report.mean_guide_damping_kg_per_s = mean(report.free_decays.iter().map(|d| d.guide_damping_kg_per_s));
-    report.mean_sheave_damping_nms_per_rad = mean(report.travels.iter().map(|t| t.sheave_damping_nms_per_rad));
+            })
+            .collect(),
+        mean_sheave_damping_nms_per_rad: id.sheave_damping_nms_per_rad,
+        left_out: id.left_out,
+    };
 
     let json = args.out.join("identify.json");
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
@@ -190,37 +177,14 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
         );
     }
     for t in &report.travels {
-        println!("{:<28} c_sheave = {:.3} N m s/rad (Eqn 13)", t.recording, t.sheave_damping_nms_per_rad);
+        println!(
+            "{:<28} c_sheave = {:.3} N m s/rad (Eqn 13; mean torque {:+.2} N m at {:+.3} rad/s)",
+            t.recording, t.sheave_damping_nms_per_rad, t.mean_torque_nm, t.mean_speed_radps
+        );
     }
-    for s in &report.skipped {
-        println!("skipped: {s}");
+    for l in &report.left_out {
+        println!("left out: {}: {}", l.recording, l.reason);
     }
     println!("wrote {}, {}", json.display(), csv_path.display());
     Ok(())
-}
-
-/// Eqn 13 on one travel recording ([`torque_balance`]), less the guide
-/// damping (the rig's `c_cw + c_car`, or twice the identified guide damping
-/// when free decays gave one).
-fn sheave_damping(
-    rig: &RigConfig,
-    stem: &str,
-    recording: &Recording,
-    identified_guide_damping: Option<f64>,
-) -> anyhow::Result<SheaveResult> {
-    let RecordingKind::Travel { m_car_kg, m_cw_kg, .. } = recording.meta.kind else {
-        anyhow::bail!("not a travel");
-    };
-    let m = &rig.mechanics;
-    let guides = identified_guide_damping.map_or(m.c_cw_kg_per_s + m.c_car_kg_per_s, |c| 2.0 * c);
-    let b = torque_balance(rig, recording, stem, guides)?;
-    Ok(SheaveResult {
-        recording: stem.to_string(),
-        m_car_kg,
-        m_cw_kg,
-        mean_torque_nm: b.mean_torque_nm,
-        mean_speed_radps: b.mean_speed_radps,
-        out_of_balance_torque_nm: b.out_of_balance_torque_nm,
-        sheave_damping_nms_per_rad: b.sheave_damping_nms_per_rad,
-    })
 }

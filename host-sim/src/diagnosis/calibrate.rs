@@ -5,10 +5,9 @@
 //! logarithmic decrement (Eqn 11-12), the sheave's damping from the torque
 //! balance of the constant-speed stage (Eqn 13 with Eqn 4).
 
-use crate::analysis::identify::identify_free_decay;
-use crate::analysis::travel_signals::torque_balance;
+use crate::analysis::identify_dataset::identify_dataset;
 use crate::config::RigConfig;
-use crate::recording::{Recording, RecordingKind, ACC_CAR};
+use crate::recording::Recording;
 
 /// Highest frequency searched for a decay's first mode, Hz.
 pub const DECAY_MAX_FREQUENCY_HZ: f64 = 100.0;
@@ -97,61 +96,31 @@ impl Calibration {
     }
 }
 
-fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
-    let v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
-    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-}
-
-/// Calibrates `rig` on `dataset`; returns the calibrated rig and the record.
+/// Calibrates `rig` on `dataset` ([`identify_dataset`]: every recording on
+/// its own, implausible values and outliers left out with the reason);
+/// returns the calibrated rig and the record. A value the data does not
+/// give stays the rig's.
 pub fn calibrate(rig: &RigConfig, dataset: &[(String, Recording)]) -> (RigConfig, Calibration) {
     let m = &rig.mechanics;
-    let mut decays = Vec::new();
-    let mut skipped = Vec::new();
-    for (stem, recording) in dataset {
-        if let RecordingKind::FreeDecay { mass_kg, rope_length_m } = recording.meta.kind {
-            let Some(acc) = recording.column(ACC_CAR) else {
-                skipped.push(format!("{stem}: no {ACC_CAR}"));
-                continue;
-            };
-            match identify_free_decay(
-                &acc.values,
-                recording.meta.sample_rate_hz,
-                mass_kg,
-                rope_length_m,
-                m.rope_mass_per_length_kg_per_m,
-                m.gravity_mps2,
-                DECAY_MAX_FREQUENCY_HZ,
-            ) {
-                Ok(id) => decays.push(DecayCalibration {
-                    recording: stem.clone(),
-                    mass_kg,
-                    tension_n: id.tension_n,
-                    first_frequency_hz: id.first_frequency_hz,
-                    rope_ea_n: id.rope_ea_n,
-                    damping_ratio: id.damping_ratio,
-                    guide_damping_kg_per_s: id.damping_kg_per_s,
-                }),
-                Err(e) => skipped.push(format!("{stem}: {e}")),
-            }
-        }
-    }
-    let rope_ea_n = mean(decays.iter().map(|d| d.rope_ea_n)).unwrap_or(m.rope_ea_n);
-    let guide =
-        mean(decays.iter().map(|d| d.guide_damping_kg_per_s)).unwrap_or(0.5 * (m.c_cw_kg_per_s + m.c_car_kg_per_s));
+    let id = identify_dataset(rig, dataset, DECAY_MAX_FREQUENCY_HZ);
+    let decays: Vec<DecayCalibration> = id
+        .decays
+        .iter()
+        .map(|(stem, d)| DecayCalibration {
+            recording: stem.clone(),
+            mass_kg: d.mass_kg,
+            tension_n: d.tension_n,
+            first_frequency_hz: d.first_frequency_hz,
+            rope_ea_n: d.rope_ea_n,
+            damping_ratio: d.damping_ratio,
+            guide_damping_kg_per_s: d.damping_kg_per_s,
+        })
+        .collect();
+    let rope_ea_n = id.rope_ea_n.unwrap_or(m.rope_ea_n);
+    let guide = id.guide_damping_kg_per_s.unwrap_or(0.5 * (m.c_cw_kg_per_s + m.c_car_kg_per_s));
+    let sheave = id.sheave_damping_nms_per_rad.unwrap_or(m.c_sheave_nms_per_rad);
     let reference_tension_n = (!decays.is_empty())
         .then(|| (decays.iter().map(|d| d.tension_n.ln()).sum::<f64>() / decays.len() as f64).exp());
-
-    let mut travels = Vec::new();
-    for (stem, recording) in dataset {
-        if let RecordingKind::Travel { .. } = recording.meta.kind {
-            let result = torque_balance(rig, recording, stem, 2.0 * guide).map(|b| b.sheave_damping_nms_per_rad);
-            match result {
-                Ok(c) => travels.push((stem.clone(), c)),
-                Err(e) => skipped.push(format!("{stem}: {e:#}")),
-            }
-        }
-    }
-    let sheave = mean(travels.iter().map(|(_, c)| *c)).map_or(m.c_sheave_nms_per_rad, |c| c.max(0.0));
     let mut calibrated = rig.clone();
     calibrated.mechanics.rope_ea_n = rope_ea_n;
     calibrated.mechanics.c_cw_kg_per_s = guide;
@@ -163,8 +132,8 @@ pub fn calibrate(rig: &RigConfig, dataset: &[(String, Recording)]) -> (RigConfig
         sheave_damping_nms_per_rad: sheave,
         reference_tension_n,
         decays,
-        travels,
-        skipped,
+        travels: id.travels.iter().map(|(stem, b)| (stem.clone(), b.sheave_damping_nms_per_rad)).collect(),
+        skipped: id.left_out.iter().map(|l| format!("{}: {}", l.recording, l.reason)).collect(),
         nominal: (m.rope_ea_n, 0.5 * (m.c_cw_kg_per_s + m.c_car_kg_per_s), m.c_sheave_nms_per_rad),
     };
     (calibrated, calibration)
