@@ -135,7 +135,10 @@ pub fn identify_free_decay(
 
 /// The release of a free decay: the first sample whose magnitude reaches
 /// [`RELEASE_FRACTION`] of the largest.
-fn release_index(acceleration_mps2: &[f64]) -> Result<usize, AnalysisError> {
+///
+/// # Errors
+/// [`AnalysisError::EmptySignal`] for a signal without a finite non-zero sample.
+pub fn release_index(acceleration_mps2: &[f64]) -> Result<usize, AnalysisError> {
     let largest = acceleration_mps2.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if !(largest > 0.0 && largest.is_finite()) {
         return Err(AnalysisError::EmptySignal);

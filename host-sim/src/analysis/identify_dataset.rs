@@ -64,7 +64,11 @@ pub struct DatasetIdentification {
 /// torque balance. `max_frequency_hz` bounds the search for a decay's first
 /// mode. Never fails: a recording that gives nothing usable is left out
 /// with the reason.
-pub fn identify_dataset(rig: &RigConfig, dataset: &[(String, Recording)], max_frequency_hz: f64) -> DatasetIdentification {
+pub fn identify_dataset(
+    rig: &RigConfig,
+    dataset: &[(String, Recording)],
+    max_frequency_hz: f64,
+) -> DatasetIdentification {
     let m = &rig.mechanics;
     let mut out = DatasetIdentification::default();
     let mut decays = Vec::new();
@@ -104,13 +108,9 @@ pub fn identify_dataset(rig: &RigConfig, dataset: &[(String, Recording)], max_fr
             }
         }
     }
-    let travels = out.plausible(
-        travels,
-        "sheave damping",
-        "N m s/rad",
-        SHEAVE_DAMPING_RANGE_NMS_PER_RAD,
-        |b| b.sheave_damping_nms_per_rad,
-    );
+    let travels = out.plausible(travels, "sheave damping", "N m s/rad", SHEAVE_DAMPING_RANGE_NMS_PER_RAD, |b| {
+        b.sheave_damping_nms_per_rad
+    });
     out.sheave_damping_nms_per_rad = mean(travels.iter().map(|(_, b)| b.sheave_damping_nms_per_rad));
     out.travels = travels;
     out
@@ -140,17 +140,24 @@ impl DatasetIdentification {
             } else {
                 self.leave_out(
                     &stem,
-                    format!("{what} {v:.4e} {unit} lies outside the plausible range {:.1e} to {:.1e} {unit}", range.0, range.1),
+                    format!(
+                        "{what} {v:.4e} {unit} lies outside the plausible range {:.1e} to {:.1e} {unit}",
+                        range.0, range.1
+                    ),
                 );
             }
         }
         let values: Vec<f64> = kept.iter().map(|(_, e)| value(e)).collect();
         let Some((median, limit)) = outlier_limit(&values) else { return kept };
-        let (good, outliers): (Vec<_>, Vec<_>) = kept.into_iter().partition(|(_, e)| (value(e) - median).abs() <= limit);
+        let (good, outliers): (Vec<_>, Vec<_>) =
+            kept.into_iter().partition(|(_, e)| (value(e) - median).abs() <= limit);
         for (stem, e) in outliers {
             self.leave_out(
                 &stem,
-                format!("{what} {:.4e} {unit} is an outlier: the median of the recordings is {median:.4e} {unit}", value(&e)),
+                format!(
+                    "{what} {:.4e} {unit} is an outlier: the median of the recordings is {median:.4e} {unit}",
+                    value(&e)
+                ),
             );
         }
         good

@@ -183,8 +183,8 @@ pub fn expected_torque_nm(
     let mut chain = crate::plant::ChainParams::from_rig(rig, m_car_kg);
     chain.m_cw_kg = m_cw_kg;
     let r = m.sheave_radius_m;
-    let inertia = m.sheave_inertia_kg_m2
-        + (m_car_kg + m_cw_kg + m.rope_mass_per_length_kg_per_m * m.rope_total_length_m) * r * r;
+    let inertia =
+        m.sheave_inertia_kg_m2 + (m_car_kg + m_cw_kg + m.rope_mass_per_length_kg_per_m * m.rope_total_length_m) * r * r;
     let damping = m.c_sheave_nms_per_rad + (m.c_cw_kg_per_s + m.c_car_kg_per_s) * r * r;
     let lw = counterweight_side_length_m(shaft_angle_rad, lw_start_m, r);
     let fs = recording.meta.sample_rate_hz;

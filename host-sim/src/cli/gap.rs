@@ -20,6 +20,11 @@ use crate::recording::{read_dataset, ACC_CAR};
 pub struct GapArgs {
     /// The dataset: a directory of recordings in the measurement format.
     pub dataset: PathBuf,
+    /// The rig's drive: `auto` decides from the torque at standstill,
+    /// `project` (this project's drive core: closed loop, every channel) or
+    /// `foreign` (another drive: the mechanics driven by the measured torque).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub drive: DriveArg,
     /// Output directory for gap.json, gap.md, CSV tables and plots.
     #[arg(long, value_name = "DIR", default_value = "out/gap")]
     pub out: PathBuf,
@@ -33,6 +38,27 @@ pub struct GapArgs {
     /// Smallest held-out shrink of the gap (0-1) for `explained`.
     #[arg(long, value_name = "FRACTION", default_value_t = crate::diagnosis::EXPLAINED_SHRINK)]
     pub explained_shrink: f64,
+}
+
+/// `--drive` values.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum DriveArg {
+    /// Decide from the data.
+    Auto,
+    /// This project's drive core.
+    Project,
+    /// Another drive.
+    Foreign,
+}
+
+impl From<DriveArg> for crate::diagnosis::DriveAssumption {
+    fn from(d: DriveArg) -> Self {
+        match d {
+            DriveArg::Auto => Self::Auto,
+            DriveArg::Project => Self::Project,
+            DriveArg::Foreign => Self::Foreign,
+        }
+    }
 }
 
 /// Runs `gap`.
@@ -66,8 +92,12 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
-    let options =
-        GapOptions { effects, nominal_excess_db: args.nominal_excess_db, explained_shrink: args.explained_shrink };
+    let options = GapOptions {
+        drive: args.drive.into(),
+        effects,
+        nominal_excess_db: args.nominal_excess_db,
+        explained_shrink: args.explained_shrink,
+    };
     let name = args.dataset.display().to_string();
     let report = diagnose(rig, &name, &dataset, &options, &progress)?;
     bar.finish_and_clear();

@@ -11,8 +11,10 @@
 //! 4. [`attribute`]: every effect fitted and cross-validated.
 //! 5. The verdict: `nominal`, `explained` or `unexplained` ([`report`]).
 
+pub mod acquisition;
 pub mod attribute;
 pub mod calibrate;
+pub mod driven;
 pub mod locate;
 pub mod measure;
 pub mod replay;
@@ -23,11 +25,12 @@ pub mod spectra;
 
 use std::time::Instant;
 
-use anyhow::Context;
 use rayon::prelude::*;
 
+use crate::analysis::identify_dataset::LeftOut;
 use crate::config::RigConfig;
 use crate::plant::effects::{EffectKind, Effects};
+use crate::plant::free_decay::eqn9_first_frequency_hz;
 use crate::recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
 use attribute::{attribute, Candidate, Lab, Target};
 use calibrate::{calibrate, Calibration};
@@ -55,9 +58,56 @@ pub enum Verdict {
     Unexplained,
 }
 
+/// Largest RMS gap (dB) of the torque at standstill (start and stop cells)
+/// between the recording and the project's drive in closed loop for which
+/// the rig is taken to run the project's drive.
+pub const DRIVE_MISMATCH_DB: f64 = 6.0;
+
+/// On a rig that is not the project's, a free decay's gap is taken up to
+/// this multiple of its first natural frequency (Eqn 9): the decay tests the
+/// first mode (Eqn 9, 11); the rope's own modes above it ring as the test's
+/// release and the rope's make excite them, which the nominal model does not
+/// claim to know.
+pub const DECAY_TOP_MODE_FACTOR: f64 = 4.0;
+
+/// What the diagnosis may assume about the rig's drive.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DriveAssumption {
+    /// Decide from the data ([`DRIVE_MISMATCH_DB`]).
+    #[default]
+    Auto,
+    /// The rig runs the project's drive core.
+    Project,
+    /// The rig runs another drive.
+    Foreign,
+}
+
+/// The drive model of the travels' counterparts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DriveModel {
+    /// The project's drive core in closed loop with the plant: every
+    /// channel (torque, speed, accelerations) compared, the replay beside it.
+    Project,
+    /// Another drive: the mechanics driven by the measured torque
+    /// ([`driven`]); the accelerations compared.
+    Foreign,
+}
+
+/// The drive model used and why.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DriveFinding {
+    /// The model.
+    pub drive: DriveModel,
+    /// Why, in words.
+    pub reason: String,
+}
+
 /// Settings of a diagnosis.
 #[derive(Clone, Debug)]
 pub struct GapOptions {
+    /// What to assume about the rig's drive.
+    pub drive: DriveAssumption,
     /// The effects to try (default: the whole library).
     pub effects: Vec<EffectKind>,
     /// See [`NOMINAL_EXCESS_DB`].
@@ -69,6 +119,7 @@ pub struct GapOptions {
 impl Default for GapOptions {
     fn default() -> Self {
         Self {
+            drive: DriveAssumption::Auto,
             effects: EffectKind::ALL.to_vec(),
             nominal_excess_db: NOMINAL_EXCESS_DB,
             explained_shrink: EXPLAINED_SHRINK,
@@ -104,6 +155,13 @@ pub struct GapReport {
     pub dataset: String,
     /// The verdict.
     pub verdict: Verdict,
+    /// The drive the travels' model assumes, and why.
+    pub drive: DriveFinding,
+    /// Recordings not diagnosed, with the reason (the calibration's own
+    /// left-out recordings are in [`Calibration::skipped`]).
+    pub left_out: Vec<LeftOut>,
+    /// Why no effect was fitted, when the data cannot support the fit.
+    pub attribution_refused: Option<String>,
     /// The explaining effect (or pair) when `explained`.
     pub explained_by: Option<String>,
     /// The gap measure, in words, with its unit.
@@ -197,8 +255,232 @@ fn align_phases(measured: &mut ChainSignals, model: &mut ChainSignals) {
     model.phases = model_phases;
 }
 
+/// One recording made ready for the gap: its measured chain signals and the
+/// nominal model's counterpart with its two perturbations.
+struct Prepared {
+    stem: String,
+    measured: ChainSignals,
+    nominal: ChainSignals,
+    perturbed: Vec<ChainSignals>,
+    /// The torque-driven model's response to the current probes' noise in
+    /// the measured torque (another draw of it), where the model is driven.
+    noise_response: Option<ChainSignals>,
+}
+
+/// `signal` plus white Gaussian noise of one-sided density `density`
+/// (unit^2/Hz) at `sample_rate_hz`, seeded from `stem` (reproducible).
+fn with_white_noise(signal: &[f64], density: f64, sample_rate_hz: f64, stem: &str) -> Vec<f64> {
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+    let sigma = (density * 0.5 * sample_rate_hz).sqrt();
+    let Ok(normal) = rand_distr::Normal::new(0.0, sigma) else { return signal.to_vec() };
+    let seed = stem.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    signal.iter().map(|v| v + normal.sample(&mut rng)).collect()
+}
+
+/// `a - b`, channel by channel (same channels, lengths and phases).
+fn difference(a: &ChainSignals, b: &ChainSignals) -> ChainSignals {
+    let mut out = a.clone();
+    for ((_, x), (_, y)) in out.channels.iter_mut().zip(&b.channels) {
+        x.iter_mut().zip(y).for_each(|(x, y)| *x -= y);
+    }
+    out
+}
+
+/// The measured chain signals of every recording and, for the decision on
+/// the drive, the closed loop's nominal run of each (an error where it
+/// cannot run, e.g. the project's drive trips on the recording).
+fn measure_and_run_closed_loop(
+    rig: &RigConfig,
+    model: &RigConfig,
+    dataset: &[(String, Recording)],
+    left_out: &mut Vec<LeftOut>,
+) -> Vec<(usize, ChainSignals, anyhow::Result<ChainSignals>)> {
+    let runs: Vec<anyhow::Result<(ChainSignals, anyhow::Result<ChainSignals>)>> = dataset
+        .par_iter()
+        .map(|(stem, recording)| {
+            let factor = decimation_factor(recording.meta.sample_rate_hz);
+            let measured = chain_signals(rig, recording, stem, factor, true)?;
+            let closed = simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
+            Ok((measured, closed))
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (i, run) in runs.into_iter().enumerate() {
+        match run {
+            Ok((measured, closed)) => out.push((i, measured, closed)),
+            Err(e) => left_out.push(LeftOut { recording: dataset[i].0.clone(), reason: format!("{e:#}") }),
+        }
+    }
+    out
+}
+
+/// RMS (dB) over the torque channel's start and stop cells of how far the
+/// closed loop's torque lies from the measured: the drive's own start and
+/// stop sequence (brake timing, pre-torque, torque ramps), which any other
+/// drive does its own way.
+fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> f64 {
+    let (mut measured, mut closed) = (measured.clone(), closed.clone());
+    align_phases(&mut measured, &mut closed);
+    let seg = Segmentation::of(&measured);
+    let bands = Bands::new(measured.sample_rate_hz, seg.segment_len);
+    let m = cell_powers(&[(&ChainSpectra::compute(&measured, &seg, &bands), 1.0)], &bands);
+    let c = cell_powers(&[(&ChainSpectra::compute(&closed, &Segmentation::of(&closed), &bands), 1.0)], &bands);
+    let cells = cell_gaps(&m, &measured.noise_density, &Vec::new(), &c);
+    let d: Vec<f64> = cells
+        .iter()
+        .filter(|c| {
+            c.channel == signals::Channel::Torque && matches!(c.phase, signals::Phase::Start | signals::Phase::Stop)
+        })
+        .map(|c| c.d_db * c.d_db)
+        .collect();
+    if d.is_empty() {
+        0.0
+    } else {
+        (d.iter().sum::<f64>() / d.len() as f64).sqrt()
+    }
+}
+
+/// Which drive the travels' model assumes, and why.
+fn decide_drive(
+    option: DriveAssumption,
+    dataset: &[(String, Recording)],
+    runs: &[(usize, ChainSignals, anyhow::Result<ChainSignals>)],
+) -> DriveFinding {
+    let travels = runs.iter().filter(|(i, ..)| matches!(dataset[*i].1.meta.kind, RecordingKind::Travel { .. }));
+    match option {
+        DriveAssumption::Project => {
+            return DriveFinding { drive: DriveModel::Project, reason: "set by --drive project".into() }
+        }
+        DriveAssumption::Foreign => {
+            return DriveFinding { drive: DriveModel::Foreign, reason: "set by --drive foreign".into() }
+        }
+        DriveAssumption::Auto => {}
+    }
+    for (i, measured, closed) in travels {
+        let stem = &dataset[*i].0;
+        let reason = match closed {
+            Err(e) => format!("the project's drive cannot run travel `{stem}` ({e:#})"),
+            Ok(closed) => {
+                let d = start_stop_torque_gap_db(measured, closed);
+                if d <= DRIVE_MISMATCH_DB {
+                    continue;
+                }
+                format!(
+                    "the torque of travel `{stem}` at standstill (start and stop) lies {d:.1} dB (RMS) from the \
+                     project's drive (more than {DRIVE_MISMATCH_DB} dB): another start and stop sequence"
+                )
+            }
+        };
+        return DriveFinding { drive: DriveModel::Foreign, reason };
+    }
+    DriveFinding {
+        drive: DriveModel::Project,
+        reason: format!(
+            "the project's drive reproduces every travel's torque at standstill within {DRIVE_MISMATCH_DB} dB"
+        ),
+    }
+}
+
+/// The model's counterpart of a measured recording, with its two
+/// perturbations: the closed loop (the project's drive) or, for travels
+/// under another drive, the torque-driven mechanics ([`driven`]); the
+/// measured signals reduced to the channels the counterpart has.
+fn counterpart(
+    models: [&RigConfig; 3],
+    drive: DriveModel,
+    stem: &str,
+    recording: &Recording,
+    mut measured: ChainSignals,
+    closed: anyhow::Result<ChainSignals>,
+) -> anyhow::Result<Prepared> {
+    let driven = matches!(recording.meta.kind, RecordingKind::Travel { .. }) && drive == DriveModel::Foreign;
+    let torque = measured.channel(signals::Channel::Torque).map(<[f64]>::to_vec).unwrap_or_default();
+    let torque_noise_density =
+        measured.noise_density.iter().find(|(c, _)| *c == signals::Channel::Torque).map_or(0.0, |(_, n)| *n);
+    if driven {
+        measured.channels.retain(|(c, _)| {
+            matches!(c, signals::Channel::CarAcceleration | signals::Channel::CounterweightAcceleration)
+        });
+        measured.noise_density.retain(|(c, _)| measured.channels.iter().any(|(m, _)| m == c));
+    }
+    let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
+        driven_counterpart(model, recording, &measured, &torque, settings)
+    };
+    let run_closed =
+        |model: &RigConfig| simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
+    let (nominal, perturbed) = if driven {
+        let settings = driven::DrivenSettings::default();
+        let mut perturbed = vec![run_driven(models[1], &settings)?, run_driven(models[2], &settings)?];
+        for alternative in driven::DrivenSettings::alternatives() {
+            perturbed.push(run_driven(models[0], &alternative)?);
+        }
+        (run_driven(models[0], &settings)?, perturbed)
+    } else {
+        (closed?, vec![run_closed(models[1])?, run_closed(models[2])?])
+    };
+    let noise_response = if driven {
+        let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
+        let run = driven_counterpart(models[0], recording, &measured, &noisy, &driven::DrivenSettings::default())?;
+        Some(difference(&run, &nominal))
+    } else {
+        None
+    };
+    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response })
+}
+
+/// The torque-driven counterpart of the travel `recording` whose measured
+/// chain signals (with the torque and the angle) are `measured`.
+fn driven_counterpart(
+    model: &RigConfig,
+    recording: &Recording,
+    measured: &ChainSignals,
+    torque: &[f64],
+    settings: &driven::DrivenSettings,
+) -> anyhow::Result<ChainSignals> {
+    let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+        anyhow::bail!("not a travel");
+    };
+    let phase = |p: signals::Phase| measured.phases.iter().find(|(q, _)| *q == p).map(|(_, r)| r.clone());
+    let Some(constant) = phase(signals::Phase::Constant) else {
+        anyhow::bail!("the travel has no constant-speed stage");
+    };
+    let travel = driven::DrivenTravel {
+        m_car_kg,
+        m_cw_kg,
+        lw_start_m,
+        torque_nm: torque,
+        shaft_angle_rad: &measured.angle_rad,
+        motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
+        constant_speed: constant,
+        sample_rate_hz: measured.sample_rate_hz,
+    };
+    let (car, cw) = driven::torque_driven_accelerations(model, &travel, settings)?;
+    // The rig's accelerometers high-pass what they record; the model's
+    // accelerations go through the same, its corner found from the data.
+    let fs = measured.sample_rate_hz;
+    let measured_car = measured.channel(signals::Channel::CarAcceleration).unwrap_or(&[]);
+    let corner_hz = acquisition::identify_highpass_hz(measured_car, &car, fs)?;
+    let (car, cw) =
+        (acquisition::first_order_highpass(&car, fs, corner_hz), acquisition::first_order_highpass(&cw, fs, corner_hz));
+    let mut channels = vec![(signals::Channel::CarAcceleration, car)];
+    if measured.channel(signals::Channel::CounterweightAcceleration).is_some() {
+        channels.push((signals::Channel::CounterweightAcceleration, cw));
+    }
+    Ok(ChainSignals {
+        sample_rate_hz: measured.sample_rate_hz,
+        channels,
+        phases: measured.phases.clone(),
+        noise_density: Vec::new(),
+        angle_rad: measured.angle_rad.clone(),
+    })
+}
+
 /// Runs the diagnosis of `dataset` (named `name`) on `rig`; `progress`
-/// gets (step, runs done, runs planned).
+/// gets (step, runs done, runs planned). A recording that cannot be
+/// measured or simulated is left out with the reason; the verdict is given
+/// on the rest.
 pub fn diagnose(
     rig: &RigConfig,
     name: &str,
@@ -213,29 +495,32 @@ pub fn diagnose(
     progress("calibrating", 0, 1);
     let (model, calibration) = calibrate(rig, dataset);
     let perturbed_models = [calibration.perturbed(&model, 1.0), calibration.perturbed(&model, -1.0)];
+    let mut left_out = Vec::new();
 
-    // Measured signals and the nominal closed loop, per recording.
     progress("nominal model", 0, dataset.len());
-    let prepared: Vec<anyhow::Result<(ChainSignals, ChainSignals, [ChainSignals; 2])>> = dataset
-        .par_iter()
-        .map(|(stem, recording)| {
-            let factor = decimation_factor(recording.meta.sample_rate_hz);
-            let measured = chain_signals(rig, recording, stem, factor, true)?;
-            let step = model_step_s(&model);
-            let nominal = simulate_counterpart(&model, &Effects::none(), recording, stem, step)?;
-            let perturbed = [
-                simulate_counterpart(&perturbed_models[0], &Effects::none(), recording, stem, step)?,
-                simulate_counterpart(&perturbed_models[1], &Effects::none(), recording, stem, step)?,
-            ];
-            Ok((measured, nominal, perturbed))
+    let runs = measure_and_run_closed_loop(rig, &model, dataset, &mut left_out);
+    let drive = decide_drive(options.drive, dataset, &runs);
+    let prepared: Vec<(usize, anyhow::Result<Prepared>)> = runs
+        .into_par_iter()
+        .map(|(i, measured, closed)| {
+            let (stem, recording) = &dataset[i];
+            let models = [&model, &perturbed_models[0], &perturbed_models[1]];
+            (i, counterpart(models, drive.drive, stem, recording, measured, closed))
         })
         .collect();
     let mut targets = Vec::new();
     let mut measured_all = Vec::new();
+    let mut used = Vec::new();
     let mut bands_all: Option<Bands> = None;
-    for ((stem, recording), prepared) in dataset.iter().zip(prepared) {
-        let (mut measured, mut nominal, mut perturbed) =
-            prepared.with_context(|| format!("dataset {name}, recording `{stem}`"))?;
+    for (i, prepared) in prepared {
+        let recording = &dataset[i].1;
+        let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response } = match prepared {
+            Ok(p) => p,
+            Err(e) => {
+                left_out.push(LeftOut { recording: dataset[i].0.clone(), reason: format!("{e:#}") });
+                continue;
+            }
+        };
         let measured_for_perturbed = measured.clone();
         align_phases(&mut measured, &mut nominal);
         for p in perturbed.iter_mut() {
@@ -245,15 +530,41 @@ pub fn diagnose(
         let seg_model = Segmentation::of(&nominal);
         let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len);
         if bands_all.as_ref().is_some_and(|b| b.edges_hz != bands.edges_hz) {
-            anyhow::bail!(
-                "dataset {name}: recording `{stem}` has a sample rate ({} Hz) whose analysis bands differ from the \
-                 others'; expected one sample rate for the whole dataset",
-                recording.meta.sample_rate_hz
-            );
+            left_out.push(LeftOut {
+                recording: stem.clone(),
+                reason: format!(
+                    "its sample rate ({} Hz) gives other analysis bands than the dataset's first recording; \
+                     expected one sample rate for the whole dataset",
+                    recording.meta.sample_rate_hz
+                ),
+            });
+            continue;
         }
         let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
         let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
-        let measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
+        let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
+        // Before the motion, another drive lifts its brake against its own
+        // pre-torque when it likes: the recording does not say when, so the
+        // standstill before the motion is no gap of the mechanics.
+        if noise_response.is_some() {
+            measured_cells.cells.retain(|((_, phase, _), _)| *phase != signals::Phase::Start);
+        }
+        // The model carries its response to the torque's measurement noise;
+        // the measured side gets the same, as the model gets the sensors'.
+        if let Some(response) = &noise_response {
+            let spectra = ChainSpectra::compute(response, &Segmentation::of(response), &bands);
+            let extra = cell_powers(&[(&spectra, 1.0)], &bands);
+            for (key, power) in measured_cells.cells.iter_mut() {
+                power.0 += extra.get(*key).map_or(0.0, |e| e.0);
+            }
+        }
+        if let (DriveModel::Foreign, RecordingKind::FreeDecay { mass_kg, rope_length_m }) =
+            (drive.drive, &recording.meta.kind)
+        {
+            let m = &model.mechanics;
+            let f1 = eqn9_first_frequency_hz(m.rope_ea_n, m.rope_mass_per_length_kg_per_m, *rope_length_m, *mass_kg);
+            measured_cells.cells.retain(|((_, _, band), _)| bands.edges_hz[*band].1 <= DECAY_TOP_MODE_FACTOR * f1);
+        }
         let nominal_cells = cell_powers(&[(&nominal_spectra, 1.0)], &bands);
         let perturbed_cells: Vec<_> = perturbed
             .iter()
@@ -266,7 +577,7 @@ pub fn diagnose(
             RecordingKind::FreeDecay { mass_kg, .. } => format!("{mass_kg:.1} kg"),
         };
         targets.push(Target {
-            stem: stem.clone(),
+            stem,
             group,
             recording: light_copy(recording),
             measured: measured_cells,
@@ -276,7 +587,12 @@ pub fn diagnose(
             nominal: nominal_spectra,
         });
         measured_all.push(measured);
+        used.push(i);
         bands_all = Some(bands);
+    }
+    if targets.is_empty() {
+        let reasons: Vec<String> = left_out.iter().map(|l| format!("`{}`: {}", l.recording, l.reason)).collect();
+        anyhow::bail!("dataset {name}: no recording could be diagnosed: {}", reasons.join("; "));
     }
     let bands = bands_all.unwrap_or_else(|| Bands::new(2048.0, 2048));
     progress("nominal model", dataset.len(), dataset.len());
@@ -286,12 +602,14 @@ pub fn diagnose(
         .iter()
         .map(|t| cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&t.nominal, 1.0)], &bands)))
         .collect();
-    let replays: Vec<Option<Vec<CellGap>>> = dataset
+    let replays: Vec<Option<Vec<CellGap>>> = used
         .par_iter()
         .zip(measured_all.par_iter())
         .zip(targets.par_iter())
-        .map(|(((stem, recording), measured), target)| {
-            replay::replay_cells(&model, recording, stem, measured, target, &bands).ok()
+        .map(|((&i, measured), target)| {
+            let (stem, recording) = &dataset[i];
+            let project = drive.drive == DriveModel::Project;
+            project.then(|| replay::replay_cells(&model, recording, stem, measured, target, &bands).ok()).flatten()
         })
         .collect();
     let low_acc = |c: &&CellGap| {
@@ -340,7 +658,16 @@ pub fn diagnose(
         progress: &report_progress,
     };
     let is_nominal = nominal_excess_db <= options.nominal_excess_db;
-    let ranking = if options.effects.is_empty() { Vec::new() } else { attribute(&lab, &options.effects) };
+    let attribution_refused = (drive.drive == DriveModel::Foreign && !is_nominal).then(|| {
+        "the library's effects are fitted with the project's drive in the loop, and the rig's drive is another: \
+         the effect is not attributed (the location above still holds)"
+            .to_string()
+    });
+    let ranking = if options.effects.is_empty() || drive.drive == DriveModel::Foreign {
+        Vec::new()
+    } else {
+        attribute(&lab, &options.effects)
+    };
     let best = ranking.first();
     let verdict = if is_nominal {
         Verdict::Nominal
@@ -382,6 +709,9 @@ pub fn diagnose(
     Ok(GapReport {
         dataset: name.to_string(),
         verdict,
+        drive,
+        left_out,
+        attribution_refused,
         explained_by,
         gap_measure: GAP_MEASURE.to_string(),
         nominal_excess_db,

@@ -3,6 +3,8 @@
 //! same free decay, sampled at the analysis rate.
 
 use anyhow::Context;
+
+use crate::analysis::identify::release_index;
 use shared::config::Direction;
 
 use super::signals::{chain_signals, decimation_factor, ChainSignals};
@@ -72,7 +74,9 @@ pub fn simulate_recording(
         }
         RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
             let acc = measured.column(ACC_CAR).with_context(|| format!("`{stem}`: no {ACC_CAR}"))?;
-            let duration_s = acc.values.len() as f64 / measured.meta.sample_rate_hz;
+            let fs = measured.meta.sample_rate_hz;
+            let release = release_index(&acc.values).with_context(|| format!("`{stem}`: finding the release"))?;
+            let released_s = (acc.values.len() - release) as f64 / fs;
             let m = &rig.mechanics;
             let spec = FreeDecaySpec {
                 mass_kg,
@@ -80,11 +84,19 @@ pub fn simulate_recording(
                 rope_ea_n: m.rope_ea_n,
                 rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
                 damping_kg_per_s: m.c_car_kg_per_s,
-                initial_acceleration_mps2: acc.values.first().copied().unwrap_or(0.0),
+                initial_acceleration_mps2: 1.0,
                 elements: DECAY_ROPE_ELEMENTS,
             };
-            let values = simulate_free_decay_with(&spec, effects, sample_rate_hz, duration_s)
+            let unit = simulate_free_decay_with(&spec, effects, sample_rate_hz, released_s)
                 .with_context(|| format!("`{stem}`: simulating the free decay"))?;
+            // The held displacement is the test's, not the model's: the
+            // model's decay takes the measured level over its first second.
+            let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+            let first_s = |v: &[f64], rate: f64| rms(&v[..((rate as usize).min(v.len()))]);
+            let level = first_s(&acc.values[release..], fs) / first_s(&unit, sample_rate_hz).max(1e-300);
+            let pre_trigger = (release as f64 / fs * sample_rate_hz).round() as usize;
+            let values: Vec<f64> =
+                std::iter::repeat_n(0.0, pre_trigger).chain(unit.iter().map(|a| a * level)).collect();
             let time = (0..values.len()).map(|i| i as f64 / sample_rate_hz).collect();
             Ok(Recording {
                 meta: RecordingMeta {
