@@ -14,6 +14,7 @@ pub mod closed_loop;
 pub mod compensation;
 pub mod diagnosis;
 pub mod faults;
+pub mod foreign;
 pub mod pil;
 pub mod plant;
 pub mod plots;
