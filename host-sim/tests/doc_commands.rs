@@ -230,12 +230,23 @@ fn run(place: &str, args: &[String], dir: &Path) -> String {
     stdout + &stderr
 }
 
-/// A fresh, empty scratch directory of this test run.
-fn scratch(tag: &str) -> PathBuf {
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
-    let dir = std::env::temp_dir().join(format!("host-sim-doc-commands-{}-{nanos}-{tag}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh, empty scratch directory of this test run, removed when dropped
+/// (also when an assertion fails).
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(tag: &str) -> Self {
+        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
+        let dir = std::env::temp_dir().join(format!("host-sim-doc-commands-{}-{nanos}-{tag}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        Scratch(dir)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// Subcommands `host-sim --help` lists (its "Commands:" section).
@@ -263,8 +274,8 @@ fn lists_flag(help: &str, flag: &str) -> bool {
 #[test]
 fn commands_in_readme_and_docs_run_as_written() {
     let root = repo_root();
-    let scratch_root = scratch("all");
-    let top_help = run("host-sim --help", &["--help".to_string()], &scratch_root);
+    let scratch_root = Scratch::new("all");
+    let top_help = run("host-sim --help", &["--help".to_string()], &scratch_root.0);
     let known = subcommands(&top_help);
     assert!(known.len() >= 10, "too few subcommands parsed from --help:\n{top_help}");
 
@@ -288,7 +299,7 @@ fn commands_in_readme_and_docs_run_as_written() {
             }
             let quick = sub.as_deref().is_some_and(|s| QUICK.contains(&s));
             if is_help(&args) || quick {
-                let dir = scratch(&format!("{ran}"));
+                let dir = Scratch::new(&format!("{ran}"));
                 let args: Vec<String> = args
                     .iter()
                     .map(|a| {
@@ -300,15 +311,14 @@ fn commands_in_readme_and_docs_run_as_written() {
                         }
                     })
                     .collect();
-                run(place, &args, &dir);
-                std::fs::remove_dir_all(&dir).ok();
+                run(place, &args, &dir.0);
                 ran += 1;
                 continue;
             }
             let sub = sub.unwrap_or_else(|| panic!("{place}: `{}` names no subcommand", cmd.text));
             let help = sub_help
                 .entry(sub.clone())
-                .or_insert_with(|| run(place, &[sub.clone(), "--help".to_string()], &scratch_root));
+                .or_insert_with(|| run(place, &[sub.clone(), "--help".to_string()], &scratch_root.0));
             for arg in args.iter().filter(|a| a.starts_with("--")) {
                 let flag = arg.split('=').next().unwrap();
                 assert!(lists_flag(help, flag), "{place}: `{}`: `host-sim {sub} --help` lists no `{flag}`", cmd.text);
@@ -316,7 +326,6 @@ fn commands_in_readme_and_docs_run_as_written() {
             parsed += 1;
         }
     }
-    std::fs::remove_dir_all(&scratch_root).ok();
     eprintln!("doc commands: {ran} run, {parsed} checked to parse, {other} other commands left alone");
     assert!(ran >= 3, "only {ran} short host-sim commands found in the ```sh blocks");
     assert!(parsed >= 10, "only {parsed} long host-sim commands found in the ```sh blocks");
@@ -324,9 +333,8 @@ fn commands_in_readme_and_docs_run_as_written() {
 
 #[test]
 fn readme_command_table_lists_every_subcommand() {
-    let dir = scratch("table");
-    let help = run("host-sim --help", &["--help".to_string()], &dir);
-    std::fs::remove_dir_all(&dir).ok();
+    let dir = Scratch::new("table");
+    let help = run("host-sim --help", &["--help".to_string()], &dir.0);
     let readme = std::fs::read_to_string(repo_root().join("README.md")).unwrap();
     for sub in subcommands(&help) {
         let row = format!("| `{sub}`");
