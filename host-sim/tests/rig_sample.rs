@@ -45,7 +45,10 @@ fn identification_finds_the_reference_rig_in_every_foreign_recording() {
     let travels = data.len() - decays;
     assert_eq!((id.decays.len(), id.travels.len()), (decays, travels));
     for (stem, d) in &id.decays {
-        println!("{stem}: f1 {:.3} Hz, EA {:.4e} N, c {:.1} kg/s", d.first_frequency_hz, d.rope_ea_n, d.damping_kg_per_s);
+        println!(
+            "{stem}: f1 {:.3} Hz, EA {:.4e} N, c {:.1} kg/s",
+            d.first_frequency_hz, d.rope_ea_n, d.damping_kg_per_s
+        );
         assert!((d.rope_ea_n / 1.0e6 - 1.0).abs() < 0.02, "{stem}: EA {}", d.rope_ea_n);
         assert!((d.damping_kg_per_s / 148.0 - 1.0).abs() < 0.15, "{stem}: guide damping {}", d.damping_kg_per_s);
     }
@@ -54,7 +57,11 @@ fn identification_finds_the_reference_rig_in_every_foreign_recording() {
             "{stem}: c_sheave {:.3} N m s/rad, mean torque {:+.2} N m at {:+.3} rad/s",
             b.sheave_damping_nms_per_rad, b.mean_torque_nm, b.mean_speed_radps
         );
-        assert!((b.sheave_damping_nms_per_rad / 3.0 - 1.0).abs() < 0.10, "{stem}: c_sheave {}", b.sheave_damping_nms_per_rad);
+        assert!(
+            (b.sheave_damping_nms_per_rad / 3.0 - 1.0).abs() < 0.10,
+            "{stem}: c_sheave {}",
+            b.sheave_damping_nms_per_rad
+        );
         // Eqn 4 and 13: the machine supplies the out-of-balance torque and
         // the losses, which oppose the motion.
         let drive_power = (b.mean_torque_nm - b.out_of_balance_torque_nm) * b.mean_speed_radps;

@@ -51,23 +51,32 @@ pub struct DrivenSettings {
     /// Ripple phases read from the measured torque where the drive rejects
     /// an order ([`ripple_matched_to_the_drive`]); `false`: the rig file's.
     pub ripple_phases_from_torque: bool,
+    /// The rig drive's speed feedback identified from the data
+    /// ([`identify_speed_feedback`]) acts on the model's departures from the
+    /// measured speed; `false` (the default): the measured torque alone. On
+    /// the foreign recordings tried, the identified gain helped one rig and
+    /// hurt three (the in-phase torque-speed gain also holds the forward
+    /// path), so it only widens the tolerance.
+    pub speed_feedback: bool,
 }
 
 impl Default for DrivenSettings {
     fn default() -> Self {
-        Self { tracking_bandwidth_hz: TRACKING_BANDWIDTH_HZ, ripple_phases_from_torque: true }
+        Self { tracking_bandwidth_hz: TRACKING_BANDWIDTH_HZ, ripple_phases_from_torque: true, speed_feedback: false }
     }
 }
 
 impl DrivenSettings {
     /// The settings moved within what the data cannot decide: tracking
-    /// bandwidth halved and doubled, ripple phases from the rig file.
-    pub fn alternatives() -> [Self; 3] {
+    /// bandwidth halved and doubled, ripple phases from the rig file, the
+    /// rig drive's speed feedback identified and acting.
+    pub fn alternatives() -> [Self; 4] {
         let d = Self::default();
         [
             Self { tracking_bandwidth_hz: 0.5 * d.tracking_bandwidth_hz, ..d },
             Self { tracking_bandwidth_hz: 2.0 * d.tracking_bandwidth_hz, ..d },
             Self { ripple_phases_from_torque: false, ..d },
+            Self { speed_feedback: true, ..d },
         ]
     }
 }
@@ -97,6 +106,78 @@ pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<
     }
 }
 
+/// Band in which the rig drive's speed feedback is identified, Hz: above
+/// the speed reference's content and the lowest ripple orders, below the
+/// anti-alias and the speed estimate's quantisation.
+pub const FEEDBACK_BAND_HZ: (f64, f64) = (4.0, 40.0);
+/// Candidate time constants of the rig drive's speed-estimate filter, s.
+pub const ESTIMATE_LAGS_S: [f64; 8] = [0.0, 0.0005, 0.001, 0.002, 0.004, 0.008, 0.016, 0.032];
+
+/// What the data tell of the rig drive's speed loop above its reference:
+/// its torque answers the speed estimate's vibration as `-gain * estimate`,
+/// the estimate being the shaft speed through a first-order lag.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SpeedFeedback {
+    /// Proportional gain, N m s/rad (never negative; 0 when the data show none).
+    pub gain_nms_per_rad: f64,
+    /// Time constant of the speed estimate's lag, s.
+    pub estimate_lag_s: f64,
+}
+
+/// First-order lag of time constant `tau_s` applied to `x` at `fs` Hz.
+fn lag(x: &[f64], fs: f64, tau_s: f64) -> Vec<f64> {
+    if tau_s <= 0.0 {
+        return x.to_vec();
+    }
+    let a = (-1.0 / (fs * tau_s)).exp();
+    let mut y = x.first().copied().unwrap_or(0.0);
+    x.iter()
+        .map(|v| {
+            y = a * y + (1.0 - a) * v;
+            y
+        })
+        .collect()
+}
+
+/// `x` band-passed to [`FEEDBACK_BAND_HZ`] (zero phase).
+fn feedback_band(x: &[f64], fs: f64) -> anyhow::Result<Vec<f64>> {
+    let above = highpass_zero_phase(x, fs, FEEDBACK_BAND_HZ.0)?;
+    let top = highpass_zero_phase(&above, fs, FEEDBACK_BAND_HZ.1.min(0.4 * fs))?;
+    Ok(above.iter().zip(&top).map(|(a, t)| a - t).collect())
+}
+
+/// Identifies the rig drive's [`SpeedFeedback`] over the motion of
+/// `travel`: the estimate's lag that brings the encoder's speed closest to
+/// the drive's estimate, then the least-squares gain of the torque on the
+/// estimate, both in [`FEEDBACK_BAND_HZ`].
+pub fn identify_speed_feedback(travel: &DrivenTravel) -> anyhow::Result<SpeedFeedback> {
+    let fs = travel.sample_rate_hz;
+    let m = travel.motion.clone();
+    if m.len() < (fs as usize).max(16) {
+        return Ok(SpeedFeedback::default());
+    }
+    let angle = &travel.shaft_angle_rad[m.clone()];
+    let encoder: Vec<f64> = (0..angle.len())
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(angle.len() - 1));
+            (angle[b] - angle[a]) * fs / (b - a).max(1) as f64
+        })
+        .collect();
+    let estimate = feedback_band(&travel.speed_estimate_radps[m.clone()], fs)?;
+    let mut best = (0.0, f64::INFINITY);
+    for tau in ESTIMATE_LAGS_S {
+        let lagged = feedback_band(&lag(&encoder, fs, tau), fs)?;
+        let error: f64 = lagged.iter().zip(&estimate).map(|(a, b)| (a - b).powi(2)).sum();
+        if error < best.1 {
+            best = (tau, error);
+        }
+    }
+    let torque = feedback_band(&travel.torque_nm[m], fs)?;
+    let (num, den) = torque.iter().zip(&estimate).fold((0.0, 0.0), |(n, d), (t, w)| (n - t * w, d + w * w));
+    let gain = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
+    Ok(SpeedFeedback { gain_nms_per_rad: gain, estimate_lag_s: best.0 })
+}
+
 /// What the counterpart needs of a travel recording, at one sample rate.
 pub struct DrivenTravel<'a> {
     /// Car mass, kg.
@@ -109,7 +190,10 @@ pub struct DrivenTravel<'a> {
     pub torque_nm: &'a [f64],
     /// Measured shaft angle, rad (positive: car up).
     pub shaft_angle_rad: &'a [f64],
-    /// Samples in which the rig moves (outside them its brake holds).
+    /// The rig drive's own speed estimate, rad/s.
+    pub speed_estimate_radps: &'a [f64],
+    /// Samples in which the rig moves ([`motion_from_angle`]; outside them
+    /// the brake holds the sheave).
     pub motion: Range<usize>,
     /// Samples of the constant-speed stage.
     pub constant_speed: Range<usize>,
@@ -175,15 +259,20 @@ pub fn torque_driven_accelerations(
     let tracking = gains(1.0, settings.tracking_bandwidth_hz);
     let h = 1.0 / fs;
     let theta0 = travel.shaft_angle_rad[0];
+    let feedback = if settings.speed_feedback { identify_speed_feedback(travel)? } else { SpeedFeedback::default() };
+    let estimate_decay = if feedback.estimate_lag_s > 0.0 { (-h / feedback.estimate_lag_s).exp() } else { 0.0 };
     // Accelerations at sample k + frac. While the rig moves, the tracking loop
     // acts on the rigid-body coordinate (the mass-weighted mean of the
     // chain's displacements) as a force spread in proportion to mass: it
     // moves the rigid-body mode alone and neither drives nor damps the
     // elastic modes. At standstill the brake holds the sheave (rigid, as in
     // the nominal plant).
-    let deriv = |s: &ChainState, k: usize, frac: f64| -> ChainState {
+    // The rig drive's answer to the model's speed where it departs from
+    // the rig's: `-gain (model's estimate - rig's estimate)`.
+    let deriv = |s: &ChainState, k: usize, frac: f64, model_estimate: f64| -> ChainState {
         let j = (k + 1).min(n - 1);
-        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]);
+        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k])
+            - feedback.gain_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k]);
         let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
         let theta = theta0 + s.position_m[SHEAVE] / r;
         let shaft = torque + ripple.torque_nm(theta);
@@ -211,26 +300,31 @@ pub fn torque_driven_accelerations(
     };
     let mut state = ChainState::default();
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut model_estimate = travel.speed_estimate_radps[0];
     for k in 0..n {
         if !travel.motion.contains(&k) {
             state.velocity_mps[SHEAVE] = 0.0;
+            model_estimate = travel.speed_estimate_radps[k];
         }
-        let a = deriv(&state, k, 0.0).velocity_mps;
+        let e = model_estimate;
+        let a = deriv(&state, k, 0.0, e).velocity_mps;
         car.push(a[CAR]);
         cw.push(-a[CW]);
         if k + 1 == n {
             break;
         }
-        let k1 = deriv(&state, k, 0.0);
-        let k2 = deriv(&add(&state, &k1, 0.5 * h), k, 0.5);
-        let k3 = deriv(&add(&state, &k2, 0.5 * h), k, 0.5);
-        let k4 = deriv(&add(&state, &k3, h), k, 1.0);
+        let k1 = deriv(&state, k, 0.0, e);
+        let k2 = deriv(&add(&state, &k1, 0.5 * h), k, 0.5, e);
+        let k3 = deriv(&add(&state, &k2, 0.5 * h), k, 0.5, e);
+        let k4 = deriv(&add(&state, &k3, h), k, 1.0, e);
         for i in 0..DOF {
             state.position_m[i] +=
                 h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
             state.velocity_mps[i] += h / 6.0
                 * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
         }
+        let speed = state.velocity_mps[SHEAVE] / r;
+        model_estimate = estimate_decay * model_estimate + (1.0 - estimate_decay) * speed;
         if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
             anyhow::bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
         }
@@ -255,4 +349,64 @@ fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> anyhow::Res
         })
         .collect();
     Ok((u, v))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn travel<'a>(torque: &'a [f64], angle: &'a [f64], estimate: &'a [f64], fs: f64) -> DrivenTravel<'a> {
+        DrivenTravel {
+            m_car_kg: 70.5,
+            m_cw_kg: 33.0,
+            lw_start_m: 1.0,
+            torque_nm: torque,
+            shaft_angle_rad: angle,
+            speed_estimate_radps: estimate,
+            motion: 0..torque.len(),
+            constant_speed: 0..torque.len(),
+            sample_rate_hz: fs,
+        }
+    }
+
+    #[test]
+    fn a_proportional_speed_loop_behind_a_lagged_estimate_is_identified() {
+        // Shaft speed: 6 rad/s with broadband wobble; the drive's estimate is
+        // the speed through a 4 ms lag; its torque answers -12 * estimate.
+        let fs = 4096.0;
+        let n = 8 * 4096;
+        let speed: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 / fs;
+                6.0 + [7.0, 13.0, 23.0, 31.0].iter().map(|f| 0.05 * (TAU * f * t + f).sin()).sum::<f64>()
+            })
+            .collect();
+        let mut angle = vec![0.0; n];
+        for k in 1..n {
+            angle[k] = angle[k - 1] + 0.5 * (speed[k] + speed[k - 1]) / fs;
+        }
+        let estimate = lag(&speed, fs, 0.004);
+        let torque: Vec<f64> = estimate.iter().map(|w| 40.0 - 12.0 * w).collect();
+        let found = identify_speed_feedback(&travel(&torque, &angle, &estimate, fs)).unwrap();
+        assert!((found.gain_nms_per_rad - 12.0).abs() < 0.1, "{found:?}");
+        assert_eq!(found.estimate_lag_s, 0.004, "{found:?}");
+    }
+
+    #[test]
+    fn the_motion_is_where_the_encoder_turns() {
+        // At rest 1 s, turning at 2 rad/s for 2 s, at rest 1 s; an encoder of
+        // 16384 counts per revolution.
+        let fs = 1000.0;
+        let q = TAU / 16384.0;
+        let angle: Vec<f64> = (0..4000)
+            .map(|k| {
+                let t = (k as f64 / fs - 1.0).clamp(0.0, 2.0);
+                ((2.0 * t) / q).floor() * q
+            })
+            .collect();
+        let m = motion_from_angle(&angle, fs);
+        // Within the window (50 ms) and the four-count threshold of the edges.
+        assert!(m.start >= 945 && m.start <= 1005, "{m:?}");
+        assert!(m.end >= 2995 && m.end <= 3055, "{m:?}");
+    }
 }

@@ -70,6 +70,12 @@ pub const DRIVE_MISMATCH_DB: f64 = 6.0;
 /// claim to know.
 pub const DECAY_TOP_MODE_FACTOR: f64 = 4.0;
 
+/// On a rig that is not the project's, band cells are compared up to this
+/// fraction of the recording's sample rate: its data acquisition's
+/// anti-alias filter may already act above (the measurement format does not
+/// promise a flat response up to Nyquist).
+pub const FOREIGN_TOP_FRACTION: f64 = 0.2;
+
 /// What the diagnosis may assume about the rig's drive.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum DriveAssumption {
@@ -397,6 +403,7 @@ fn counterpart(
 ) -> anyhow::Result<Prepared> {
     let driven = matches!(recording.meta.kind, RecordingKind::Travel { .. }) && drive == DriveModel::Foreign;
     let torque = measured.channel(signals::Channel::Torque).map(<[f64]>::to_vec).unwrap_or_default();
+    let speed = measured.channel(signals::Channel::Speed).map(<[f64]>::to_vec).unwrap_or_default();
     let torque_noise_density =
         measured.noise_density.iter().find(|(c, _)| *c == signals::Channel::Torque).map_or(0.0, |(_, n)| *n);
     if driven {
@@ -406,7 +413,7 @@ fn counterpart(
         measured.noise_density.retain(|(c, _)| measured.channels.iter().any(|(m, _)| m == c));
     }
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
-        driven_counterpart(model, recording, &measured, &torque, settings)
+        driven_counterpart(model, recording, &measured, (&torque, &speed), settings)
     };
     let run_closed =
         |model: &RigConfig| simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
@@ -422,7 +429,8 @@ fn counterpart(
     };
     let noise_response = if driven {
         let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
-        let run = driven_counterpart(models[0], recording, &measured, &noisy, &driven::DrivenSettings::default())?;
+        let run =
+            driven_counterpart(models[0], recording, &measured, (&noisy, &speed), &driven::DrivenSettings::default())?;
         Some(difference(&run, &nominal))
     } else {
         None
@@ -436,7 +444,7 @@ fn driven_counterpart(
     model: &RigConfig,
     recording: &Recording,
     measured: &ChainSignals,
-    torque: &[f64],
+    (torque, speed): (&[f64], &[f64]),
     settings: &driven::DrivenSettings,
 ) -> anyhow::Result<ChainSignals> {
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
@@ -452,6 +460,7 @@ fn driven_counterpart(
         lw_start_m,
         torque_nm: torque,
         shaft_angle_rad: &measured.angle_rad,
+        speed_estimate_radps: speed,
         motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
         constant_speed: constant,
         sample_rate_hz: measured.sample_rate_hz,
@@ -543,11 +552,18 @@ pub fn diagnose(
         let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
         let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
         let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
-        // Before the motion, another drive lifts its brake against its own
-        // pre-torque when it likes: the recording does not say when, so the
-        // standstill before the motion is no gap of the mechanics.
+        // At standstill, before and after the motion, another drive lifts
+        // and sets its brake against its own pre-torque and holding torque
+        // when it likes; the recording does not say when. Those transients
+        // are the drive's, not a gap of the mechanics: not compared.
+        // Its data acquisition's anti-alias filter may start at a fifth of
+        // the sample rate: bands above are not compared.
         if noise_response.is_some() {
-            measured_cells.cells.retain(|((_, phase, _), _)| *phase != signals::Phase::Start);
+            let top_hz = FOREIGN_TOP_FRACTION * recording.meta.sample_rate_hz;
+            measured_cells.cells.retain(|((_, phase, band), _)| {
+                !matches!(phase, signals::Phase::Start | signals::Phase::Stop)
+                    && (bands.is_line(*band) || bands.edges_hz[*band].1 <= top_hz)
+            });
         }
         // The model carries its response to the torque's measurement noise;
         // the measured side gets the same, as the model gets the sensors'.
