@@ -75,6 +75,13 @@ pub const DECAY_TOP_MODE_FACTOR: f64 = 4.0;
 /// anti-alias filter may already act above (the measurement format does not
 /// promise a flat response up to Nyquist).
 pub const FOREIGN_TOP_FRACTION: f64 = 0.2;
+/// ... and up to this frequency, Hz: the torque from currents sampled by
+/// the data acquisition stands for the shaft's only below the current
+/// loop's bandwidth (a few hundred Hz on a commercial drive); above it the
+/// inverter's switching ripple, aliased, drives the torque-driven model
+/// where the rig's shaft never saw it. The car frame's first mode (235 Hz)
+/// stays inside.
+pub const FOREIGN_TOP_HZ: f64 = 500.0;
 
 /// What the diagnosis may assume about the rig's drive.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -557,9 +564,10 @@ pub fn diagnose(
         // when it likes; the recording does not say when. Those transients
         // are the drive's, not a gap of the mechanics: not compared.
         // Its data acquisition's anti-alias filter may start at a fifth of
-        // the sample rate: bands above are not compared.
+        // the sample rate, and its torque stands for the shaft's only below
+        // the current loop's bandwidth: bands above are not compared.
         if noise_response.is_some() {
-            let top_hz = FOREIGN_TOP_FRACTION * recording.meta.sample_rate_hz;
+            let top_hz = (FOREIGN_TOP_FRACTION * recording.meta.sample_rate_hz).min(FOREIGN_TOP_HZ);
             measured_cells.cells.retain(|((_, phase, band), _)| {
                 !matches!(phase, signals::Phase::Start | signals::Phase::Stop)
                     && (bands.is_line(*band) || bands.edges_hz[*band].1 <= top_hz)
