@@ -72,7 +72,8 @@ const BAND_EDGE_FRACTION: f64 = 0.97;
 /// `max_frequency_hz` with the largest displacement amplitude (acceleration
 /// over `f^2`), among the lines that stand clear of the noise floor: the rope
 /// masses' own modes ring above it with more acceleration but far less
-/// displacement. The decrement is fitted (least squares on the log of the
+/// displacement (a line too broad to stand clear of the floor: the band's
+/// largest). The decrement is fitted (least squares on the log of the
 /// positive peaks) to the signal band-limited around that mode, from the
 /// second cycle after its largest peak until the peaks fall below 5 % of the
 /// largest or below three times the noise, and turned into
@@ -164,7 +165,10 @@ fn first_mode_hz(released: &[f64], sample_rate_hz: f64, top_hz: f64) -> Result<f
     let best = in_band
         .iter()
         .filter(|&&i| a[i] >= threshold && a[i] > 0.0 && a[i] >= a[i - 1] && a[i] >= a[i + 1])
-        .max_by(|&&i, &&j| (a[i] / (f[i] * f[i])).total_cmp(&(a[j] / (f[j] * f[j]))));
+        .max_by(|&&i, &&j| (a[i] / (f[i] * f[i])).total_cmp(&(a[j] / (f[j] * f[j]))))
+        // A line too broad to stand clear of the floor (a decay that dies
+        // within a few cycles): the band's largest line.
+        .or_else(|| in_band.iter().filter(|&&i| a[i] > 0.0).max_by(|&&i, &&j| a[i].total_cmp(&a[j])));
     let Some(&i) = best else {
         return Err(invalid("max_frequency_hz", top_hz, "a band above 0.5 Hz holding the first mode"));
     };
