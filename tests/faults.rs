@@ -5,7 +5,7 @@
 //! checks well below the trip levels; and arbitrary sensor inputs never make
 //! the controller panic or leave its safe state once tripped.
 //!
-//! `cargo test -p integration-tests --test faults -- --nocapture` prints the
+//! `cargo test -p integration-tests --test integration faults:: -- --nocapture` prints the
 //! measured figures.
 
 use host_sim::closed_loop::{simulate_travel_with, DriveController, SimError, SimOptions, TravelSpec};
