@@ -1,6 +1,10 @@
 //! The integration tests of the drive core around the simulated plant, one
 //! test binary (one link) with a module per subject; `lib.rs` holds the
 //! helpers they share.
+//!
+//! The heavy sweeps run a fixed subset by default; each full sweep is an
+//! ignored test of the same assertions, run on demand with
+//! `cargo test --release -p integration-tests -- --ignored NAME`.
 
 mod closed_loop;
 mod compensation;
