@@ -7,12 +7,41 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-step() { printf '\n==> %s\n' "$*"; }
+# Each step's wall time, printed at the end (also when a step fails), so
+# that CI shows where the time goes.
+step_names=()
+step_seconds=()
+step_started=$SECONDS
+end_step() {
+  if [ "${#step_names[@]}" -gt "${#step_seconds[@]}" ]; then
+    step_seconds+=($((SECONDS - step_started)))
+  fi
+}
+step() {
+  end_step
+  step_names+=("$*")
+  step_started=$SECONDS
+  printf '\n==> %s\n' "$*"
+}
+report_times() {
+  local status=$?
+  end_step
+  printf '\n==> wall time per step%s\n' "$([ "$status" -eq 0 ] || echo " (failed, exit status $status)")"
+  local i
+  for i in "${!step_names[@]}"; do
+    printf '%5d s  %s\n' "${step_seconds[$i]}" "${step_names[$i]}"
+  done
+  printf '%5d s  total\n' "$SECONDS"
+}
+trap report_times EXIT
 
 step "toolchain (rust-toolchain.toml: stable, thumbv7em-none-eabihf, clippy, rustfmt, llvm-tools)"
 rustup show active-toolchain || rustup toolchain install
 rustup target add thumbv7em-none-eabihf >/dev/null
 rustup component add clippy rustfmt llvm-tools >/dev/null
+
+step "longest functions of the library crates (information only)"
+./scripts/longest-functions.sh 15 || true
 
 step "qemu-system-arm (processor-in-the-loop tests)"
 if ! command -v qemu-system-arm >/dev/null 2>&1; then

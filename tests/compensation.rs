@@ -1,6 +1,8 @@
-//! Torque-ripple compensation in closed loop (issue 5): the model behind the
-//! learning against the simulated plant, the best strategy on the 8 nominal
-//! travels, and every strategy on the mismatch cases.
+//! Torque-ripple compensation in closed loop: the model behind the learning
+//! against the simulated plant, the best strategy on the 8 nominal travels,
+//! and every strategy on the mismatch cases. By default the two sweeps run a
+//! fixed subset of their travels; the full sweeps are ignored tests, run with
+//! `cargo test --release -p integration-tests -- --ignored NAME`.
 
 use std::thread;
 
@@ -133,14 +135,10 @@ fn run_cases(
     })
 }
 
-/// The best strategy (adaptive harmonics) on the 8 nominal travels: the car's
-/// 12 x f_mech component at least 20 dB down and its A95 at least 60 % down.
-#[test]
-fn the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_every_nominal_travel() {
-    let rig = rig();
-    let cases: Vec<_> =
-        all_cases(&rig).into_iter().enumerate().filter(|(_, c)| c.mismatch == Mismatch::Nominal).collect();
-    assert_eq!(cases.len(), 8);
+/// The best strategy (adaptive harmonics) on the nominal travels `cases`:
+/// the car's 12 x f_mech component at least 20 dB down and its A95 at least
+/// 60 % down.
+fn assert_best_strategy(cases: Vec<(usize, host_sim::compensation::Case)>) {
     let rows = run_cases(cases, &[Strategy::Off, Strategy::Adaptive], HarmonicTable::default());
     for r in rows.iter().filter(|r| r.strategy == "adaptive") {
         println!(
@@ -158,14 +156,39 @@ fn the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_ev
     }
 }
 
-/// Every strategy on every mismatch case (three travels each; `host-sim
-/// compare` runs all 8): never more than 1 dB worse than no compensation on
-/// the car's 12x line or its A95.
+/// The nominal travels of the rig, with their index in `all_cases`.
+fn nominal_cases() -> Vec<(usize, host_sim::compensation::Case)> {
+    all_cases(&rig()).into_iter().enumerate().filter(|(_, c)| c.mismatch == Mismatch::Nominal).collect()
+}
+
+/// The nominal travels of the best-strategy check run by default (car mass,
+/// direction): those with the smallest 12x and A95 margins in the full sweep.
+const BEST_SUBSET: [(f64, Direction); 2] = [(33.0, Direction::Up), (70.5, Direction::Down)];
+
+/// The best strategy on BEST_SUBSET of the 8 nominal travels.
 #[test]
-fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_db() {
-    let rig = rig();
-    let table = calibrate_table(&rig).unwrap();
-    let cases: Vec<_> = all_cases(&rig)
+fn the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_a_subset_of_the_nominal_travels() {
+    let cases: Vec<_> =
+        nominal_cases().into_iter().filter(|(_, c)| BEST_SUBSET.contains(&(c.m_car_kg, c.direction))).collect();
+    assert_eq!(cases.len(), BEST_SUBSET.len());
+    assert_best_strategy(cases);
+}
+
+/// The best strategy on the 8 nominal travels (the full sweep):
+/// `cargo test --release -p integration-tests -- --ignored
+/// the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_every_nominal_travel --nocapture`.
+#[test]
+#[ignore = "full sweep: run with --ignored"]
+fn the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_every_nominal_travel() {
+    let cases = nominal_cases();
+    assert_eq!(cases.len(), 8);
+    assert_best_strategy(cases);
+}
+
+/// The mismatch cases of the sweep (three travels each; `host-sim compare`
+/// runs all 8), with their index in `all_cases`.
+fn mismatch_cases() -> Vec<(usize, host_sim::compensation::Case)> {
+    all_cases(&rig())
         .into_iter()
         .enumerate()
         .filter(|(_, c)| {
@@ -173,8 +196,14 @@ fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_d
                 && (((c.m_car_kg == 45.5 || c.m_car_kg == 70.5) && c.direction == Direction::Up)
                     || (c.m_car_kg == 33.0 && c.direction == Direction::Down))
         })
-        .collect();
-    assert_eq!(cases.len(), 15);
+        .collect()
+}
+
+/// Every strategy on the mismatch cases `cases`: never more than 1 dB worse
+/// than no compensation on the car's 12x line or its A95.
+fn assert_no_strategy_worse(cases: Vec<(usize, host_sim::compensation::Case)>) {
+    let rig = rig();
+    let table = calibrate_table(&rig).unwrap();
     let strategies = Strategy::ALL;
     let rows = run_cases(cases, &strategies, table);
     for r in rows.iter().filter(|r| r.strategy != "off") {
@@ -185,6 +214,38 @@ fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_d
         );
         assert!(r.car_12x_change_db <= 1.0 && a95_db <= 1.0, "{r:?}");
     }
+}
+
+/// The mismatch cases run by default (mismatch, car mass, direction), four
+/// of the 15: the EA and phase-drift cases come closest to the 1 dB limit in
+/// the full sweep; one ripple-amplitude case.
+const MISMATCH_SUBSET: [(Mismatch, f64, Direction); 4] = [
+    (Mismatch::RopeEa { factor: 0.8 }, 70.5, Direction::Up),
+    (Mismatch::RopeEa { factor: 1.2 }, 33.0, Direction::Down),
+    (Mismatch::RippleAmplitude { factor: 1.3 }, 45.5, Direction::Up),
+    (Mismatch::RipplePhaseDrift { fraction: 0.005 }, 70.5, Direction::Up),
+];
+
+/// Every strategy on MISMATCH_SUBSET of the 15 mismatch cases.
+#[test]
+fn no_strategy_makes_a_subset_of_the_mismatch_cases_worse_than_no_compensation_by_more_than_1_db() {
+    let cases: Vec<_> = mismatch_cases()
+        .into_iter()
+        .filter(|(_, c)| MISMATCH_SUBSET.contains(&(c.mismatch, c.m_car_kg, c.direction)))
+        .collect();
+    assert_eq!(cases.len(), MISMATCH_SUBSET.len());
+    assert_no_strategy_worse(cases);
+}
+
+/// Every strategy on every mismatch case (the full sweep):
+/// `cargo test --release -p integration-tests -- --ignored
+/// no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_db --nocapture`.
+#[test]
+#[ignore = "full sweep: run with --ignored"]
+fn no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_db() {
+    let cases = mismatch_cases();
+    assert_eq!(cases.len(), 15);
+    assert_no_strategy_worse(cases);
 }
 
 /// A travel with no ripple in the plant and a wrong table: the back-off

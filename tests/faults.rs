@@ -1,12 +1,12 @@
-//! Drive safety under faults (issue 7): every fault kind injected into a
-//! closed-loop travel is detected within its stated bound, the drive goes to
-//! and stays in its safe state (PWM off, brake commanded, no machine torque)
-//! until an explicit reset; the 8 nominal travels keep their consistency
-//! checks well below the trip levels; and arbitrary sensor inputs never make
-//! the controller panic or leave its safe state once tripped.
+//! Drive safety under faults: every fault kind injected into a closed-loop
+//! travel is detected within its stated bound, the drive goes to and stays
+//! in its safe state (PWM off, brake commanded, no machine torque) until an
+//! explicit reset; the 8 nominal travels keep their consistency checks well
+//! below the trip levels; and arbitrary sensor inputs never make the
+//! controller panic or leave its safe state once tripped.
 //!
-//! `cargo test -p integration-tests --test faults -- --nocapture` prints the
-//! measured figures.
+//! `cargo test -p integration-tests --test integration faults:: -- --nocapture`
+//! prints the measured figures.
 
 use host_sim::closed_loop::{simulate_travel_with, DriveController, SimError, SimOptions, TravelSpec};
 use host_sim::faults::run::{run_case_with, FaultCase, FaultOutcome};

@@ -106,7 +106,7 @@ fn paper_reference_point_at_lw_4m_with_the_heaviest_car() {
     let independent = independent_frequencies(70.5, 4.0);
     let solver = natural_modes(&ChainParams::from_rig(&rig, 70.5), 4.0).frequencies_hz;
     println!("lw = 4.0 m, m_car = 70.5 kg: solver {solver:.2?}, determinant roots {independent:.2?}");
-    // The values the issue quotes (about 10.6, 17.5, 224.8, 258.7 Hz).
+    // The quoted values (about 10.6, 17.5, 224.8, 258.7 Hz).
     for (got, quoted) in solver[1..].iter().zip([10.6, 17.5, 224.8, 258.7]) {
         assert!((got - quoted).abs() < 0.005 * quoted, "{got} vs {quoted}");
     }

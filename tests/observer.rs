@@ -1,11 +1,14 @@
-//! The reduced 5-DOF observer (`shared::observer`, issue 5) against the
-//! plant: for every nominal travel (4 car masses x up/down, full travel, the
+//! The reduced 5-DOF observer (`shared::observer`) against the plant: for
+//! every nominal travel (4 car masses x up/down, full travel, the
 //! plant with its torque ripple and quantised sensors) the closed loop runs
 //! with the drive core, and the observer is fed offline at the speed-loop
 //! rate with exactly what the chip has at each speed tick: the encoder
 //! counter and the measured q current (`Kt i_q`). Its car acceleration is
 //! compared with the plant's, both band-passed 1-80 Hz (zero phase), from
-//! brake lift to landing (end of the `Travel` state).
+//! brake lift to landing (end of the `Travel` state). By default two of the
+//! travels run (the ones with the largest error); the sweeps over all 8 are
+//! ignored tests, run with `cargo test --release -p integration-tests --
+//! --ignored NAME`.
 
 use host_sim::analysis::highpass_zero_phase;
 use host_sim::closed_loop::{simulate_travel_with, SimOptions, StepLog, TravelRun, TravelSpec};
@@ -17,7 +20,7 @@ use shared::config::Direction;
 use shared::observer::{ChainObserver, ObserverTuning};
 use shared::{Controller, DriveState};
 
-/// Evaluation band, Hz (the issue's 1-80 Hz).
+/// Evaluation band, Hz (1-80 Hz).
 const BAND_HZ: (f64, f64) = (1.0, 80.0);
 
 /// One travel's comparison.
@@ -124,10 +127,17 @@ fn observe_travel(plant_rig: &RigConfig, m_car_kg: f64, direction: Direction, la
 
 /// The 8 travels of the rig with the plant's EA scaled by `ea_factor`, two at a time.
 fn eight_travels(ea_factor: f64) -> Vec<Outcome> {
+    let jobs: Vec<(f64, Direction)> =
+        rig().mechanics.m_car_kg.iter().flat_map(|&m| [Direction::Up, Direction::Down].map(|d| (m, d))).collect();
+    assert_eq!(jobs.len(), 8);
+    travels(ea_factor, &jobs)
+}
+
+/// The travels `jobs` (car mass, direction) with the plant's EA scaled by
+/// `ea_factor`, two at a time.
+fn travels(ea_factor: f64, jobs: &[(f64, Direction)]) -> Vec<Outcome> {
     let mut plant_rig = rig();
     plant_rig.mechanics.rope_ea_n *= ea_factor;
-    let jobs: Vec<(f64, Direction)> =
-        plant_rig.mechanics.m_car_kg.iter().flat_map(|&m| [Direction::Up, Direction::Down].map(|d| (m, d))).collect();
     let plant_rig = &plant_rig;
     let mut outcomes: Vec<Outcome> = std::thread::scope(|scope| {
         let handles: Vec<_> = jobs
@@ -176,26 +186,56 @@ fn assert_all_below(outcomes: &[Outcome], limit: f64) {
     }
 }
 
+/// The travels run by default (car mass, direction): those with the largest
+/// error of the full sweep, nominal and with the EA off.
+const SUBSET_TRAVELS: [(f64, Direction); 2] = [(70.5, Direction::Up), (33.0, Direction::Down)];
+
+/// The nominal travels run by default: SUBSET_TRAVELS of the 8.
 #[test]
+fn car_acceleration_error_under_25_percent_on_a_subset_of_the_nominal_travels() {
+    let outcomes = travels(1.0, &SUBSET_TRAVELS);
+    assert_all_below(&outcomes, 0.25);
+}
+
+/// The full sweep: `cargo test --release -p integration-tests -- --ignored
+/// car_acceleration_error_under_25_percent_on_all_8_nominal_travels --nocapture`.
+#[test]
+#[ignore = "full sweep: run with --ignored"]
 fn car_acceleration_error_under_25_percent_on_all_8_nominal_travels() {
     let outcomes = eight_travels(1.0);
     assert_all_below(&outcomes, 0.25);
 }
 
+/// Errors under 40 % and the EA estimate moving towards the plant's, on
+/// the travels `outcomes` of a plant whose EA is `factor` times nominal.
+fn assert_ea_off(outcomes: &[Outcome], factor: f64) {
+    assert_all_below(outcomes, 0.40);
+    // The filter's stiffness scale moves from nominal towards the plant's EA.
+    for o in outcomes {
+        let scale = o.final_ea_n as f64 / rig().mechanics.rope_ea_n;
+        assert!(
+            (scale - factor).abs() < 0.5 * (1.0 - factor).abs(),
+            "{}: EA scale estimate {scale:.3} not closer to {factor} than to 1",
+            o.label
+        );
+    }
+}
+
+/// The plant's EA off by 20 % on the travels run by default: SUBSET_TRAVELS of the 8.
 #[test]
+fn car_acceleration_error_under_40_percent_with_the_plant_ea_off_by_20_percent_on_a_subset_of_the_travels() {
+    for factor in [0.8, 1.2] {
+        assert_ea_off(&travels(factor, &SUBSET_TRAVELS), factor);
+    }
+}
+
+/// The full sweep: `cargo test --release -p integration-tests -- --ignored
+/// car_acceleration_error_under_40_percent_with_the_plant_ea_off_by_20_percent --nocapture`.
+#[test]
+#[ignore = "full sweep: run with --ignored"]
 fn car_acceleration_error_under_40_percent_with_the_plant_ea_off_by_20_percent() {
     for factor in [0.8, 1.2] {
-        let outcomes = eight_travels(factor);
-        assert_all_below(&outcomes, 0.40);
-        // The filter's stiffness scale moves from nominal towards the plant's EA.
-        for o in &outcomes {
-            let scale = o.final_ea_n as f64 / rig().mechanics.rope_ea_n;
-            assert!(
-                (scale - factor).abs() < 0.5 * (1.0 - factor).abs(),
-                "{}: EA scale estimate {scale:.3} not closer to {factor} than to 1",
-                o.label
-            );
-        }
+        assert_ea_off(&eight_travels(factor), factor);
     }
 }
 
