@@ -119,10 +119,12 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
             for (label, effects) in
                 [("nominal model".to_string(), Some(Effects::none())), ("explaining model".to_string(), explaining)]
             {
-                if let Some(effects) = effects {
-                    let sim =
-                        simulate_recording(&model_rig, &effects, recording, stem, rate, model_step_s(&model_rig))?;
-                    series.push((label, sim.column(ACC_CAR).map(|c| c.values.clone()), 1));
+                // The project's drive in closed loop; a recording it cannot
+                // run loses this picture, never the diagnosis.
+                let Some(effects) = effects else { continue };
+                match simulate_recording(&model_rig, &effects, recording, stem, rate, model_step_s(&model_rig)) {
+                    Ok(sim) => series.push((label, sim.column(ACC_CAR).map(|c| c.values.clone()), 1)),
+                    Err(e) => eprintln!("note: no {label} spectrogram of `{stem}`: {e:#}"),
                 }
             }
             for (label, values, f) in series {
@@ -156,6 +158,13 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         report.location.phase.name(),
         report.location.band
     );
+    println!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
+    if let Some(why) = &report.attribution_refused {
+        println!("attribution: {why}");
+    }
+    for l in &report.left_out {
+        println!("left out: {}: {}", l.recording, l.reason);
+    }
     for c in report.ranking.iter().take(5) {
         println!(
             "  {:<48} held-out {:.2} -> {:.2} dB ({:+.0} %)",

@@ -10,7 +10,7 @@ use anyhow::Context;
 
 use super::measure::CellGap;
 use super::signals::Phase;
-use super::{GapReport, Verdict};
+use super::{DriveModel, GapReport, Verdict};
 use crate::analysis::Spectrogram;
 use crate::plots::spectrogram_plot;
 
@@ -150,11 +150,29 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
             "**nominal**: the calibrated nominal model explains the data to the noise level".to_string()
         }
         Verdict::Explained => format!("**explained** by `{}`", r.explained_by.as_deref().unwrap_or("?")),
+        Verdict::Unexplained if r.attribution_refused.is_some() => {
+            "**unexplained**: the calibrated nominal model misses the data beyond noise and tolerance, and no effect \
+             was fitted (see Attribution)"
+                .to_string()
+        }
         Verdict::Unexplained => {
             "**unexplained**: no effect of the library (nor a pair) shrinks the held-out gap enough".to_string()
         }
     };
     let _ = writeln!(s, "Verdict: {verdict}.\n");
+    let drive = match r.drive.drive {
+        DriveModel::Project => "the project's drive core (closed loop, every channel compared)",
+        DriveModel::Foreign => {
+            "another drive (the nominal mechanics driven by the measured torque, accelerations compared)"
+        }
+    };
+    let _ = writeln!(s, "The rig's drive: {drive}; {}.\n", r.drive.reason);
+    if let Some(why) = &r.attribution_refused {
+        let _ = writeln!(s, "Attribution: {why}.\n");
+    }
+    for l in &r.left_out {
+        let _ = writeln!(s, "Left out: `{}`: {}.\n", l.recording, l.reason);
+    }
     let _ = writeln!(
         s,
         "Nominal model: excess gap {:.2} dB (noise gap {:.2} dB), mean over {} recordings; {} simulations in {:.1} s.\n",
