@@ -493,6 +493,43 @@ fn driven_counterpart(
     })
 }
 
+/// The measured cells of a recording from a rig with another drive, made
+/// comparable with the model: what that rig does not tell is taken out, and
+/// the torque-driven model's response to the torque's measurement noise
+/// (`noise_response`) is added, as the model gets the sensors' noise.
+fn foreign_rig_cells(
+    measured_cells: &mut spectra::CellPowers,
+    recording: &Recording,
+    bands: &Bands,
+    model: &RigConfig,
+    noise_response: Option<&ChainSignals>,
+) {
+    // At standstill, before and after the motion, another drive lifts and
+    // sets its brake against its own pre-torque and holding torque when it
+    // likes; the recording does not say when. Those transients are the
+    // drive's, not a gap of the mechanics: not compared. Its data
+    // acquisition's anti-alias filter may start at a fifth of the sample
+    // rate, and its torque stands for the shaft's only below the current
+    // loop's bandwidth: bands above are not compared.
+    if let Some(response) = noise_response {
+        let top_hz = (FOREIGN_TOP_FRACTION * recording.meta.sample_rate_hz).min(FOREIGN_TOP_HZ);
+        measured_cells.cells.retain(|((_, phase, band), _)| {
+            !matches!(phase, signals::Phase::Start | signals::Phase::Stop)
+                && (bands.is_line(*band) || bands.edges_hz[*band].1 <= top_hz)
+        });
+        let spectra = ChainSpectra::compute(response, &Segmentation::of(response), bands);
+        let extra = cell_powers(&[(&spectra, 1.0)], bands);
+        for (key, power) in measured_cells.cells.iter_mut() {
+            power.0 += extra.get(*key).map_or(0.0, |e| e.0);
+        }
+    }
+    if let RecordingKind::FreeDecay { mass_kg, rope_length_m } = recording.meta.kind {
+        let m = &model.mechanics;
+        let f1 = eqn9_first_frequency_hz(m.rope_ea_n, m.rope_mass_per_length_kg_per_m, rope_length_m, mass_kg);
+        measured_cells.cells.retain(|((_, _, band), _)| bands.edges_hz[*band].1 <= DECAY_TOP_MODE_FACTOR * f1);
+    }
+}
+
 /// Runs the diagnosis of `dataset` (named `name`) on `rig`; `progress`
 /// gets (step, runs done, runs planned). A recording that cannot be
 /// measured or simulated is left out with the reason; the verdict is given
@@ -559,35 +596,8 @@ pub fn diagnose(
         let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
         let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
         let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
-        // At standstill, before and after the motion, another drive lifts
-        // and sets its brake against its own pre-torque and holding torque
-        // when it likes; the recording does not say when. Those transients
-        // are the drive's, not a gap of the mechanics: not compared.
-        // Its data acquisition's anti-alias filter may start at a fifth of
-        // the sample rate, and its torque stands for the shaft's only below
-        // the current loop's bandwidth: bands above are not compared.
-        if noise_response.is_some() {
-            let top_hz = (FOREIGN_TOP_FRACTION * recording.meta.sample_rate_hz).min(FOREIGN_TOP_HZ);
-            measured_cells.cells.retain(|((_, phase, band), _)| {
-                !matches!(phase, signals::Phase::Start | signals::Phase::Stop)
-                    && (bands.is_line(*band) || bands.edges_hz[*band].1 <= top_hz)
-            });
-        }
-        // The model carries its response to the torque's measurement noise;
-        // the measured side gets the same, as the model gets the sensors'.
-        if let Some(response) = &noise_response {
-            let spectra = ChainSpectra::compute(response, &Segmentation::of(response), &bands);
-            let extra = cell_powers(&[(&spectra, 1.0)], &bands);
-            for (key, power) in measured_cells.cells.iter_mut() {
-                power.0 += extra.get(*key).map_or(0.0, |e| e.0);
-            }
-        }
-        if let (DriveModel::Foreign, RecordingKind::FreeDecay { mass_kg, rope_length_m }) =
-            (drive.drive, &recording.meta.kind)
-        {
-            let m = &model.mechanics;
-            let f1 = eqn9_first_frequency_hz(m.rope_ea_n, m.rope_mass_per_length_kg_per_m, *rope_length_m, *mass_kg);
-            measured_cells.cells.retain(|((_, _, band), _)| bands.edges_hz[*band].1 <= DECAY_TOP_MODE_FACTOR * f1);
+        if drive.drive == DriveModel::Foreign {
+            foreign_rig_cells(&mut measured_cells, recording, &bands, &model, noise_response.as_ref());
         }
         let nominal_cells = cell_powers(&[(&nominal_spectra, 1.0)], &bands);
         let perturbed_cells: Vec<_> = perturbed
