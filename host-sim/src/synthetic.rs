@@ -123,17 +123,8 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> anyhow::Result<Vec<(
         }
         out.push((name, recording));
     }
-    let m = &rig.mechanics;
     for &mass in &spec.decay_masses_kg {
-        let decay = FreeDecaySpec {
-            mass_kg: mass,
-            rope_length_m: spec.decay_rope_length_m,
-            rope_ea_n: m.rope_ea_n,
-            rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
-            damping_kg_per_s: m.c_car_kg_per_s,
-            initial_acceleration_mps2: 2.0,
-            elements: crate::diagnosis::simulate::DECAY_ROPE_ELEMENTS,
-        };
+        let decay = decay_spec(rig, spec, mass);
         let acc = simulate_free_decay_with(&decay, &spec.effects, spec.sample_rate_hz, spec.decay_duration_s)?;
         let time = (0..acc.len()).map(|i| i as f64 / spec.sample_rate_hz).collect();
         let mut recording = Recording {
@@ -292,6 +283,21 @@ fn foreign_travel(
     Ok(recording)
 }
 
+/// The free decay of `spec` on `rig` for the hanging mass `mass_kg`: the
+/// rig's rope and guide damping, released from 2 m/s^2.
+fn decay_spec(rig: &RigConfig, spec: &DatasetSpec, mass_kg: f64) -> FreeDecaySpec {
+    let m = &rig.mechanics;
+    FreeDecaySpec {
+        mass_kg,
+        rope_length_m: spec.decay_rope_length_m,
+        rope_ea_n: m.rope_ea_n,
+        rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
+        damping_kg_per_s: m.c_car_kg_per_s,
+        initial_acceleration_mps2: 2.0,
+        elements: crate::diagnosis::simulate::DECAY_ROPE_ELEMENTS,
+    }
+}
+
 /// One free decay of a foreign rig.
 fn foreign_decay(
     rig: &RigConfig,
@@ -300,16 +306,7 @@ fn foreign_decay(
     mass_kg: f64,
     rng: &mut StdRng,
 ) -> Result<Recording, ForeignError> {
-    let m = &rig.mechanics;
-    let mut decay = FreeDecaySpec {
-        mass_kg,
-        rope_length_m: spec.decay_rope_length_m,
-        rope_ea_n: m.rope_ea_n,
-        rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
-        damping_kg_per_s: m.c_car_kg_per_s,
-        initial_acceleration_mps2: 2.0,
-        elements: crate::diagnosis::simulate::DECAY_ROPE_ELEMENTS,
-    };
+    let mut decay = decay_spec(rig, spec, mass_kg);
     let kind = RecordingKind::FreeDecay { mass_kg, rope_length_m: spec.decay_rope_length_m };
     let description = Some(foreign_description(foreign, "free decay, top end of the rope fixed"));
     let Some(acq) = &foreign.acquisition else {

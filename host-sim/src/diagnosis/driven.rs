@@ -156,13 +156,7 @@ pub fn identify_speed_feedback(travel: &DrivenTravel) -> anyhow::Result<SpeedFee
     if m.len() < (fs as usize).max(16) {
         return Ok(SpeedFeedback::default());
     }
-    let angle = &travel.shaft_angle_rad[m.clone()];
-    let encoder: Vec<f64> = (0..angle.len())
-        .map(|k| {
-            let (a, b) = (k.saturating_sub(1), (k + 1).min(angle.len() - 1));
-            (angle[b] - angle[a]) * fs / (b - a).max(1) as f64
-        })
-        .collect();
+    let encoder = central_difference(&travel.shaft_angle_rad[m.clone()], fs);
     let estimate = feedback_band(&travel.speed_estimate_radps[m.clone()], fs)?;
     let mut best = (0.0, f64::INFINITY);
     for tau in ESTIMATE_LAGS_S {
@@ -341,14 +335,24 @@ fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> anyhow::Res
     let high = highpass_zero_phase(&relative, fs, TRACKING_REFERENCE_LOWPASS_HZ)
         .context("low-passing the measured shaft angle")?;
     let u: Vec<f64> = relative.iter().zip(&high).map(|(a, h)| a - h).collect();
-    let n = u.len();
-    let v = (0..n)
-        .map(|k| {
-            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
-            (u[b] - u[a]) * fs / (b - a).max(1) as f64
-        })
-        .collect();
+    let v = central_difference(&u, fs);
     Ok((u, v))
+}
+
+/// The rate of `x` sampled at `fs` Hz: central differences inside, one-sided
+/// at the ends.
+fn central_difference(x: &[f64], fs: f64) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n.saturating_sub(1)));
+            if b > a {
+                (x[b] - x[a]) * fs / (b - a) as f64
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
