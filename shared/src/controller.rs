@@ -74,6 +74,24 @@ pub enum DriveState {
 }
 
 impl DriveState {
+    /// Whether the inverter switches in this state: every state between the
+    /// travel command and the brake set, none when idle or tripped.
+    pub fn pwm_enabled(self) -> bool {
+        matches!(
+            self,
+            DriveState::PreTorque
+                | DriveState::BrakeLift
+                | DriveState::Travel
+                | DriveState::Hold
+                | DriveState::BrakeSet
+        )
+    }
+
+    /// Whether the brake is released (lifted) in this state.
+    pub fn brake_released(self) -> bool {
+        matches!(self, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold)
+    }
+
     /// Numeric code of the state for frames and recordings: 0 idle, 1
     /// pre-torque, 2 brake lift, 3 travel, 4 hold, 5 brake set, 100 + the
     /// fault's reason code when tripped.
@@ -450,15 +468,8 @@ impl Controller {
             }
         }
 
-        let pwm_enabled = matches!(
-            self.state,
-            DriveState::PreTorque
-                | DriveState::BrakeLift
-                | DriveState::Travel
-                | DriveState::Hold
-                | DriveState::BrakeSet
-        );
-        let brake_released = matches!(self.state, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold);
+        let pwm_enabled = self.state.pwm_enabled();
+        let brake_released = self.state.brake_released();
         let mut pwm_compare = [0u16; 3];
         if pwm_enabled {
             let speed_e =
@@ -507,7 +518,7 @@ impl Controller {
     /// on the latest current-loop sample and this tick's speed reference.
     fn check_loop_consistency(&mut self) {
         let s = self.loop_sample;
-        let brake_released = matches!(self.state, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold);
+        let brake_released = self.state.brake_released();
         self.supervisor.check_consistency(&MonitorSample {
             pwm_enabled: s.pwm_enabled,
             brake_released,

@@ -606,15 +606,8 @@ impl DriveController for CommercialDrive {
             self.speed_tick();
         }
         self.step += 1;
-        let pwm_enabled = matches!(
-            self.state,
-            DriveState::PreTorque
-                | DriveState::BrakeLift
-                | DriveState::Travel
-                | DriveState::Hold
-                | DriveState::BrakeSet
-        );
-        let brake_released = matches!(self.state, DriveState::BrakeLift | DriveState::Travel | DriveState::Hold);
+        let pwm_enabled = self.state.pwm_enabled();
+        let brake_released = self.state.brake_released();
         let pwm_compare = if pwm_enabled {
             self.current_loop(abc, sensors.dc_bus_code as f64 * k.dc_bus_v_per_code)
         } else {

@@ -44,6 +44,16 @@ pub struct ParamInfo {
 }
 
 impl ParamInfo {
+    /// `Ok` when [`ParamInfo::accepts`] `value`, else the error that names
+    /// the part (`drive` or `acquisition`), the parameter and its range.
+    pub fn check(&self, part: &'static str, value: f64) -> Result<(), ParamError> {
+        if self.accepts(value) {
+            Ok(())
+        } else {
+            Err(ParamError::OutOfRange { part, name: self.name, value, expected: self.expected() })
+        }
+    }
+
     /// Whether `value` is accepted: finite, in `[min, max]`, a whole number
     /// for [`ParamKind::Integer`], 0 or 1 for [`ParamKind::Switch`].
     pub fn accepts(&self, value: f64) -> bool {
@@ -236,14 +246,7 @@ macro_rules! foreign_params {
                         known: Self::PARAMS.iter().map(|p| p.name).collect::<Vec<_>>().join(", "),
                     }
                 })?;
-                if !info.accepts(value) {
-                    return Err($crate::foreign::params::ParamError::OutOfRange {
-                        part: $part,
-                        name: info.name,
-                        value,
-                        expected: info.expected(),
-                    });
-                }
+                info.check($part, value)?;
                 match name {
                     $(stringify!($field) => {
                         self.$field = <$ty as $crate::foreign::params::ParamValue>::from_f64(value)
@@ -274,15 +277,7 @@ macro_rules! foreign_params {
             /// the first parameter out of its range.
             pub fn validate(&self) -> Result<(), $crate::foreign::params::ParamError> {
                 for info in Self::PARAMS {
-                    let value = self.get(info.name).unwrap_or(f64::NAN);
-                    if !info.accepts(value) {
-                        return Err($crate::foreign::params::ParamError::OutOfRange {
-                            part: $part,
-                            name: info.name,
-                            value,
-                            expected: info.expected(),
-                        });
-                    }
+                    info.check($part, self.get(info.name).unwrap_or(f64::NAN))?;
                 }
                 Ok(())
             }
