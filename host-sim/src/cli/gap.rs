@@ -159,6 +159,27 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         report.location.band
     );
     println!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
+    for l in &report.rig_speed_loops {
+        match (&l.controller, &l.refused) {
+            (Some(c), _) => println!(
+                "  {}: the rig drive's speed loop Kp {:.2} N m s/rad, Ki {:.1} N m/rad, estimate {:.1} ms late \
+                 and {:.1} ms lag ({:.1} % of the torque's 4-40 Hz vibration)",
+                l.recording,
+                c.kp_nms_per_rad,
+                c.ki_nm_per_rad,
+                1e3 * c.estimate_delay_s,
+                1e3 * c.estimate_lag_s,
+                100.0 * c.dynamic_fit
+            ),
+            (None, reason) => {
+                println!(
+                    "  {}: the rig drive's speed loop not identified: {}",
+                    l.recording,
+                    reason.as_deref().unwrap_or("-")
+                )
+            }
+        }
+    }
     if let Some(why) = &report.attribution_refused {
         println!("attribution: {why}");
     }

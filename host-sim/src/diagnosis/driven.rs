@@ -17,6 +17,7 @@ use std::ops::Range;
 
 use anyhow::Context;
 
+use super::drive_law::{central_difference, SpeedController};
 use crate::analysis::highpass_zero_phase;
 use crate::config::RigConfig;
 use crate::plant::mechanics::Chain;
@@ -51,33 +52,58 @@ pub struct DrivenSettings {
     /// Ripple phases read from the measured torque where the drive rejects
     /// an order ([`ripple_matched_to_the_drive`]); `false`: the rig file's.
     pub ripple_phases_from_torque: bool,
-    /// The rig drive's speed feedback identified from the data
-    /// ([`identify_speed_feedback`]) acts on the model's departures from the
-    /// measured speed; `false` (the default): the measured torque alone. On
-    /// the foreign recordings tried, the identified gain helped one rig and
-    /// hurt three (the in-phase torque-speed gain also holds the forward
-    /// path), so it only widens the tolerance.
+    /// Added to every ripple order's phase, rad: the rig file gives no
+    /// phases, so the tolerance is taken over the phase circle.
+    pub ripple_phase_shift_rad: f64,
+    /// The rig drive's speed loop, where identified
+    /// ([`DrivenTravel::controller`]), answers the model's departures from
+    /// the rig's speed estimate: the measured torque plus
+    /// `-Kp de - Ki integral(de)`, `de` the model's estimate minus the
+    /// rig's. A resonance the drive holds down is held down in the model
+    /// too, where the measured torque alone would replay it open loop.
+    /// `false`: the measured torque alone.
     pub speed_feedback: bool,
 }
 
 impl Default for DrivenSettings {
     fn default() -> Self {
-        Self { tracking_bandwidth_hz: TRACKING_BANDWIDTH_HZ, ripple_phases_from_torque: true, speed_feedback: false }
+        Self {
+            tracking_bandwidth_hz: TRACKING_BANDWIDTH_HZ,
+            ripple_phases_from_torque: true,
+            ripple_phase_shift_rad: 0.0,
+            speed_feedback: false,
+        }
     }
 }
 
 impl DrivenSettings {
     /// The settings moved within what the data cannot decide: tracking
-    /// bandwidth halved and doubled, ripple phases from the rig file, the
-    /// rig drive's speed feedback identified and acting.
-    pub fn alternatives() -> [Self; 4] {
+    /// bandwidth halved and doubled, ripple phases from the rig file and
+    /// turned by a quarter, a half and three quarters of a period.
+    pub fn alternatives() -> [Self; 7] {
         let d = Self::default();
+        let turned = |quarters: f64| Self { ripple_phase_shift_rad: quarters * 0.25 * TAU, ..d };
         [
             Self { tracking_bandwidth_hz: 0.5 * d.tracking_bandwidth_hz, ..d },
             Self { tracking_bandwidth_hz: 2.0 * d.tracking_bandwidth_hz, ..d },
             Self { ripple_phases_from_torque: false, ..d },
+            turned(1.0),
+            turned(2.0),
+            turned(3.0),
             Self { speed_feedback: true, ..d },
         ]
+    }
+}
+
+/// The encoder's resolution as the recorded angle shows it: its smallest
+/// step between samples, rad (a tiny value for a smooth angle).
+pub fn encoder_step_rad(shaft_angle_rad: &[f64]) -> f64 {
+    let step =
+        shaft_angle_rad.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 1e-12).fold(f64::INFINITY, f64::min);
+    if step.is_finite() {
+        step
+    } else {
+        1e-12
     }
 }
 
@@ -92,8 +118,7 @@ pub const STANDSTILL_WINDOW_S: f64 = 0.05;
 /// estimate lags; the encoder tells when the brake holds.
 pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<usize> {
     let n = shaft_angle_rad.len();
-    let quantum =
-        shaft_angle_rad.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 1e-12).fold(f64::INFINITY, f64::min);
+    let quantum = encoder_step_rad(shaft_angle_rad);
     let threshold = (4.0 * quantum).max(1e-4);
     let w = ((STANDSTILL_WINDOW_S * sample_rate_hz).round() as usize).max(1);
     let moving =
@@ -104,72 +129,6 @@ pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<
         (Some(a), Some(b)) => a..b + 1,
         _ => 0..0,
     }
-}
-
-/// Band in which the rig drive's speed feedback is identified, Hz: above
-/// the speed reference's content and the lowest ripple orders, below the
-/// anti-alias and the speed estimate's quantisation.
-pub const FEEDBACK_BAND_HZ: (f64, f64) = (4.0, 40.0);
-/// Candidate time constants of the rig drive's speed-estimate filter, s.
-pub const ESTIMATE_LAGS_S: [f64; 8] = [0.0, 0.0005, 0.001, 0.002, 0.004, 0.008, 0.016, 0.032];
-
-/// What the data tell of the rig drive's speed loop above its reference:
-/// its torque answers the speed estimate's vibration as `-gain * estimate`,
-/// the estimate being the shaft speed through a first-order lag.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-pub struct SpeedFeedback {
-    /// Proportional gain, N m s/rad (never negative; 0 when the data show none).
-    pub gain_nms_per_rad: f64,
-    /// Time constant of the speed estimate's lag, s.
-    pub estimate_lag_s: f64,
-}
-
-/// First-order lag of time constant `tau_s` applied to `x` at `fs` Hz.
-fn lag(x: &[f64], fs: f64, tau_s: f64) -> Vec<f64> {
-    if tau_s <= 0.0 {
-        return x.to_vec();
-    }
-    let a = (-1.0 / (fs * tau_s)).exp();
-    let mut y = x.first().copied().unwrap_or(0.0);
-    x.iter()
-        .map(|v| {
-            y = a * y + (1.0 - a) * v;
-            y
-        })
-        .collect()
-}
-
-/// `x` band-passed to [`FEEDBACK_BAND_HZ`] (zero phase).
-fn feedback_band(x: &[f64], fs: f64) -> anyhow::Result<Vec<f64>> {
-    let above = highpass_zero_phase(x, fs, FEEDBACK_BAND_HZ.0)?;
-    let top = highpass_zero_phase(&above, fs, FEEDBACK_BAND_HZ.1.min(0.4 * fs))?;
-    Ok(above.iter().zip(&top).map(|(a, t)| a - t).collect())
-}
-
-/// Identifies the rig drive's [`SpeedFeedback`] over the motion of
-/// `travel`: the estimate's lag that brings the encoder's speed closest to
-/// the drive's estimate, then the least-squares gain of the torque on the
-/// estimate, both in [`FEEDBACK_BAND_HZ`].
-pub fn identify_speed_feedback(travel: &DrivenTravel) -> anyhow::Result<SpeedFeedback> {
-    let fs = travel.sample_rate_hz;
-    let m = travel.motion.clone();
-    if m.len() < (fs as usize).max(16) {
-        return Ok(SpeedFeedback::default());
-    }
-    let encoder = central_difference(&travel.shaft_angle_rad[m.clone()], fs);
-    let estimate = feedback_band(&travel.speed_estimate_radps[m.clone()], fs)?;
-    let mut best = (0.0, f64::INFINITY);
-    for tau in ESTIMATE_LAGS_S {
-        let lagged = feedback_band(&lag(&encoder, fs, tau), fs)?;
-        let error: f64 = lagged.iter().zip(&estimate).map(|(a, b)| (a - b).powi(2)).sum();
-        if error < best.1 {
-            best = (tau, error);
-        }
-    }
-    let torque = feedback_band(&travel.torque_nm[m], fs)?;
-    let (num, den) = torque.iter().zip(&estimate).fold((0.0, 0.0), |(n, d), (t, w)| (n - t * w, d + w * w));
-    let gain = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
-    Ok(SpeedFeedback { gain_nms_per_rad: gain, estimate_lag_s: best.0 })
 }
 
 /// What the counterpart needs of a travel recording, at one sample rate.
@@ -186,6 +145,9 @@ pub struct DrivenTravel<'a> {
     pub shaft_angle_rad: &'a [f64],
     /// The rig drive's own speed estimate, rad/s.
     pub speed_estimate_radps: &'a [f64],
+    /// The rig drive's speed loop, when identified
+    /// ([`super::drive_law::identify_speed_controller`]).
+    pub controller: Option<SpeedController>,
     /// Samples in which the rig moves ([`motion_from_angle`]; outside them
     /// the brake holds the sheave).
     pub motion: Range<usize>,
@@ -240,11 +202,12 @@ pub fn torque_driven_accelerations(
     let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
     params.m_cw_kg = travel.m_cw_kg;
     let chain = Chain::new(params, travel.lw_start_m);
-    let ripple = if settings.ripple_phases_from_torque {
+    let mut ripple = if settings.ripple_phases_from_torque {
         ripple_matched_to_the_drive(rig, travel)
     } else {
         RippleTorque::from_rig(&rig.ripple)
     };
+    ripple.harmonics.iter_mut().for_each(|h| h.phase_rad += settings.ripple_phase_shift_rad);
     let gains = |per_kg: f64, bandwidth_hz: f64| {
         let wb = TAU * bandwidth_hz;
         (per_kg * wb * wb, per_kg * 2.0 * TRACKING_DAMPING * wb)
@@ -253,8 +216,10 @@ pub fn torque_driven_accelerations(
     let tracking = gains(1.0, settings.tracking_bandwidth_hz);
     let h = 1.0 / fs;
     let theta0 = travel.shaft_angle_rad[0];
-    let feedback = if settings.speed_feedback { identify_speed_feedback(travel)? } else { SpeedFeedback::default() };
+    let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
     let estimate_decay = if feedback.estimate_lag_s > 0.0 { (-h / feedback.estimate_lag_s).exp() } else { 0.0 };
+    // The model's shaft speed, kept for the estimate's dead time.
+    let dead_samples = (feedback.estimate_delay_s * fs).round() as usize;
     // Accelerations at sample k + frac. While the rig moves, the tracking loop
     // acts on the rigid-body coordinate (the mass-weighted mean of the
     // chain's displacements) as a force spread in proportion to mass: it
@@ -262,11 +227,13 @@ pub fn torque_driven_accelerations(
     // elastic modes. At standstill the brake holds the sheave (rigid, as in
     // the nominal plant).
     // The rig drive's answer to the model's speed where it departs from
-    // the rig's: `-gain (model's estimate - rig's estimate)`.
-    let deriv = |s: &ChainState, k: usize, frac: f64, model_estimate: f64| -> ChainState {
+    // the rig's: `-Kp de - Ki integral(de)`, `de` the model's estimate
+    // minus the rig's.
+    let deriv = |s: &ChainState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64)| {
         let j = (k + 1).min(n - 1);
         let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k])
-            - feedback.gain_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k]);
+            - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
+            - feedback.ki_nm_per_rad * departure_integral;
         let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
         let theta = theta0 + s.position_m[SHEAVE] / r;
         let shaft = torque + ripple.torque_nm(theta);
@@ -295,12 +262,17 @@ pub fn torque_driven_accelerations(
     let mut state = ChainState::default();
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut model_estimate = travel.speed_estimate_radps[0];
+    let mut departure_integral = 0.0;
+    // The model's shaft speed, kept for the estimate's dead time.
+    let mut speeds = std::collections::VecDeque::from(vec![model_estimate; dead_samples + 1]);
     for k in 0..n {
         if !travel.motion.contains(&k) {
             state.velocity_mps[SHEAVE] = 0.0;
             model_estimate = travel.speed_estimate_radps[k];
+            departure_integral = 0.0;
+            speeds.iter_mut().for_each(|v| *v = 0.0);
         }
-        let e = model_estimate;
+        let e = (model_estimate, departure_integral);
         let a = deriv(&state, k, 0.0, e).velocity_mps;
         car.push(a[CAR]);
         cw.push(-a[CW]);
@@ -317,7 +289,9 @@ pub fn torque_driven_accelerations(
             state.velocity_mps[i] += h / 6.0
                 * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
         }
-        let speed = state.velocity_mps[SHEAVE] / r;
+        speeds.push_back(state.velocity_mps[SHEAVE] / r);
+        let speed = speeds.pop_front().unwrap_or(0.0);
+        departure_integral += (model_estimate - travel.speed_estimate_radps[k]) * h;
         model_estimate = estimate_decay * model_estimate + (1.0 - estimate_decay) * speed;
         if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
             anyhow::bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
@@ -339,62 +313,9 @@ fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> anyhow::Res
     Ok((u, v))
 }
 
-/// The rate of `x` sampled at `fs` Hz: central differences inside, one-sided
-/// at the ends.
-fn central_difference(x: &[f64], fs: f64) -> Vec<f64> {
-    let n = x.len();
-    (0..n)
-        .map(|k| {
-            let (a, b) = (k.saturating_sub(1), (k + 1).min(n.saturating_sub(1)));
-            if b > a {
-                (x[b] - x[a]) * fs / (b - a) as f64
-            } else {
-                0.0
-            }
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn travel<'a>(torque: &'a [f64], angle: &'a [f64], estimate: &'a [f64], fs: f64) -> DrivenTravel<'a> {
-        DrivenTravel {
-            m_car_kg: 70.5,
-            m_cw_kg: 33.0,
-            lw_start_m: 1.0,
-            torque_nm: torque,
-            shaft_angle_rad: angle,
-            speed_estimate_radps: estimate,
-            motion: 0..torque.len(),
-            constant_speed: 0..torque.len(),
-            sample_rate_hz: fs,
-        }
-    }
-
-    #[test]
-    fn a_proportional_speed_loop_behind_a_lagged_estimate_is_identified() {
-        // Shaft speed: 6 rad/s with broadband wobble; the drive's estimate is
-        // the speed through a 4 ms lag; its torque answers -12 * estimate.
-        let fs = 4096.0;
-        let n = 8 * 4096;
-        let speed: Vec<f64> = (0..n)
-            .map(|k| {
-                let t = k as f64 / fs;
-                6.0 + [7.0, 13.0, 23.0, 31.0].iter().map(|f| 0.05 * (TAU * f * t + f).sin()).sum::<f64>()
-            })
-            .collect();
-        let mut angle = vec![0.0; n];
-        for k in 1..n {
-            angle[k] = angle[k - 1] + 0.5 * (speed[k] + speed[k - 1]) / fs;
-        }
-        let estimate = lag(&speed, fs, 0.004);
-        let torque: Vec<f64> = estimate.iter().map(|w| 40.0 - 12.0 * w).collect();
-        let found = identify_speed_feedback(&travel(&torque, &angle, &estimate, fs)).unwrap();
-        assert!((found.gain_nms_per_rad - 12.0).abs() < 0.1, "{found:?}");
-        assert_eq!(found.estimate_lag_s, 0.004, "{found:?}");
-    }
 
     #[test]
     fn the_motion_is_where_the_encoder_turns() {

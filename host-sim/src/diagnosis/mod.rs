@@ -14,6 +14,7 @@
 pub mod acquisition;
 pub mod attribute;
 pub mod calibrate;
+pub mod drive_law;
 pub mod driven;
 pub mod locate;
 pub mod measure;
@@ -116,6 +117,18 @@ pub struct DriveFinding {
     pub reason: String,
 }
 
+/// The rig drive's speed loop as one travel shows it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RigSpeedLoop {
+    /// The travel.
+    pub recording: String,
+    /// The identified controller, when the data show a PI on the speed
+    /// estimate.
+    pub controller: Option<drive_law::SpeedController>,
+    /// Why not, otherwise.
+    pub refused: Option<String>,
+}
+
 /// Settings of a diagnosis.
 #[derive(Clone, Debug)]
 pub struct GapOptions {
@@ -170,6 +183,9 @@ pub struct GapReport {
     pub verdict: Verdict,
     /// The drive the travels' model assumes, and why.
     pub drive: DriveFinding,
+    /// The rig drive's speed loop identified from each travel under another
+    /// drive ([`drive_law`]).
+    pub rig_speed_loops: Vec<RigSpeedLoop>,
     /// Recordings not diagnosed, with the reason (the calibration's own
     /// left-out recordings are in [`Calibration::skipped`]).
     pub left_out: Vec<LeftOut>,
@@ -278,6 +294,9 @@ struct Prepared {
     /// The torque-driven model's response to the current probes' noise in
     /// the measured torque (another draw of it), where the model is driven.
     noise_response: Option<ChainSignals>,
+    /// The rig drive's speed loop as identified, or why not, where the
+    /// model is driven.
+    speed_loop: Option<Result<drive_law::SpeedController, String>>,
 }
 
 /// `signal` plus white Gaussian noise of one-sided density `density`
@@ -419,8 +438,10 @@ fn counterpart(
         });
         measured.noise_density.retain(|(c, _)| measured.channels.iter().any(|(m, _)| m == c));
     }
+    let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
+    let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
-        driven_counterpart(model, recording, &measured, (&torque, &speed), settings)
+        driven_counterpart(model, recording, &measured, (&torque, &speed, controller), settings)
     };
     let run_closed =
         |model: &RigConfig| simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
@@ -436,13 +457,53 @@ fn counterpart(
     };
     let noise_response = if driven {
         let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
-        let run =
-            driven_counterpart(models[0], recording, &measured, (&noisy, &speed), &driven::DrivenSettings::default())?;
+        let run = driven_counterpart(
+            models[0],
+            recording,
+            &measured,
+            (&noisy, &speed, controller),
+            &driven::DrivenSettings::default(),
+        )?;
         Some(difference(&run, &nominal))
     } else {
         None
     };
-    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response })
+    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop })
+}
+
+/// The rig drive's speed controller identified from the travel
+/// `recording` ([`drive_law`]): its measured chain signals, torque and
+/// speed estimate, and the speed reference when recorded; the reason when
+/// the data do not show a PI on the speed estimate.
+fn rig_speed_controller(
+    model: &RigConfig,
+    recording: &Recording,
+    measured: &ChainSignals,
+    torque: &[f64],
+    speed: &[f64],
+) -> Result<drive_law::SpeedController, String> {
+    let factor = (recording.meta.sample_rate_hz / measured.sample_rate_hz).round().max(1.0) as usize;
+    let r = model.mechanics.sheave_radius_m;
+    let reference: Option<Vec<f64>> = recording
+        .column(crate::recording::REF_SPEED)
+        .map(|c| c.values.iter().step_by(factor).map(|v| v / r).take(torque.len()).collect());
+    let constant_speed = measured
+        .phases
+        .iter()
+        .find(|(p, _)| *p == signals::Phase::Constant)
+        .ok_or("the travel has no constant-speed stage")?
+        .1
+        .clone();
+    let data = drive_law::ControllerData {
+        torque_nm: torque,
+        shaft_angle_rad: &measured.angle_rad,
+        speed_estimate_radps: speed,
+        reference_radps: reference.as_deref().filter(|r| r.len() == torque.len()),
+        motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
+        constant_speed,
+        sample_rate_hz: measured.sample_rate_hz,
+    };
+    drive_law::identify_speed_controller(&data).map_err(|e| format!("{e:#}"))
 }
 
 /// The torque-driven counterpart of the travel `recording` whose measured
@@ -451,7 +512,7 @@ fn driven_counterpart(
     model: &RigConfig,
     recording: &Recording,
     measured: &ChainSignals,
-    (torque, speed): (&[f64], &[f64]),
+    (torque, speed, controller): (&[f64], &[f64], Option<drive_law::SpeedController>),
     settings: &driven::DrivenSettings,
 ) -> anyhow::Result<ChainSignals> {
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
@@ -468,6 +529,7 @@ fn driven_counterpart(
         torque_nm: torque,
         shaft_angle_rad: &measured.angle_rad,
         speed_estimate_radps: speed,
+        controller,
         motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
         constant_speed: constant,
         sample_rate_hz: measured.sample_rate_hz,
@@ -565,15 +627,23 @@ pub fn diagnose(
     let mut measured_all = Vec::new();
     let mut used = Vec::new();
     let mut bands_all: Option<Bands> = None;
+    let mut rig_speed_loops = Vec::new();
     for (i, prepared) in prepared {
         let recording = &dataset[i].1;
-        let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response } = match prepared {
+        let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, speed_loop } = match prepared {
             Ok(p) => p,
             Err(e) => {
                 left_out.push(LeftOut { recording: dataset[i].0.clone(), reason: format!("{e:#}") });
                 continue;
             }
         };
+        if let Some(found) = speed_loop {
+            let (controller, refused) = match found {
+                Ok(c) => (Some(c), None),
+                Err(reason) => (None, Some(reason)),
+            };
+            rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused });
+        }
         let measured_for_perturbed = measured.clone();
         align_phases(&mut measured, &mut nominal);
         for p in perturbed.iter_mut() {
@@ -744,6 +814,7 @@ pub fn diagnose(
         dataset: name.to_string(),
         verdict,
         drive,
+        rig_speed_loops,
         left_out,
         attribution_refused,
         explained_by,

@@ -167,6 +167,7 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
         }
     };
     let _ = writeln!(s, "The rig's drive: {drive}; {}.\n", r.drive.reason);
+    speed_loops(&mut s, &r.rig_speed_loops);
     if let Some(why) = &r.attribution_refused {
         let _ = writeln!(s, "Attribution: {why}.\n");
     }
@@ -298,4 +299,42 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
         }
     }
     s
+}
+
+/// The table of the rig drive's speed loop as each travel shows it.
+fn speed_loops(s: &mut String, loops: &[super::RigSpeedLoop]) {
+    if loops.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "The rig drive's speed loop, identified from its own input and output (speed reference and estimate, \
+         torque); the tolerance covers the model with this loop answering its departures from the rig's speed:\n"
+    );
+    let _ = writeln!(
+        s,
+        "| travel | Kp (N m s/rad) | Ki (N m/rad) | estimate delay (ms) | estimate lag (ms) | fit 4-40 Hz |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for l in loops {
+        match (&l.controller, &l.refused) {
+            (Some(c), _) => {
+                let _ = writeln!(
+                    s,
+                    "| {} | {:.2} | {:.1} | {:.1} | {:.1} | {:.1} % |",
+                    l.recording,
+                    c.kp_nms_per_rad,
+                    c.ki_nm_per_rad,
+                    1e3 * c.estimate_delay_s,
+                    1e3 * c.estimate_lag_s,
+                    100.0 * c.dynamic_fit
+                );
+            }
+            (None, reason) => {
+                let _ =
+                    writeln!(s, "| {} | not identified: {} | | | | |", l.recording, reason.as_deref().unwrap_or("-"));
+            }
+        }
+    }
+    let _ = writeln!(s);
 }
