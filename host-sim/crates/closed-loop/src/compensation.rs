@@ -1,19 +1,19 @@
 //! Torque-ripple compensation on the host: the strategies of
-//! `shared::ripple` set up from the rig file, run over travels and model
+//! `drive_core::ripple` set up from the rig file, run over travels and model
 //! mismatches, and the measures `host-sim compare` reports for each run.
 
 use anyhow::Context;
+use drive_core::config::Direction;
+use drive_core::observer::{ChainObserver, ObserverTuning};
+use drive_core::ripple::harmonics::HarmonicTable;
+use drive_core::ripple::{RippleCompensator, Strategy};
+use drive_core::{ControlOutput, Controller, SensorFrame};
 use serde::{Deserialize, Serialize};
-use shared::config::Direction;
-use shared::observer::{ChainObserver, ObserverTuning};
-use shared::ripple::harmonics::HarmonicTable;
-use shared::ripple::{RippleCompensator, Strategy};
-use shared::{ControlOutput, Controller, SensorFrame};
 
-use crate::analysis::{constant_speed_stage, ride_quality};
-use crate::closed_loop::{simulate_travel_faulted, FaultHook, SimError, SimOptions, StepAction, TravelRun, TravelSpec};
-use crate::config::RigConfig;
-use crate::plant::Plant;
+use crate::{simulate_travel_faulted, FaultHook, SimError, SimOptions, StepAction, TravelRun, TravelSpec};
+use dsp::{constant_speed_stage, ride_quality};
+use plant::Plant;
+use rig_config::RigConfig;
 
 /// The mechanical orders of the rig's `[[ripple]]` table, in file order.
 pub fn ripple_orders(rig: &RigConfig) -> Vec<u16> {

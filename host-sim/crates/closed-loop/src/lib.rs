@@ -1,4 +1,23 @@
-//! One closed-loop travel: the drive core of `shared` controls the plant.
+//! The drive closed around the plant, and what runs on closed loops.
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate is the `<->` and the arrow to the recording: the
+//! drive core (`drive-core`) or another [`DriveController`] steps on the
+//! plant's sensor frames, and a travel becomes a [`Recording`]. It depends on
+//! `drive-core`, `plant`, `recording` and `rig-config`, and on `dsp` for the
+//! ride measures of the compensation runs; nothing downstream (the diagnosis)
+//! is visible from here.
+//!
+//! - this crate's root: one closed-loop travel ([`simulate_travel`] and its
+//!   variants), the data acquisition, the [`FaultHook`];
+//! - [`faults`]: fault kinds, their injection and the runs of `host-sim faults`;
+//! - [`foreign`]: a commercial drive and a foreign data acquisition;
+//! - [`synthetic`]: rig-like datasets from the full plant (`host-sim dataset`);
+//! - [`compensation`]: the ripple-compensation strategies over travels and
+//!   mismatches (`host-sim compare`);
+//! - [`pil`]: the drive core in QEMU as a [`DriveController`] (`host-sim pil`).
+//!
+//! One closed-loop travel: the drive core controls the plant.
 //!
 //! Timing per PWM period `Ts` (16 kHz): at `t_k` the sensors are sampled and
 //! the controller steps; the brake output acts at once; the new PWM compare
@@ -7,14 +26,22 @@
 //! own rate (16384 Hz): the plant is integrated exactly to every sample
 //! instant, so no interpolation is involved.
 
-use indicatif::ProgressBar;
-use shared::config::Direction;
-use shared::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
+#![warn(missing_docs)]
 
-use crate::config::RigConfig;
-use crate::plant::effects::Effects;
-use crate::plant::{Plant, PlantInputs, PlantObservation};
-use crate::recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta};
+pub mod compensation;
+pub mod faults;
+pub mod foreign;
+pub mod pil;
+pub mod synthetic;
+
+use drive_core::config::Direction;
+use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
+use indicatif::ProgressBar;
+
+use plant::effects::Effects;
+use plant::{Plant, PlantInputs, PlantObservation};
+use recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta};
+use rig_config::RigConfig;
 
 /// One travel to simulate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -78,14 +105,14 @@ pub enum SimError {
     BadTravel(String),
     /// The controller refused the travel command.
     #[error("the drive refused the travel command: {0:?}")]
-    Refused(shared::controller::CommandError),
+    Refused(drive_core::controller::CommandError),
     /// The drive tripped.
     #[error("the drive tripped at t = {time_s:.4} s: {fault:?}")]
     Tripped {
         /// Time of the trip, s.
         time_s: f64,
         /// Fault.
-        fault: shared::supervisor::Fault,
+        fault: drive_core::supervisor::Fault,
     },
     /// The simulation did not finish in the allowed time.
     #[error("the travel did not finish within {0:.1} s of simulated time")]
@@ -140,7 +167,7 @@ pub enum StepAction {
     /// enable and brake outputs.
     Skip,
     /// The frame reaches the controller corrupted: byte `byte_index` of its
-    /// link encoding (`shared::frame`) XOR `xor`.
+    /// link encoding (`drive_core::frame`) XOR `xor`.
     Corrupt {
         /// The sensor readings before corruption.
         frame: SensorFrame,
@@ -168,11 +195,11 @@ pub trait FaultHook {
 }
 
 /// What the controller receives of a sensor frame corrupted on the link:
-/// the frame encoded with the link codec (`shared::frame`), byte
+/// the frame encoded with the link codec (`drive_core::frame`), byte
 /// `byte_index` XOR `xor`, decoded by a fresh decoder; `None` when the
 /// decoder rejects it (CRC) or never completes it.
 pub fn corrupted_frame(sensors: &SensorFrame, byte_index: usize, xor: u8) -> Option<SensorFrame> {
-    use shared::frame::{encode, Decoder, Message, MAX_FRAME};
+    use drive_core::frame::{encode, Decoder, Message, MAX_FRAME};
     let mut bytes = [0u8; MAX_FRAME];
     let n = encode(&Message::Sense(*sensors), &mut bytes);
     if let Some(byte) = bytes[..n].get_mut(byte_index) {
@@ -352,7 +379,7 @@ pub fn simulate_travel_faulted(
                 pwm_enabled: false,
                 brake_released: false,
                 state: DriveState::Idle,
-                telemetry: shared::controller::Telemetry::default(),
+                telemetry: drive_core::controller::Telemetry::default(),
             },
         };
         if let DriveState::Tripped(fault) = output.state {
@@ -434,7 +461,7 @@ pub fn simulate_travel_faulted(
     Ok(run)
 }
 
-fn record(run: &mut TravelRun, t: f64, o: &PlantObservation, output: &shared::ControlOutput) {
+fn record(run: &mut TravelRun, t: f64, o: &PlantObservation, output: &drive_core::ControlOutput) {
     run.time_s.push(t);
     run.acc_car_mps2.push(o.car_acceleration_mps2);
     run.acc_cw_mps2.push(o.counterweight_acceleration_mps2);
@@ -457,7 +484,7 @@ impl TravelRun {
     /// (`motor_torque_nm`, `ripple_torque_nm`, `shaft_speed_true_radps`,
     /// `lw_m`, `drive_state`), which readers keep and ignore.
     pub fn to_recording(&self, spec: &TravelSpec, m_cw_kg: f64, description: String) -> Recording {
-        use crate::recording as rec;
+        use recording as rec;
         let columns = vec![
             Column::new(rec::TIME_S, self.time_s.clone()),
             Column::new(rec::ACC_CAR, self.acc_car_mps2.clone()),

@@ -1,7 +1,7 @@
 //! The link to the processor-in-the-loop target: the drive core compiled for
 //! the Cortex-M4F (`pil/`) running in QEMU's `mps2-an386`, one frame per PWM
 //! period over the emulated UART (a TCP socket on 127.0.0.1 that QEMU
-//! connects to). Frames are `shared::frame`, the code the target uses too.
+//! connects to). Frames are `drive_core::frame`, the code the target uses too.
 //!
 //! QEMU runs with `-icount shift=N`: every instruction advances the virtual
 //! clock by 2^N ns, and the target times each step with SysTick on the
@@ -20,10 +20,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use shared::frame::{command_result_from_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
-use shared::{ControlOutput, Controller, DriveConfig, SensorFrame, TravelCommand};
+use drive_core::frame::{
+    command_result_from_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME,
+};
+use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame, TravelCommand};
 
-use crate::closed_loop::{corrupted_frame, DriveController, SimError};
+use crate::{corrupted_frame, DriveController, SimError};
 
 /// Processor clock of the MPS2 board in QEMU, which SysTick counts, Hz.
 pub const MPS2_SYSCLK_HZ: f64 = 25.0e6;
@@ -31,7 +33,7 @@ pub const MPS2_SYSCLK_HZ: f64 = 25.0e6;
 /// Where the PIL target's ELF is built (`cargo build --release --target
 /// thumbv7em-none-eabihf` in `pil/`, which `scripts/test.sh` does).
 pub fn default_elf_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../pil/target/thumbv7em-none-eabihf/release/pil")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../pil/target/thumbv7em-none-eabihf/release/pil")
 }
 
 /// How to start the target.
@@ -89,7 +91,7 @@ pub enum PilError {
     Timeout(&'static str),
     /// A frame failed its checks.
     #[error("bad frame from the PIL target: {0:?}")]
-    Frame(shared::frame::FrameError),
+    Frame(drive_core::frame::FrameError),
     /// A valid frame of the wrong kind.
     #[error("unexpected reply from the PIL target: {0:?}")]
     Unexpected(Message),
@@ -295,15 +297,15 @@ impl PilTarget {
     /// Installs ripple compensation `strategy` with `table` on the target
     /// and on the shadow alike ([`Controller::install_compensation`] with
     /// the drive's chain model `chain`); the table keeps its first
-    /// [`shared::frame::COMPENSATION_HARMONICS`] harmonics, as the frame does.
+    /// [`drive_core::frame::COMPENSATION_HARMONICS`] harmonics, as the frame does.
     pub fn install_compensation(
         &mut self,
-        strategy: shared::ripple::Strategy,
-        table: &shared::ripple::harmonics::HarmonicTable,
-        chain: &shared::observer::ChainModel,
+        strategy: drive_core::ripple::Strategy,
+        table: &drive_core::ripple::harmonics::HarmonicTable,
+        chain: &drive_core::observer::ChainModel,
     ) -> Result<(), PilError> {
         let mut sent = *table;
-        sent.len = sent.len.min(shared::frame::COMPENSATION_HARMONICS);
+        sent.len = sent.len.min(drive_core::frame::COMPENSATION_HARMONICS);
         match self.exchange(&Message::Compensation { strategy, table: sent })? {
             Message::Ack(0) => {}
             other => return Err(PilError::Unexpected(other)),

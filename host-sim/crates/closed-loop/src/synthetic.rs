@@ -5,20 +5,20 @@
 //! records them as a foreign rig would: another drive, another data
 //! acquisition (`crate::foreign`).
 
+use drive_core::config::Direction;
+use drive_core::{Controller, DriveState};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use shared::config::Direction;
-use shared::{Controller, DriveState};
 
-use crate::closed_loop::{simulate_travel, simulate_travel_with, SimOptions, TravelSpec};
-use crate::config::RigConfig;
 use crate::foreign::{simulate_commercial_travel, AnalogSignal, Channel, ForeignError, ForeignRig};
-use crate::plant::effects::Effects;
-use crate::plant::free_decay::{simulate_free_decay_with, FreeDecaySpec};
-use crate::recording::{
+use crate::{simulate_travel, simulate_travel_with, SimOptions, TravelSpec};
+use plant::effects::Effects;
+use plant::free_decay::{simulate_free_decay_with, FreeDecaySpec};
+use recording::{
     Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, ACC_CW, ANGLE, I_A, I_B, I_C, REF_SPEED, SPEED, TIME_S,
 };
+use rig_config::RigConfig;
 
 /// What to record.
 #[derive(Clone, Debug)]
@@ -114,7 +114,7 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> anyhow::Result<Vec<(
     let mut out = Vec::new();
     for run in runs {
         let (name, mut recording) = run?;
-        recording.columns.retain(|c| crate::recording::KNOWN_COLUMNS.contains(&c.name.as_str()));
+        recording.columns.retain(|c| recording::KNOWN_COLUMNS.contains(&c.name.as_str()));
         for acc in [ACC_CAR, ACC_CW] {
             add_noise(&mut recording, acc, spec.acc_noise_mps2, &mut rng);
         }
@@ -140,6 +140,10 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> anyhow::Result<Vec<(
     }
     Ok(out)
 }
+
+/// Rope elements of the decay model (a continuous rope for Eqn 9): the
+/// project's datasets and the diagnosis's counterparts of their decays.
+pub const DECAY_ROPE_ELEMENTS: usize = 40;
 
 /// Rope elements of the free decays of a foreign rig: with 40 the rope's own
 /// first ten or so modes (the second of a 2.5 m rope near 650 Hz) ring
@@ -242,7 +246,7 @@ fn foreign_travel(
     let description = foreign_description(foreign, "travel");
     let Some(acq) = &foreign.acquisition else {
         let mut recording = run.to_recording(travel, rig.mechanics.m_cw_kg, description);
-        recording.columns.retain(|c| crate::recording::KNOWN_COLUMNS.contains(&c.name.as_str()));
+        recording.columns.retain(|c| recording::KNOWN_COLUMNS.contains(&c.name.as_str()));
         for acc in [ACC_CAR, ACC_CW] {
             add_noise(&mut recording, acc, spec.acc_noise_mps2, rng);
         }
@@ -294,7 +298,7 @@ fn decay_spec(rig: &RigConfig, spec: &DatasetSpec, mass_kg: f64) -> FreeDecaySpe
         rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
         damping_kg_per_s: m.c_car_kg_per_s,
         initial_acceleration_mps2: 2.0,
-        elements: crate::diagnosis::simulate::DECAY_ROPE_ELEMENTS,
+        elements: DECAY_ROPE_ELEMENTS,
     }
 }
 

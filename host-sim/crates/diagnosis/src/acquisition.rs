@@ -10,7 +10,7 @@
 //! corner, against the measured acceleration, both low-passed below the
 //! chain's elastic modes.
 
-use crate::analysis::highpass_zero_phase;
+use dsp::highpass_zero_phase;
 
 /// Candidate corners, Hz: none (0) and a geometric grid from 0.05 to 3 Hz.
 pub fn candidate_corners_hz() -> Vec<f64> {

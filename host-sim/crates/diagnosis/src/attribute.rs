@@ -30,9 +30,9 @@ use super::measure::{gap, Tolerances};
 use super::signals::Channel;
 use super::simulate::{model_step_s, simulate_counterpart};
 use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers, Segmentation};
-use crate::config::RigConfig;
-use crate::plant::effects::{EffectKind, Effects, ParamScale};
-use crate::recording::Recording;
+use plant::effects::{EffectKind, Effects, ParamScale};
+use recording::Recording;
+use rig_config::RigConfig;
 
 /// Relative penalty per fitted parameter on the held-out gap when ranking.
 pub const PARAMETER_PENALTY: f64 = 0.03;

@@ -5,9 +5,9 @@
 //! logarithmic decrement (Eqn 11-12), the sheave's damping from the torque
 //! balance of the constant-speed stage (Eqn 13 with Eqn 4).
 
-use crate::analysis::identify_dataset::identify_dataset;
-use crate::config::RigConfig;
-use crate::recording::Recording;
+use crate::identify_dataset::identify_dataset;
+use recording::Recording;
+use rig_config::RigConfig;
 
 /// Highest frequency searched for a decay's first mode, Hz.
 pub const DECAY_MAX_FREQUENCY_HZ: f64 = 100.0;

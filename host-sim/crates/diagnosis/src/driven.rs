@@ -17,12 +17,12 @@ use std::ops::Range;
 
 use anyhow::Context;
 
-use crate::analysis::highpass_zero_phase;
-use crate::config::RigConfig;
-use crate::plant::mechanics::Chain;
-use crate::plant::ripple::RippleTorque;
-use crate::plant::rope::{CAR, CW, DOF, SHEAVE};
-use crate::plant::{ChainParams, ChainState};
+use dsp::highpass_zero_phase;
+use plant::mechanics::Chain;
+use plant::ripple::RippleTorque;
+use plant::rope::{CAR, CW, DOF, SHEAVE};
+use plant::{ChainParams, ChainState};
+use rig_config::RigConfig;
 
 /// Bandwidth of the tracking loop on the measured shaft angle, Hz: well
 /// below the chain's first elastic mode (about 8 Hz and up on the reference

@@ -8,10 +8,10 @@
 //!   corrected for the out-of-balance torque (Eqn 4) when the travel is not
 //!   balanced.
 
-use super::filter::highpass_zero_phase;
-use super::spectrum::amplitude_spectrum;
-use super::AnalysisError;
-use crate::plant::free_decay::eqn9_fundamental_gamma_l;
+use dsp::filter::highpass_zero_phase;
+use dsp::spectrum::amplitude_spectrum;
+use dsp::AnalysisError;
+use plant::free_decay::eqn9_fundamental_gamma_l;
 
 /// What a free decay gives.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -256,7 +256,7 @@ pub fn sheave_damping_from_torque_balance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay, FreeDecaySpec};
+    use plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay, FreeDecaySpec};
 
     #[test]
     fn eqn9_inverts_its_own_frequency() {

@@ -6,8 +6,8 @@
 
 use super::identify::{identify_free_decay, FreeDecayIdentification};
 use super::travel_signals::{torque_balance, TorqueBalance};
-use crate::config::RigConfig;
-use crate::recording::{Recording, RecordingKind, ACC_CAR};
+use recording::{Recording, RecordingKind, ACC_CAR};
+use rig_config::RigConfig;
 
 /// Plausible rope `EA`, N: from a thin synthetic cord to a thick steel rope.
 pub const EA_RANGE_N: (f64, f64) = (1.0e4, 1.0e9);

@@ -10,11 +10,26 @@
 //!    located along the signal chain, in time and in frequency ([`locate`]).
 //! 4. [`attribute`]: every effect fitted and cross-validated.
 //! 5. The verdict: `nominal`, `explained` or `unexplained` ([`report`]).
+//!
+//! The paper's identification, which the calibration uses and `host-sim
+//! identify` reports, is here too, because it needs the plant model:
+//! [`identify`] (Eqn 9, 11-13), [`identify_dataset`] (over a dataset) and
+//! [`travel_signals`] (shaft angle, rope length, torque balance of a travel).
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate is the last step: it reads recordings
+//! (`recording`), analyses them (`dsp`) and simulates their counterparts on
+//! the plant in closed loop (`plant`, `closed-loop`); nothing upstream
+//! depends on it.
+
+#![warn(missing_docs)]
 
 pub mod acquisition;
 pub mod attribute;
 pub mod calibrate;
 pub mod driven;
+pub mod identify;
+pub mod identify_dataset;
 pub mod locate;
 pub mod measure;
 pub mod replay;
@@ -22,20 +37,21 @@ pub mod report;
 pub mod signals;
 pub mod simulate;
 pub mod spectra;
+pub mod travel_signals;
 
 use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::analysis::identify_dataset::LeftOut;
-use crate::config::RigConfig;
-use crate::plant::effects::{EffectKind, Effects};
-use crate::plant::free_decay::eqn9_first_frequency_hz;
-use crate::recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
+use crate::identify_dataset::LeftOut;
 use attribute::{attribute, Candidate, Lab, Target};
 use calibrate::{calibrate, Calibration};
 use locate::{locate, Location};
 use measure::{cell_gaps, gap_of_cells, CellGap, GapValue};
+use plant::effects::{EffectKind, Effects};
+use plant::free_decay::eqn9_first_frequency_hz;
+use recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
+use rig_config::RigConfig;
 use signals::{chain_signals, decimation_factor, ChainSignals};
 use simulate::{model_step_s, simulate_counterpart};
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};

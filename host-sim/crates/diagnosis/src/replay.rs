@@ -5,10 +5,10 @@
 //! loop does not, the gap lies upstream of the sheave (drive or electrical);
 //! when the replay misses them too, it lies in the mechanics.
 
-use crate::analysis::highpass_zero_phase;
-use crate::config::RigConfig;
-use crate::plant::rope::{CAR, CW, DOF, SHEAVE};
-use crate::plant::{Chain, ChainParams, ChainState};
+use dsp::highpass_zero_phase;
+use plant::rope::{CAR, CW, DOF, SHEAVE};
+use plant::{Chain, ChainParams, ChainState};
+use rig_config::RigConfig;
 
 /// The prescribed angle is low-passed at this frequency, Hz (encoder
 /// quantisation would otherwise drive the rope masses' modes); it keeps the
@@ -100,7 +100,7 @@ pub fn replay_accelerations(
 /// channels, the measured phases).
 pub fn replay_cells(
     rig: &RigConfig,
-    recording: &crate::recording::Recording,
+    recording: &recording::Recording,
     stem: &str,
     measured: &super::signals::ChainSignals,
     target: &super::attribute::Target,
@@ -108,19 +108,15 @@ pub fn replay_cells(
 ) -> anyhow::Result<Vec<super::measure::CellGap>> {
     use super::signals::{decimation_factor, ChainSignals, Channel};
     use super::spectra::{cell_powers, ChainSpectra, Segmentation};
-    use crate::recording::{RecordingKind, ANGLE, SPEED};
+    use recording::{RecordingKind, ANGLE, SPEED};
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         anyhow::bail!("`{stem}`: only travels are replayed");
     };
     let fs = recording.meta.sample_rate_hz;
     let speed = recording.column(SPEED).map(|c| c.values.as_slice()).unwrap_or(&[]);
-    let angle = crate::analysis::travel_signals::shaft_angle_rad(
-        recording.column(ANGLE).map(|c| c.values.as_slice()),
-        speed,
-        fs,
-    );
+    let angle = crate::travel_signals::shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
     let factor = decimation_factor(fs);
-    let angle = if factor > 1 { crate::analysis::decimate(&angle, factor)? } else { angle };
+    let angle = if factor > 1 { dsp::decimate(&angle, factor)? } else { angle };
     let len = measured.len().min(angle.len());
     let (car, cw) = replay_accelerations(rig, m_car_kg, m_cw_kg, lw_start_m, &angle[..len], measured.sample_rate_hz)?;
     let mut channels = vec![(Channel::CarAcceleration, car)];

@@ -11,8 +11,8 @@ use anyhow::Context;
 use super::measure::CellGap;
 use super::signals::Phase;
 use super::{DriveModel, GapReport, Verdict};
-use crate::analysis::Spectrogram;
-use crate::plots::spectrogram_plot;
+use dsp::Spectrogram;
+use plots::spectrogram_plot;
 
 const PHASES: [Phase; 6] =
     [Phase::Start, Phase::Acceleration, Phase::Constant, Phase::Deceleration, Phase::Stop, Phase::Decay];

@@ -9,10 +9,10 @@ use std::ops::Range;
 
 use anyhow::Context;
 
-use crate::analysis::travel_signals::travel_torque;
-use crate::analysis::{decimate, travel_phases, welch_psd};
-use crate::config::RigConfig;
-use crate::recording::{Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
+use crate::travel_signals::travel_torque;
+use dsp::{decimate, travel_phases, welch_psd};
+use recording::{Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
+use rig_config::RigConfig;
 
 /// Lowest sample rate the gap is measured at, Hz: recordings are decimated
 /// by the largest whole factor that keeps at least this rate, so that the

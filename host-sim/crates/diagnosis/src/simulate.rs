@@ -4,18 +4,16 @@
 
 use anyhow::Context;
 
-use crate::analysis::identify::release_index;
-use shared::config::Direction;
+use crate::identify::release_index;
+use drive_core::config::Direction;
 
 use super::signals::{chain_signals, decimation_factor, ChainSignals};
-use crate::closed_loop::{simulate_travel, SimOptions, TravelSpec};
-use crate::config::RigConfig;
-use crate::plant::effects::Effects;
-use crate::plant::free_decay::{simulate_free_decay_with, FreeDecaySpec};
-use crate::recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
-
-/// Rope elements of the decay model (a continuous rope for Eqn 9).
-pub const DECAY_ROPE_ELEMENTS: usize = 40;
+use closed_loop::synthetic::DECAY_ROPE_ELEMENTS;
+use closed_loop::{simulate_travel, SimOptions, TravelSpec};
+use plant::effects::Effects;
+use plant::free_decay::{simulate_free_decay_with, FreeDecaySpec};
+use recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
+use rig_config::RigConfig;
 
 /// Simulates the counterpart of `measured` (named `stem`) on `rig` with
 /// `effects` as chain signals: sampled at the control rate (synchronous with

@@ -2,7 +2,7 @@
 //! the unwrapped shaft angle, the counterweight-side rope length over time
 //! and the electrical angle offset of the machine.
 
-use super::AnalysisError;
+use dsp::AnalysisError;
 
 /// The shaft angle, rad: the `angle_rad` column when there is one, else the
 /// running trapezoidal integral of the speed (rad/s) from 0.
@@ -92,11 +92,11 @@ pub struct TravelTorque {
 
 /// [`TravelTorque`] of the travel recording `stem` for the machine of `rig`.
 pub fn travel_torque(
-    rig: &crate::config::RigConfig,
-    recording: &crate::recording::Recording,
+    rig: &rig_config::RigConfig,
+    recording: &recording::Recording,
     stem: &str,
 ) -> anyhow::Result<TravelTorque> {
-    use crate::recording::{ANGLE, I_A, I_B, I_C, SPEED};
+    use recording::{ANGLE, I_A, I_B, I_C, SPEED};
     let column = |name: &str| -> anyhow::Result<&[f64]> {
         recording
             .column(name)
@@ -109,17 +109,8 @@ pub fn travel_torque(
     let (i_a, i_b, i_c) = (column(I_A)?, column(I_B)?, column(I_C)?);
     let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
     let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
-    let mut torque = crate::analysis::machine_torque_nm(
-        i_a,
-        i_b,
-        i_c,
-        &angle,
-        mo.pole_pairs,
-        mo.flux_linkage_wb,
-        mo.ld_h,
-        mo.lq_h,
-        offset,
-    )?;
+    let mut torque =
+        dsp::machine_torque_nm(i_a, i_b, i_c, &angle, mo.pole_pairs, mo.flux_linkage_wb, mo.ld_h, mo.lq_h, offset)?;
     let expected = expected_torque_nm(rig, recording, &angle, speed)?;
     let agreement = sign_agreement(&torque, &expected);
     if agreement.abs() < MIN_SIGN_AGREEMENT {
@@ -137,7 +128,7 @@ pub fn travel_torque(
         offset
     };
     Ok(TravelTorque {
-        constant_speed: crate::analysis::constant_speed_stage(speed, fs)?,
+        constant_speed: dsp::constant_speed_stage(speed, fs)?,
         speed_radps: speed.to_vec(),
         shaft_angle_rad: angle,
         electrical_offset_rad: offset,
@@ -171,16 +162,16 @@ fn sign_agreement(torque: &[f64], expected: &[f64]) -> f64 {
 /// electrical angle offset found from `i_d = 0` is ambiguous by half a turn;
 /// this torque tells which of the two is right, whatever drive ran the rig.
 pub fn expected_torque_nm(
-    rig: &crate::config::RigConfig,
-    recording: &crate::recording::Recording,
+    rig: &rig_config::RigConfig,
+    recording: &recording::Recording,
     shaft_angle_rad: &[f64],
     speed_radps: &[f64],
 ) -> anyhow::Result<Vec<f64>> {
-    let crate::recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+    let recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         anyhow::bail!("not a travel recording");
     };
     let m = &rig.mechanics;
-    let mut chain = crate::plant::ChainParams::from_rig(rig, m_car_kg);
+    let mut chain = plant::ChainParams::from_rig(rig, m_car_kg);
     chain.m_cw_kg = m_cw_kg;
     let r = m.sheave_radius_m;
     let inertia =
@@ -221,12 +212,12 @@ pub struct TorqueBalance {
 /// over the constant-speed stage, less the out-of-balance torque of Eqn 4,
 /// against the mean shaft speed.
 pub fn torque_balance(
-    rig: &crate::config::RigConfig,
-    recording: &crate::recording::Recording,
+    rig: &rig_config::RigConfig,
+    recording: &recording::Recording,
     stem: &str,
     guide_damping_kg_per_s: f64,
 ) -> anyhow::Result<TorqueBalance> {
-    let crate::recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+    let recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         anyhow::bail!("recording `{stem}` is not a travel");
     };
     let m = &rig.mechanics;
@@ -234,7 +225,7 @@ pub fn torque_balance(
     let stage = t.constant_speed.clone();
     let lw = counterweight_side_length_m(&t.shaft_angle_rad, lw_start_m, m.sheave_radius_m);
     let n = stage.len() as f64;
-    let mut chain = crate::plant::ChainParams::from_rig(rig, m_car_kg);
+    let mut chain = plant::ChainParams::from_rig(rig, m_car_kg);
     chain.m_cw_kg = m_cw_kg;
     let mean_torque_nm = t.torque_nm[stage.clone()].iter().sum::<f64>() / n;
     let mean_speed_radps = t.speed_radps[stage.clone()].iter().sum::<f64>() / n;
@@ -243,7 +234,7 @@ pub fn torque_balance(
         mean_torque_nm,
         mean_speed_radps,
         out_of_balance_torque_nm,
-        sheave_damping_nms_per_rad: crate::analysis::identify::sheave_damping_from_torque_balance(
+        sheave_damping_nms_per_rad: crate::identify::sheave_damping_from_torque_balance(
             mean_torque_nm,
             mean_speed_radps,
             out_of_balance_torque_nm,
@@ -256,7 +247,7 @@ pub fn torque_balance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::pmsm::phase_currents_a;
+    use plant::pmsm::phase_currents_a;
 
     #[test]
     fn offset_of_q_axis_currents_is_found() {

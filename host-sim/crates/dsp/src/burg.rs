@@ -450,7 +450,7 @@ pub fn burg_spectrogram(
     frequency_step_hz: f64,
 ) -> Result<Spectrogram, AnalysisError> {
     check_sample_rate(sample_rate_hz)?;
-    crate::analysis::check_window(window_s, overlap)?;
+    crate::check_window(window_s, overlap)?;
     if order == 0 {
         return Err(AnalysisError::InvalidParameter {
             name: "order",
@@ -522,8 +522,8 @@ pub fn burg_spectrogram(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::test_signals::gaussian;
-    use crate::analysis::welch::welch_psd;
+    use crate::test_signals::gaussian;
+    use crate::welch::welch_psd;
     use std::f64::consts::PI;
 
     /// Polynomial coefficients a_1..a_p of prod (1 - 2 r cos(th) z^-1 + r^2 z^-2)
@@ -888,9 +888,9 @@ mod tests {
     }
 
     #[test]
-    #[ignore = "timing measurement: cargo test --release -p host-sim -- --ignored --nocapture timing"]
+    #[ignore = "timing measurement: cargo test --release -p dsp -- --ignored --nocapture timing"]
     fn timing_of_a_20_s_record() {
-        use crate::analysis::dq0::machine_torque_nm;
+        use crate::dq0::machine_torque_nm;
         use std::time::Instant;
         let fs = 16384.0;
         let n = (20.0 * fs) as usize;

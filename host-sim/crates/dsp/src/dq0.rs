@@ -4,7 +4,7 @@
 //! transformation").
 //!
 //! The transforms follow the simulator's PMSM convention
-//! (`crate::plant::pmsm::phase_currents_a`): amplitude-invariant Clarke,
+//! (`plant::pmsm::phase_currents_a`): amplitude-invariant Clarke,
 //! then Park at the electrical angle `theta_e = p * theta_m + offset`, with
 //! the d axis on the magnet flux. For dq currents `(i_d, i_q)` the phase
 //! currents are
@@ -161,7 +161,7 @@ pub fn machine_torque_nm(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::pmsm::{phase_currents_a, PmsmParams};
+    use plant::pmsm::{phase_currents_a, PmsmParams};
     use std::f64::consts::PI;
 
     /// Phase currents written out from the inverse transform of the module

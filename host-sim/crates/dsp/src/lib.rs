@@ -8,19 +8,25 @@
 //! Every function checks its inputs and returns an [`AnalysisError`] instead
 //! of panicking; non-finite samples (NaN, ±inf) are rejected so that a NaN
 //! never travels into a result.
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate is the analysis's signal processing: it knows
+//! sampled signals only, neither the plant, the drive nor the recording
+//! format, and depends on no other crate of the project. The analyses that
+//! need the plant model (identification, the travel's torque balance) are in
+//! the `diagnosis` crate.
+
+#![warn(missing_docs)]
 
 mod biquad;
 pub mod burg;
 pub mod dq0;
 pub mod filter;
-pub mod identify;
-pub mod identify_dataset;
 pub mod iso2631;
 pub mod ride_quality;
 pub mod spectrogram;
 pub mod spectrum;
 pub mod stages;
-pub mod travel_signals;
 pub mod welch;
 
 #[cfg(test)]

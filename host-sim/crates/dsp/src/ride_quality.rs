@@ -360,7 +360,7 @@ fn peak_to_peak_values_mg(weighted_mps2: &[f64]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::iso2631::wk_digital_gain;
+    use crate::iso2631::wk_digital_gain;
     use std::f64::consts::PI;
 
     #[test]

@@ -67,7 +67,7 @@ pub fn stft_spectrogram(
     max_frequency_hz: f64,
 ) -> Result<Spectrogram, AnalysisError> {
     check_sample_rate(sample_rate_hz)?;
-    crate::analysis::check_window(window_s, overlap)?;
+    crate::check_window(window_s, overlap)?;
     let nyquist_hz = 0.5 * sample_rate_hz;
     if !(max_frequency_hz.is_finite() && max_frequency_hz > 0.0 && max_frequency_hz <= nyquist_hz) {
         return Err(AnalysisError::InvalidParameter {

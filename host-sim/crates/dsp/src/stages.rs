@@ -221,7 +221,7 @@ pub fn travel_phases(speed_radps: &[f64], sample_rate_hz: f64) -> Result<TravelP
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::test_signals::gaussian;
+    use crate::test_signals::gaussian;
     use std::f64::consts::PI;
 
     /// Jerk-limited (S-curve) speed profile, rad/s: rest for `t_rest`, ramp

@@ -199,7 +199,7 @@ impl Psd {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::test_signals::gaussian;
+    use crate::test_signals::gaussian;
     use std::f64::consts::PI;
 
     fn variance(x: &[f64]) -> f64 {

@@ -16,6 +16,14 @@
 //! the counterweight side, car up). Positive shaft torque lifts the car.
 //! The paper's Eqn 3 counts the sheave angle the other way; the equations
 //! are the same with that sign flipped.
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate is the plant: it reads the rig (`rig-config`) and
+//! never knows which controller drives it. Of the drive core it uses only
+//! the interface type [`drive_core::SensorFrame`], the readings it hands to
+//! whichever controller closes the loop ([`Plant::sensor_frame`]).
+
+#![warn(missing_docs)]
 
 pub mod effects;
 pub mod free_decay;
@@ -31,13 +39,13 @@ pub mod sensors;
 pub use mechanics::{Chain, ChainState};
 pub use rope::ChainParams;
 
-use shared::SensorFrame;
+use drive_core::SensorFrame;
 
-use crate::config::RigConfig;
 use effects::Effects;
 use inverter::{alpha_beta_v, phase_voltages_v};
 use line::{BrakeAction, Line, MAX_NODES};
 use pmsm::{park_v, phase_currents_a, PmsmParams};
+use rig_config::RigConfig;
 use ripple::RippleTorque;
 use rope::{CAR, CW, DOF, ROPE_CAR, ROPE_CW, SHEAVE};
 use sensors::Sensors;

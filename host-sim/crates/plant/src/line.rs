@@ -383,9 +383,9 @@ impl Line {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::RigConfig;
-    use crate::plant::effects::EffectKind;
-    use crate::plant::rope::DOF;
+    use crate::effects::EffectKind;
+    use crate::rope::DOF;
+    use rig_config::RigConfig;
 
     fn chain(m_car: f64, lw: f64) -> Chain {
         Chain::new(ChainParams::from_rig(&RigConfig::embedded_default().unwrap(), m_car), lw)
@@ -415,7 +415,7 @@ mod tests {
             let line = Line::new(&effects);
             for (m, lw, seed) in [(70.5, 1.3, 1.0), (33.0, 7.2, -2.0), (45.5, 4.0, 0.5)] {
                 let c = chain(m, lw);
-                let mut state = crate::plant::ChainState::default();
+                let mut state = crate::ChainState::default();
                 for i in 0..DOF {
                     state.position_m[i] = 1e-4 * seed * (i as f64 + 0.3).sin();
                     state.velocity_mps[i] = 0.3 * seed * (i as f64 * 1.7).cos();

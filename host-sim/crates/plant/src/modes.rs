@@ -52,8 +52,8 @@ pub fn natural_modes(params: &ChainParams, lw_m: f64) -> Modes {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::RigConfig;
-    use crate::plant::rope::CAR;
+    use crate::rope::CAR;
+    use rig_config::RigConfig;
 
     fn rig_chain(m_car: f64) -> ChainParams {
         ChainParams::from_rig(&RigConfig::embedded_default().unwrap(), m_car)

@@ -4,7 +4,7 @@
 //! `L_q di_q/dt = v_q - R i_q - w_e (L_d i_d + psi)`,
 //! `tau = 1.5 p (psi i_q + (L_d - L_q) i_d i_q)`, with `w_e = p w_m` (Eqn 7).
 
-use crate::config::RigConfig;
+use rig_config::RigConfig;
 
 /// Machine parameters, SI.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -3,7 +3,7 @@
 //! `theta_m` the mechanical shaft angle. At 0.4 m/s the orders 1, 6, 12, 36
 //! and 72 appear at about 1, 6, 12, 36 and 72 Hz.
 
-use crate::config::Ripple;
+use rig_config::Ripple;
 
 /// One harmonic of the ripple.
 #[derive(Clone, Copy, Debug, PartialEq)]

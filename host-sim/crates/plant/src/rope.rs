@@ -2,7 +2,7 @@
 //! `mu l` lumped at the midpoint of each side, sheave `I/r^2`, and the
 //! inertia, stiffness and damping matrices of Eqn 6 for given rope lengths.
 
-use crate::config::RigConfig;
+use rig_config::RigConfig;
 
 /// Index of the counterweight in the coordinate vector (`u_w`).
 pub const CW: usize = 0;

@@ -2,7 +2,7 @@
 //! DC-bus ADC codes, the quadrature encoder counter and the microsecond
 //! time stamp.
 
-use crate::config::RigConfig;
+use rig_config::RigConfig;
 
 /// Sensor scaling.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -9,6 +9,13 @@
 //!
 //! Axis units are whatever the caller puts in the axis labels; the functions
 //! take the data in the units it should be shown in.
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate draws what the analysis ([`dsp::Spectrogram`])
+//! and the diagnosis (its gap maps) compute, and what the commands show; it
+//! depends only on `dsp`.
+
+#![warn(missing_docs)]
 
 use std::fmt::Display;
 use std::fs;
@@ -21,7 +28,7 @@ use plotters::coord::{ReverseCoordTranslate, Shift};
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 
-use crate::analysis::Spectrogram;
+use dsp::Spectrogram;
 
 /// Width of every plot in pixels.
 pub const PLOT_WIDTH_PX: u32 = 1200;
@@ -663,7 +670,7 @@ fn cell_index(edges: &[f64], v: f64) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::stft_spectrogram;
+    use dsp::stft_spectrogram;
     use std::f64::consts::PI;
 
     /// Checks the PNG signature and IHDR and decodes the image fully;

@@ -3,10 +3,17 @@
 //!
 //! A recording is a pair of files with the same stem in a dataset
 //! directory: `<stem>.toml` (metadata) and `<stem>.csv` (samples, one column
-//! per signal, found by header name). This module holds the in-memory types
+//! per signal, found by header name). This crate holds the in-memory types
 //! shared by the writer ([`write`](mod@write)) and the reader ([`read`]); the
 //! column-name constants below are the header names of the specification.
 //! [`evimp`] reads the `EVIMP1` text export of lift ride-quality analyzers.
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate is the recording: the closed loop writes it, the
+//! analysis and the diagnosis read it. It depends on no other crate of the
+//! project.
+
+#![warn(missing_docs)]
 
 use std::path::PathBuf;
 

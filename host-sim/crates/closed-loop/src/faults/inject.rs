@@ -1,12 +1,12 @@
 //! The [`FaultHook`] that applies [`FaultSpec`]s to a closed-loop travel,
 //! and what it observes of the plant while doing so.
 
-use shared::supervisor::Fault;
-use shared::{ControlOutput, DriveState, SensorFrame};
+use drive_core::supervisor::Fault;
+use drive_core::{ControlOutput, DriveState, SensorFrame};
 
 use super::{DisconnectedReading, FaultKind, FaultSpec, Onset};
-use crate::closed_loop::{FaultHook, StepAction};
-use crate::plant::{PhaseShort, Plant};
+use crate::{FaultHook, StepAction};
+use plant::{PhaseShort, Plant};
 
 /// A fault with its onset resolved to seconds from the travel command.
 #[derive(Clone, Copy, Debug, PartialEq)]

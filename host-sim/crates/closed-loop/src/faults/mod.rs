@@ -10,7 +10,7 @@
 //! `WHEN` is seconds from the travel command or a named instant of the
 //! travel ([`Instant`]).
 //!
-//! - [`inject`]: the [`crate::closed_loop::FaultHook`] that applies them;
+//! - [`inject`]: the [`crate::FaultHook`] that applies them;
 //! - [`run`]: one faulted travel and what it did (detection time, reason,
 //!   peaks, displacement after detection), and the case matrix of
 //!   `host-sim faults`.

@@ -2,16 +2,16 @@
 //! `host-sim faults`: every fault kind at several instants of a travel, in
 //! both directions.
 
-use shared::config::Direction;
-use shared::controller::{BRAKE_LIFT_S, PRE_TORQUE_S};
-use shared::profile::SCurve;
-use shared::supervisor::Fault;
-use shared::Controller;
+use drive_core::config::Direction;
+use drive_core::controller::{BRAKE_LIFT_S, PRE_TORQUE_S};
+use drive_core::profile::SCurve;
+use drive_core::supervisor::Fault;
+use drive_core::Controller;
 
 use super::inject::{FaultInjector, Observed};
 use super::{FaultKind, FaultSpec, Instant, Onset, KIND_NAMES};
-use crate::closed_loop::{simulate_travel_faulted, DriveController, SimOptions, TravelSpec};
-use crate::config::RigConfig;
+use crate::{simulate_travel_faulted, DriveController, SimOptions, TravelSpec};
+use rig_config::RigConfig;
 
 /// Simulated time after a trip, s: long enough for the car to settle on
 /// the ropes with the brake applied.

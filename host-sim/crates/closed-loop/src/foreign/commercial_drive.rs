@@ -44,14 +44,14 @@
 //! - **Protection**: over-current (the rig's trip level) and over-speed
 //!   (1.25 times its rated speed) trip it.
 
-use shared::config::Direction;
-use shared::controller::Telemetry;
-use shared::supervisor::Fault;
-use shared::{ControlOutput, DriveState, SensorFrame, TravelCommand};
+use drive_core::config::Direction;
+use drive_core::controller::Telemetry;
+use drive_core::supervisor::Fault;
+use drive_core::{ControlOutput, DriveState, SensorFrame, TravelCommand};
 
 use super::params::{foreign_params, ParamError, ParamKind};
-use crate::closed_loop::{DriveController, SimError};
-use crate::config::RigConfig;
+use crate::{DriveController, SimError};
+use rig_config::RigConfig;
 
 /// Period of the speed loop and of the M/T speed estimate, s (a whole
 /// number of PWM periods nearest to it).
@@ -559,7 +559,7 @@ pub fn modulate(v_alpha: f64, v_beta: f64, dc_bus_v: f64, period_counts: u16) ->
 impl DriveController for CommercialDrive {
     fn command_travel(&mut self, command: TravelCommand) -> Result<(), SimError> {
         if self.state != DriveState::Idle {
-            return Err(SimError::Refused(shared::controller::CommandError::NotIdle));
+            return Err(SimError::Refused(drive_core::controller::CommandError::NotIdle));
         }
         let distance = command.distance_m as f64;
         let lw_start = command.lw_start_m as f64;
@@ -567,7 +567,7 @@ impl DriveController for CommercialDrive {
         let inside = |lw: f64| lw > 0.0 && lw < self.rig.rope_total_length_m;
         let m = command.m_car_kg as f64;
         if !(distance > 0.0 && inside(lw_start) && inside(lw_end) && m > 0.0 && m.is_finite()) {
-            return Err(SimError::Refused(shared::controller::CommandError::OutOfRange));
+            return Err(SimError::Refused(drive_core::controller::CommandError::OutOfRange));
         }
         let p = self.params;
         let weighed = m * (1.0 + p.weighing_error_pct / 100.0);

@@ -20,12 +20,12 @@ pub use acquisition::{Acquisition, AnalogSignal, Channel};
 pub use commercial_drive::{CommercialDrive, ForeignDrive};
 pub use params::{ParamError, ParamInfo, ParamKind};
 
-use shared::{ControlOutput, SensorFrame, TravelCommand};
+use drive_core::{ControlOutput, SensorFrame, TravelCommand};
 
-use crate::closed_loop::{simulate_travel_with, DriveController, SimError, SimOptions, TravelRun, TravelSpec};
-use crate::config::RigConfig;
-use crate::plant::free_decay::FreeDecayError;
-use crate::plant::sensors::Sensors;
+use crate::{simulate_travel_with, DriveController, SimError, SimOptions, TravelRun, TravelSpec};
+use plant::free_decay::FreeDecayError;
+use plant::sensors::Sensors;
+use rig_config::RigConfig;
 
 /// Why a foreign recording cannot be made.
 #[derive(Debug, thiserror::Error)]
@@ -252,7 +252,7 @@ mod tests {
 
     #[test]
     fn rotation_moves_the_current_vector_and_keeps_the_zero_sequence() {
-        use crate::plant::pmsm::phase_currents_a;
+        use plant::pmsm::phase_currents_a;
         let (id, iq, theta) = (1.5, 12.0, 0.7);
         let plant = phase_currents_a(id, iq, theta);
         let rotated = rotate_abc(plant, 2.1);
