@@ -2,7 +2,6 @@
 //! `drive_core::ripple` set up from the rig file, run over travels and model
 //! mismatches, and the measures `host-sim compare` reports for each run.
 
-use anyhow::Context;
 use drive_core::config::Direction;
 use drive_core::observer::{ChainObserver, ObserverTuning};
 use drive_core::ripple::harmonics::HarmonicTable;
@@ -11,9 +10,31 @@ use drive_core::{ControlOutput, Controller, SensorFrame};
 use serde::{Deserialize, Serialize};
 
 use crate::{simulate_travel_faulted, FaultHook, SimError, SimOptions, StepAction, TravelRun, TravelSpec};
-use dsp::{constant_speed_stage, ride_quality};
+use dsp::{constant_speed_stage, ride_quality, AnalysisError};
 use plant::Plant;
 use rig_config::RigConfig;
+
+/// Why a comparison ([`run_case`]) stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum CompareError {
+    /// The travel without compensation failed.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// A travel with a compensation strategy failed.
+    #[error("strategy {strategy}, travel {travel}")]
+    Travel {
+        /// The strategy's name ([`Strategy::name`]).
+        strategy: &'static str,
+        /// Which travel of the strategy, from 1.
+        travel: usize,
+        /// Why it failed.
+        #[source]
+        source: SimError,
+    },
+    /// The ride measures of a travel could not be computed.
+    #[error(transparent)]
+    Measures(#[from] AnalysisError),
+}
 
 /// The mechanical orders of the rig's `[[ripple]]` table, in file order.
 pub fn ripple_orders(rig: &RigConfig) -> Vec<u16> {
@@ -215,7 +236,7 @@ pub fn line_amplitude(signal: &[f64], angle_rad: &[f64], n: f64, range: std::ops
 }
 
 /// The measures of one travel.
-pub fn ride_metrics(run: &TravelRun) -> anyhow::Result<RideMetrics> {
+pub fn ride_metrics(run: &TravelRun) -> Result<RideMetrics, AnalysisError> {
     let fs = run.sample_rate_hz;
     let stage = constant_speed_stage(&run.speed_radps, fs)?;
     let quality = ride_quality(&run.acc_car_mps2, fs, Some(stage.clone()))?;
@@ -332,7 +353,7 @@ pub fn run_case(
     table: &HarmonicTable,
     strategies: &[Strategy],
     learning_travels: usize,
-) -> anyhow::Result<Vec<CompareRow>> {
+) -> Result<Vec<CompareRow>, CompareError> {
     let spec = TravelSpec::full_travel(rig, case.m_car_kg, case.direction);
     let options = SimOptions::for_rig(rig);
     let (off_run, _) =
@@ -349,7 +370,7 @@ pub fn run_case(
             let mut last = None;
             for travel in 0..travels {
                 let (run, after) = travel_with_compensator(rig, case.mismatch, &spec, &options, comp)
-                    .with_context(|| format!("strategy {}, travel {}", strategy.name(), travel + 1))?;
+                    .map_err(|source| CompareError::Travel { strategy: strategy.name(), travel: travel + 1, source })?;
                 comp = after;
                 last = Some(ride_metrics(&run)?);
             }
@@ -384,7 +405,7 @@ pub fn run_case(
 
 /// Strategy 1's table: what strategy 2 learns in a calibration travel of the
 /// nominal rig (the heaviest car, up).
-pub fn calibrate_table(rig: &RigConfig) -> anyhow::Result<HarmonicTable> {
+pub fn calibrate_table(rig: &RigConfig) -> Result<HarmonicTable, SimError> {
     let m_car = rig.mechanics.m_car_kg.iter().copied().fold(f64::MIN, f64::max);
     let spec = TravelSpec::full_travel(rig, m_car, Direction::Up);
     let (_, after) = travel_with_compensator(

@@ -12,13 +12,24 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::foreign::{simulate_commercial_travel, AnalogSignal, Channel, ForeignError, ForeignRig};
-use crate::{simulate_travel, simulate_travel_with, SimOptions, TravelSpec};
+use crate::{simulate_travel, simulate_travel_with, SimError, SimOptions, TravelSpec};
 use plant::effects::Effects;
-use plant::free_decay::{simulate_free_decay_with, FreeDecaySpec};
+use plant::free_decay::{simulate_free_decay_with, FreeDecayError, FreeDecaySpec};
 use recording::{
     Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, ACC_CW, ANGLE, I_A, I_B, I_C, REF_SPEED, SPEED, TIME_S,
 };
 use rig_config::RigConfig;
+
+/// Why a dataset of the project's own rig ([`make_dataset`]) cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// A travel's closed-loop simulation failed.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// A free decay's simulation failed.
+    #[error(transparent)]
+    Decay(#[from] FreeDecayError),
+}
 
 /// What to record.
 #[derive(Clone, Debug)]
@@ -86,12 +97,12 @@ pub fn add_noise(recording: &mut Recording, name: &str, rms: f64, rng: &mut StdR
 
 /// The recordings of `spec` on `rig` (stems `travel_up_m70.5`,
 /// `decay_m33.0`, ...), noise included.
-pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> anyhow::Result<Vec<(String, Recording)>> {
+pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> Result<Vec<(String, Recording)>, DatasetError> {
     use rayon::prelude::*;
     let mut rng = StdRng::seed_from_u64(spec.seed);
     let travels: Vec<(f64, Direction)> =
         spec.m_car_kg.iter().flat_map(|&m| [(m, Direction::Up), (m, Direction::Down)]).collect();
-    let runs: Vec<anyhow::Result<(String, Recording)>> = travels
+    let runs: Vec<Result<(String, Recording), DatasetError>> = travels
         .par_iter()
         .map(|&(m, direction)| {
             let (lw_start_m, lw_end_m) = match direction {
