@@ -12,6 +12,8 @@
 
 use dsp::highpass_zero_phase;
 
+use crate::error::Result;
+
 /// Candidate corners, Hz: none (0) and a geometric grid from 0.05 to 3 Hz.
 pub fn candidate_corners_hz() -> Vec<f64> {
     let mut out = vec![0.0];
@@ -48,9 +50,9 @@ pub fn first_order_highpass(signal: &[f64], sample_rate_hz: f64, corner_hz: f64)
 /// model's acceleration `model` closest (least squares below
 /// [`COMPARISON_LOWPASS_HZ`]) to the measured `measured`, both at
 /// `sample_rate_hz`.
-pub fn identify_highpass_hz(measured: &[f64], model: &[f64], sample_rate_hz: f64) -> anyhow::Result<f64> {
+pub fn identify_highpass_hz(measured: &[f64], model: &[f64], sample_rate_hz: f64) -> Result<f64> {
     let n = measured.len().min(model.len());
-    let low = |v: &[f64]| -> anyhow::Result<Vec<f64>> {
+    let low = |v: &[f64]| -> Result<Vec<f64>> {
         let high = highpass_zero_phase(v, sample_rate_hz, COMPARISON_LOWPASS_HZ)?;
         Ok(v.iter().zip(&high).map(|(a, h)| a - h).collect())
     };

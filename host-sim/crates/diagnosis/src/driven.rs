@@ -15,7 +15,7 @@
 use std::f64::consts::TAU;
 use std::ops::Range;
 
-use anyhow::Context;
+use crate::error::{bail, Context, Result};
 
 use dsp::highpass_zero_phase;
 use plant::mechanics::Chain;
@@ -140,7 +140,7 @@ fn lag(x: &[f64], fs: f64, tau_s: f64) -> Vec<f64> {
 }
 
 /// `x` band-passed to [`FEEDBACK_BAND_HZ`] (zero phase).
-fn feedback_band(x: &[f64], fs: f64) -> anyhow::Result<Vec<f64>> {
+fn feedback_band(x: &[f64], fs: f64) -> Result<Vec<f64>> {
     let above = highpass_zero_phase(x, fs, FEEDBACK_BAND_HZ.0)?;
     let top = highpass_zero_phase(&above, fs, FEEDBACK_BAND_HZ.1.min(0.4 * fs))?;
     Ok(above.iter().zip(&top).map(|(a, t)| a - t).collect())
@@ -150,7 +150,7 @@ fn feedback_band(x: &[f64], fs: f64) -> anyhow::Result<Vec<f64>> {
 /// `travel`: the estimate's lag that brings the encoder's speed closest to
 /// the drive's estimate, then the least-squares gain of the torque on the
 /// estimate, both in [`FEEDBACK_BAND_HZ`].
-pub fn identify_speed_feedback(travel: &DrivenTravel) -> anyhow::Result<SpeedFeedback> {
+pub fn identify_speed_feedback(travel: &DrivenTravel) -> Result<SpeedFeedback> {
     let fs = travel.sample_rate_hz;
     let m = travel.motion.clone();
     if m.len() < (fs as usize).max(16) {
@@ -229,10 +229,10 @@ pub fn torque_driven_accelerations(
     rig: &RigConfig,
     travel: &DrivenTravel,
     settings: &DrivenSettings,
-) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+) -> Result<(Vec<f64>, Vec<f64>)> {
     let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
     if n < 2 {
-        anyhow::bail!("the travel has {n} samples; expected at least 2");
+        bail!("the travel has {n} samples; expected at least 2");
     }
     let fs = travel.sample_rate_hz;
     let r = rig.mechanics.sheave_radius_m;
@@ -320,7 +320,7 @@ pub fn torque_driven_accelerations(
         let speed = state.velocity_mps[SHEAVE] / r;
         model_estimate = estimate_decay * model_estimate + (1.0 - estimate_decay) * speed;
         if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
-            anyhow::bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
+            bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
         }
     }
     Ok((car, cw))
@@ -329,7 +329,7 @@ pub fn torque_driven_accelerations(
 /// The tracking loop's reference: the measured sheave-edge travel (m) from
 /// the start, low-passed at [`TRACKING_REFERENCE_LOWPASS_HZ`], and its rate
 /// (m/s, central differences).
-fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> Result<(Vec<f64>, Vec<f64>)> {
     let theta0 = shaft_angle_rad[0];
     let relative: Vec<f64> = shaft_angle_rad.iter().map(|a| (a - theta0) * r).collect();
     let high = highpass_zero_phase(&relative, fs, TRACKING_REFERENCE_LOWPASS_HZ)

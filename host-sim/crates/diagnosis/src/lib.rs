@@ -28,6 +28,7 @@ pub mod acquisition;
 pub mod attribute;
 pub mod calibrate;
 pub mod driven;
+pub mod error;
 pub mod identify;
 pub mod identify_dataset;
 pub mod locate;
@@ -43,6 +44,9 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+pub use error::DiagnosisError;
+
+use crate::error::{bail, Result};
 use crate::identify_dataset::LeftOut;
 use attribute::{attribute, Candidate, Lab, Target};
 use calibrate::{calibrate, Calibration};
@@ -325,8 +329,8 @@ fn measure_and_run_closed_loop(
     model: &RigConfig,
     dataset: &[(String, Recording)],
     left_out: &mut Vec<LeftOut>,
-) -> Vec<(usize, ChainSignals, anyhow::Result<ChainSignals>)> {
-    let runs: Vec<anyhow::Result<(ChainSignals, anyhow::Result<ChainSignals>)>> = dataset
+) -> Vec<(usize, ChainSignals, Result<ChainSignals>)> {
+    let runs: Vec<Result<(ChainSignals, Result<ChainSignals>)>> = dataset
         .par_iter()
         .map(|(stem, recording)| {
             let factor = decimation_factor(recording.meta.sample_rate_hz);
@@ -375,7 +379,7 @@ fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> f
 fn decide_drive(
     option: DriveAssumption,
     dataset: &[(String, Recording)],
-    runs: &[(usize, ChainSignals, anyhow::Result<ChainSignals>)],
+    runs: &[(usize, ChainSignals, Result<ChainSignals>)],
 ) -> DriveFinding {
     let travels = runs.iter().filter(|(i, ..)| matches!(dataset[*i].1.meta.kind, RecordingKind::Travel { .. }));
     match option {
@@ -422,8 +426,8 @@ fn counterpart(
     stem: &str,
     recording: &Recording,
     mut measured: ChainSignals,
-    closed: anyhow::Result<ChainSignals>,
-) -> anyhow::Result<Prepared> {
+    closed: Result<ChainSignals>,
+) -> Result<Prepared> {
     let driven = matches!(recording.meta.kind, RecordingKind::Travel { .. }) && drive == DriveModel::Foreign;
     let torque = measured.channel(signals::Channel::Torque).map(<[f64]>::to_vec).unwrap_or_default();
     let speed = measured.channel(signals::Channel::Speed).map(<[f64]>::to_vec).unwrap_or_default();
@@ -469,13 +473,13 @@ fn driven_counterpart(
     measured: &ChainSignals,
     (torque, speed): (&[f64], &[f64]),
     settings: &driven::DrivenSettings,
-) -> anyhow::Result<ChainSignals> {
+) -> Result<ChainSignals> {
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
-        anyhow::bail!("not a travel");
+        bail!("not a travel");
     };
     let phase = |p: signals::Phase| measured.phases.iter().find(|(q, _)| *q == p).map(|(_, r)| r.clone());
     let Some(constant) = phase(signals::Phase::Constant) else {
-        anyhow::bail!("the travel has no constant-speed stage");
+        bail!("the travel has no constant-speed stage");
     };
     let travel = driven::DrivenTravel {
         m_car_kg,
@@ -556,10 +560,10 @@ pub fn diagnose(
     dataset: &[(String, Recording)],
     options: &GapOptions,
     progress: &(dyn Fn(&str, usize, usize) + Sync),
-) -> anyhow::Result<GapReport> {
+) -> Result<GapReport> {
     let started = Instant::now();
     if dataset.is_empty() {
-        anyhow::bail!("dataset {name}: no recordings");
+        bail!("dataset {name}: no recordings");
     }
     progress("calibrating", 0, 1);
     let (model, calibration) = calibrate(rig, dataset);
@@ -569,7 +573,7 @@ pub fn diagnose(
     progress("nominal model", 0, dataset.len());
     let runs = measure_and_run_closed_loop(rig, &model, dataset, &mut left_out);
     let drive = decide_drive(options.drive, dataset, &runs);
-    let prepared: Vec<(usize, anyhow::Result<Prepared>)> = runs
+    let prepared: Vec<(usize, Result<Prepared>)> = runs
         .into_par_iter()
         .map(|(i, measured, closed)| {
             let (stem, recording) = &dataset[i];
@@ -642,7 +646,7 @@ pub fn diagnose(
     }
     if targets.is_empty() {
         let reasons: Vec<String> = left_out.iter().map(|l| format!("`{}`: {}", l.recording, l.reason)).collect();
-        anyhow::bail!("dataset {name}: no recording could be diagnosed: {}", reasons.join("; "));
+        bail!("dataset {name}: no recording could be diagnosed: {}", reasons.join("; "));
     }
     let bands = bands_all.unwrap_or_else(|| Bands::new(2048.0, 2048));
     progress("nominal model", dataset.len(), dataset.len());

@@ -10,6 +10,8 @@ use plant::rope::{CAR, CW, DOF, SHEAVE};
 use plant::{Chain, ChainParams, ChainState};
 use rig_config::RigConfig;
 
+use crate::error::{bail, Result};
+
 /// The prescribed angle is low-passed at this frequency, Hz (encoder
 /// quantisation would otherwise drive the rope masses' modes); it keeps the
 /// ripple orders up to 72 x f_mech.
@@ -26,10 +28,10 @@ pub fn replay_accelerations(
     lw_start_m: f64,
     shaft_angle_rad: &[f64],
     sample_rate_hz: f64,
-) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+) -> Result<(Vec<f64>, Vec<f64>)> {
     let n = shaft_angle_rad.len();
     if n < 2 {
-        anyhow::bail!("replay: the shaft angle has {n} samples; expected at least 2");
+        bail!("replay: the shaft angle has {n} samples; expected at least 2");
     }
     let theta0 = shaft_angle_rad[0];
     let relative: Vec<f64> = shaft_angle_rad.iter().map(|a| a - theta0).collect();
@@ -89,7 +91,7 @@ pub fn replay_accelerations(
         }
         state = with_sheave(&next, 1.0);
         if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
-            anyhow::bail!("replay diverged at t = {:.3} s", k as f64 * h);
+            bail!("replay diverged at t = {:.3} s", k as f64 * h);
         }
     }
     Ok((car, cw))
@@ -105,12 +107,12 @@ pub fn replay_cells(
     measured: &super::signals::ChainSignals,
     target: &super::attribute::Target,
     bands: &super::spectra::Bands,
-) -> anyhow::Result<Vec<super::measure::CellGap>> {
+) -> Result<Vec<super::measure::CellGap>> {
     use super::signals::{decimation_factor, ChainSignals, Channel};
     use super::spectra::{cell_powers, ChainSpectra, Segmentation};
     use recording::{RecordingKind, ANGLE, SPEED};
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
-        anyhow::bail!("`{stem}`: only travels are replayed");
+        bail!("`{stem}`: only travels are replayed");
     };
     let fs = recording.meta.sample_rate_hz;
     let speed = recording.column(SPEED).map(|c| c.values.as_slice()).unwrap_or(&[]);

@@ -6,7 +6,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use crate::error::{Context, Result};
 
 use super::measure::CellGap;
 use super::signals::Phase;
@@ -43,7 +43,7 @@ pub fn gap_map_plot(
     title: &str,
     map: &[(Phase, Vec<Option<f64>>)],
     bands_hz: &[(f64, f64)],
-) -> anyhow::Result<()> {
+) -> Result<()> {
     if map.is_empty() || bands_hz.is_empty() {
         return Ok(());
     }
@@ -66,7 +66,7 @@ pub fn gap_map_plot(
 
 /// Writes `gap.json`, `gap_map.csv`, `ranking.csv` and the gap-map plots into
 /// `out`, then `gap.md` listing `extra_plots` (file names in `out`) too.
-pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, String)]) -> anyhow::Result<Vec<PathBuf>> {
+pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, String)]) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     let json = out.join("gap.json");
     std::fs::write(&json, serde_json::to_string_pretty(report)?)

@@ -7,7 +7,7 @@
 
 use std::ops::Range;
 
-use anyhow::Context;
+use crate::error::{Context, Result};
 
 use crate::travel_signals::travel_torque;
 use dsp::{decimate, travel_phases, welch_psd};
@@ -154,7 +154,7 @@ pub fn decimation_factor(sample_rate_hz: f64) -> usize {
 /// level over the band where the model has no content (above 1.1 kHz, up to
 /// 95 % of Nyquist), or over the top 15 % of the band for recordings sampled
 /// too slowly for that.
-pub fn noise_density(signal: &[f64], sample_rate_hz: f64) -> anyhow::Result<f64> {
+pub fn noise_density(signal: &[f64], sample_rate_hz: f64) -> Result<f64> {
     let nyquist = 0.5 * sample_rate_hz;
     let segment = (sample_rate_hz / 4.0).round().max(64.0) as usize;
     if signal.len() < segment {
@@ -187,7 +187,7 @@ pub fn chain_signals(
     stem: &str,
     factor: usize,
     measured: bool,
-) -> anyhow::Result<ChainSignals> {
+) -> Result<ChainSignals> {
     let fs = recording.meta.sample_rate_hz;
     let mut full: Vec<(Channel, Vec<f64>)> = Vec::new();
     let mut angle = Vec::new();

@@ -2,7 +2,7 @@
 //! (the project's controller on the plant with the given effects), or the
 //! same free decay, sampled at the analysis rate.
 
-use anyhow::Context;
+use crate::error::{Context, Result};
 
 use crate::identify::release_index;
 use drive_core::config::Direction;
@@ -25,7 +25,7 @@ pub fn simulate_counterpart(
     measured: &Recording,
     stem: &str,
     max_step_s: f64,
-) -> anyhow::Result<ChainSignals> {
+) -> Result<ChainSignals> {
     let rate = model_sample_rate_hz(rig);
     let recording = simulate_recording(rig, effects, measured, stem, rate, max_step_s)?;
     chain_signals(rig, &recording, stem, decimation_factor(rate), false)
@@ -51,7 +51,7 @@ pub fn simulate_recording(
     stem: &str,
     sample_rate_hz: f64,
     max_step_s: f64,
-) -> anyhow::Result<Recording> {
+) -> Result<Recording> {
     match measured.meta.kind {
         RecordingKind::Travel { m_car_kg, m_cw_kg, direction, lw_start_m, lw_end_m } => {
             let mut rig = rig.clone();

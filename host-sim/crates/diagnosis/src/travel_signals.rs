@@ -4,6 +4,8 @@
 
 use dsp::AnalysisError;
 
+use crate::error::{bail, DiagnosisError, Result};
+
 /// The shaft angle, rad: the `angle_rad` column when there is one, else the
 /// running trapezoidal integral of the speed (rad/s) from 0.
 pub fn shaft_angle_rad(angle: Option<&[f64]>, speed_radps: &[f64], sample_rate_hz: f64) -> Vec<f64> {
@@ -95,13 +97,13 @@ pub fn travel_torque(
     rig: &rig_config::RigConfig,
     recording: &recording::Recording,
     stem: &str,
-) -> anyhow::Result<TravelTorque> {
+) -> Result<TravelTorque> {
     use recording::{ANGLE, I_A, I_B, I_C, SPEED};
-    let column = |name: &str| -> anyhow::Result<&[f64]> {
+    let column = |name: &str| -> Result<&[f64]> {
         recording
             .column(name)
             .map(|c| c.values.as_slice())
-            .ok_or_else(|| anyhow::anyhow!("recording `{stem}`: column `{name}` missing"))
+            .ok_or_else(|| DiagnosisError::Message(format!("recording `{stem}`: column `{name}` missing")))
     };
     let fs = recording.meta.sample_rate_hz;
     let mo = &rig.motor;
@@ -114,7 +116,7 @@ pub fn travel_torque(
     let expected = expected_torque_nm(rig, recording, &angle, speed)?;
     let agreement = sign_agreement(&torque, &expected);
     if agreement.abs() < MIN_SIGN_AGREEMENT {
-        anyhow::bail!(
+        bail!(
             "recording `{stem}`: the machine torque from the currents neither follows nor opposes the torque that \
              the travel needs (Eqn 4, inertia and damping; correlation {agreement:.2}); expected a magnitude of \
              at least {MIN_SIGN_AGREEMENT}: are the phase currents, the speed sign (positive with the car going \
@@ -166,9 +168,9 @@ pub fn expected_torque_nm(
     recording: &recording::Recording,
     shaft_angle_rad: &[f64],
     speed_radps: &[f64],
-) -> anyhow::Result<Vec<f64>> {
+) -> Result<Vec<f64>> {
     let recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
-        anyhow::bail!("not a travel recording");
+        bail!("not a travel recording");
     };
     let m = &rig.mechanics;
     let mut chain = plant::ChainParams::from_rig(rig, m_car_kg);
@@ -216,9 +218,9 @@ pub fn torque_balance(
     recording: &recording::Recording,
     stem: &str,
     guide_damping_kg_per_s: f64,
-) -> anyhow::Result<TorqueBalance> {
+) -> Result<TorqueBalance> {
     let recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
-        anyhow::bail!("recording `{stem}` is not a travel");
+        bail!("recording `{stem}` is not a travel");
     };
     let m = &rig.mechanics;
     let t = travel_torque(rig, recording, stem)?;
