@@ -6,10 +6,10 @@ use drive_core::config::Direction;
 use drive_core::observer::{ChainObserver, ObserverTuning};
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::{RippleCompensator, Strategy};
-use drive_core::{ControlOutput, Controller, SensorFrame};
+use drive_core::Controller;
 use serde::{Deserialize, Serialize};
 
-use crate::{simulate_travel_faulted, FaultHook, SimError, SimOptions, StepAction, TravelRun, TravelSpec};
+use crate::{simulate_travel_faulted, FaultHook, SimError, SimOptions, TravelRun, TravelSpec};
 use dsp::{constant_speed_stage, ride_quality, AnalysisError};
 use plant::Plant;
 use rig_config::RigConfig;
@@ -146,16 +146,6 @@ impl FaultHook for RippleOrderShift {
             }
             self.done = true;
         }
-    }
-
-    fn sensors(&mut self, _t_s: f64, frame: SensorFrame, _plant: &Plant) -> StepAction {
-        StepAction::Run(frame)
-    }
-
-    fn after_step(&mut self, _t_s: f64, _plant: &Plant, _output: &ControlOutput) {}
-
-    fn keep_running_after_trip_s(&self) -> Option<f64> {
-        None
     }
 }
 

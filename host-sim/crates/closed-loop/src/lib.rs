@@ -181,17 +181,28 @@ pub enum StepAction {
 /// Fault injection into the closed loop (see `crate::faults`): plant-side
 /// faults change the plant before a step, sensor and timing faults change
 /// what the controller gets, and the run may go on after a trip.
+///
+/// Every method has a default that changes nothing (the plant untouched,
+/// the readings passed on, the run ended by a trip): a hook implements only
+/// what it injects.
 pub trait FaultHook {
     /// Before the step at `t_s` (s): change the plant (faults in the power
-    /// stage, the bus, the load or the brake).
-    fn before_step(&mut self, t_s: f64, plant: &mut Plant);
-    /// What the controller gets at `t_s` for the readings `frame`.
-    fn sensors(&mut self, t_s: f64, frame: SensorFrame, plant: &Plant) -> StepAction;
+    /// stage, the bus, the load or the brake). Default: nothing.
+    fn before_step(&mut self, _t_s: f64, _plant: &mut Plant) {}
+    /// What the controller gets at `t_s` for the readings `frame`. Default:
+    /// the readings, on time ([`StepAction::Run`]).
+    fn sensors(&mut self, _t_s: f64, frame: SensorFrame, _plant: &Plant) -> StepAction {
+        StepAction::Run(frame)
+    }
     /// After the period that started at `t_s`, with the outputs in force.
-    fn after_step(&mut self, t_s: f64, plant: &Plant, output: &ControlOutput);
+    /// Default: nothing.
+    fn after_step(&mut self, _t_s: f64, _plant: &Plant, _output: &ControlOutput) {}
     /// How long (s) to keep simulating after a trip (PWM off, brake
-    /// commanded); `None` ends the run with [`SimError::Tripped`].
-    fn keep_running_after_trip_s(&self) -> Option<f64>;
+    /// commanded); `None` ends the run with [`SimError::Tripped`]. Default:
+    /// `None`.
+    fn keep_running_after_trip_s(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// What the controller receives of a sensor frame corrupted on the link:
@@ -303,27 +314,7 @@ pub fn simulate_travel_faulted(
     mut log: Option<&mut StepLog>,
 ) -> Result<TravelRun, SimError> {
     let total = rig.mechanics.rope_total_length_m;
-    let inside = |lw: f64| lw > 0.0 && lw < total;
-    if !(inside(spec.lw_start_m) && inside(spec.lw_end_m)) {
-        return Err(SimError::BadTravel(format!(
-            "lw_start_m = {} and lw_end_m = {} must lie in (0, {total}) m",
-            spec.lw_start_m, spec.lw_end_m
-        )));
-    }
-    let distance = (spec.lw_end_m - spec.lw_start_m) * spec.direction.sign() as f64;
-    if distance <= 0.0 {
-        return Err(SimError::BadTravel(format!(
-            "direction {:?} needs lw_end_m on the {} side of lw_start_m (car up: lw grows)",
-            spec.direction,
-            if spec.direction == Direction::Up { "greater" } else { "smaller" }
-        )));
-    }
-    let command = TravelCommand {
-        direction: spec.direction,
-        distance_m: distance as f32,
-        m_car_kg: spec.m_car_kg as f32,
-        lw_start_m: spec.lw_start_m as f32,
-    };
+    let (command, distance) = travel_command(spec, total)?;
     controller.command_travel(command)?;
     if let Some(log) = log.as_deref_mut() {
         log.command = Some(command);
@@ -331,7 +322,6 @@ pub fn simulate_travel_faulted(
     let mut plant = Plant::with_effects(rig, spec.m_car_kg, spec.lw_start_m, &options.effects);
 
     let ts = 1.0 / rig.control.current_loop_hz;
-    let sample_period = 1.0 / options.sample_rate_hz;
     // Generous bound: the profile plus the sequence plus the tail, doubled.
     let time_limit = 2.0 * (distance / rig.travel.rated_speed_mps + 10.0 + options.tail_s);
     let expected_steps = (time_limit / 2.0 / ts) as u64;
@@ -339,7 +329,8 @@ pub fn simulate_travel_faulted(
         bar.set_length(expected_steps);
     }
     let mut run = TravelRun { sample_rate_hz: options.sample_rate_hz, ..TravelRun::default() };
-    let mut next_sample: u64 = 0;
+    let mut acquisition =
+        Acquisition { ts, sample_period: 1.0 / options.sample_rate_hz, next_sample: 0, max_step_s: options.max_step_s };
     let mut finished_at: Option<f64> = None;
     let mut k: u64 = 0;
     // Outputs in force (what the timer holds when a step does not run).
@@ -347,91 +338,24 @@ pub fn simulate_travel_faulted(
     let mut tripped_at: Option<f64> = None;
     loop {
         let t_k = k as f64 * ts;
-        if let Some(hook) = hook.as_deref_mut() {
-            hook.before_step(t_k, &mut plant);
-        }
-        let sensors = plant.sensor_frame();
-        let action = match hook.as_deref_mut() {
-            Some(hook) => hook.sensors(t_k, sensors, &plant),
-            None => StepAction::Run(sensors),
-        };
-        let (stepped, late) = match action {
-            StepAction::Run(frame) => (Some((frame, controller.step(&frame)?)), false),
-            StepAction::Late { mut frame, delay_s } => {
-                frame.time_us = frame.time_us.wrapping_add((delay_s * 1.0e6).round() as u32);
-                (Some((frame, controller.step(&frame)?)), delay_s >= 0.5 * ts)
-            }
-            StepAction::Skip => (None, false),
-            StepAction::Corrupt { frame, byte_index, xor } => {
-                (controller.step_corrupted(&frame, byte_index, xor)?.map(|o| (frame, o)), false)
-            }
-        };
-        let output = match (stepped, held) {
-            (Some((frame, output)), _) => {
-                if let Some(log) = log.as_deref_mut() {
-                    log.steps.push((frame, output));
-                }
-                output
-            }
-            (None, Some(previous)) => previous,
-            (None, None) => ControlOutput {
-                pwm_compare: [0; 3],
-                pwm_enabled: false,
-                brake_released: false,
-                state: DriveState::Idle,
-                telemetry: drive_core::controller::Telemetry::default(),
-            },
-        };
+        let (stepped, late) = control_step(controller, &mut hook, &mut plant, t_k, ts)?;
+        let output = output_in_force(stepped, held, &mut log);
         if let DriveState::Tripped(fault) = output.state {
-            match hook.as_deref().and_then(|h| h.keep_running_after_trip_s()) {
-                None => return Err(SimError::Tripped { time_s: t_k, fault }),
-                Some(after_s) => {
-                    let since = *tripped_at.get_or_insert(t_k);
-                    if t_k >= since + after_s {
-                        break;
-                    }
-                }
+            if trip_run_over(&hook, fault, t_k, &mut tripped_at)? {
+                break;
             }
         }
         // A late step's outputs load one underflow later: the previous ones act this period.
         let previous = held.unwrap_or(output);
         let applied_first_half = if late { previous } else { output };
         held = Some(output);
-        let mut inputs = plant.inputs();
-        inputs.brake_engaged = !applied_first_half.brake_released;
-        plant.set_inputs(inputs);
-        let mut advance_to = |plant: &mut Plant, t_end: f64, run: &mut TravelRun| {
-            loop {
-                let t_sample = next_sample as f64 * sample_period;
-                if t_sample >= t_end {
-                    break;
-                }
-                plant.advance(t_sample - plant.time_s(), options.max_step_s);
-                record(run, t_sample, &plant.observe(), &output);
-                next_sample += 1;
-            }
-            plant.advance(t_end - plant.time_s(), options.max_step_s);
-        };
-        advance_to(&mut plant, t_k + 0.5 * ts, &mut run);
-        plant.set_inputs(PlantInputs {
-            pwm_compare: applied_first_half.pwm_compare,
-            pwm_enabled: applied_first_half.pwm_enabled,
-            brake_engaged: !applied_first_half.brake_released,
-        });
-        advance_to(&mut plant, (k + 1) as f64 * ts, &mut run);
-        if late {
-            plant.set_inputs(PlantInputs {
-                pwm_compare: output.pwm_compare,
-                pwm_enabled: output.pwm_enabled,
-                brake_engaged: !output.brake_released,
-            });
-        }
+        acquisition.period(&mut plant, &mut run, k, &output, applied_first_half, late);
         if let Some(hook) = hook.as_deref_mut() {
             hook.after_step(t_k, &plant, &output);
         }
 
         let o = plant.observe();
-        if !(o.car_acceleration_mps2.is_finite() && inside(o.counterweight_side_length_m)) {
+        if !(o.car_acceleration_mps2.is_finite() && inside_rope(o.counterweight_side_length_m, total)) {
             return Err(SimError::Diverged(plant.time_s()));
         }
         if output.state == DriveState::Idle && k > 0 && finished_at.is_none() {
@@ -459,6 +383,179 @@ pub fn simulate_travel_faulted(
         bar.finish_and_clear();
     }
     Ok(run)
+}
+
+/// True when the counterweight-side rope length `lw` (m) lies inside the
+/// rope of length `total_m` (m), ends excluded.
+fn inside_rope(lw: f64, total_m: f64) -> bool {
+    lw > 0.0 && lw < total_m
+}
+
+/// The drive's command for `spec` on a rope of `total_m` (m) and the travel
+/// distance (m), or why `spec` is not a travel of that rope.
+fn travel_command(spec: &TravelSpec, total_m: f64) -> Result<(TravelCommand, f64), SimError> {
+    let total = total_m;
+    let inside = |lw: f64| inside_rope(lw, total);
+    if !(inside(spec.lw_start_m) && inside(spec.lw_end_m)) {
+        return Err(SimError::BadTravel(format!(
+            "lw_start_m = {} and lw_end_m = {} must lie in (0, {total}) m",
+            spec.lw_start_m, spec.lw_end_m
+        )));
+    }
+    let distance = (spec.lw_end_m - spec.lw_start_m) * spec.direction.sign() as f64;
+    if distance <= 0.0 {
+        return Err(SimError::BadTravel(format!(
+            "direction {:?} needs lw_end_m on the {} side of lw_start_m (car up: lw grows)",
+            spec.direction,
+            if spec.direction == Direction::Up { "greater" } else { "smaller" }
+        )));
+    }
+    let command = TravelCommand {
+        direction: spec.direction,
+        distance_m: distance as f32,
+        m_car_kg: spec.m_car_kg as f32,
+        lw_start_m: spec.lw_start_m as f32,
+    };
+    Ok((command, distance))
+}
+
+/// The control step at `t_k` (s) of a PWM period `ts` (s): the hook changes
+/// the plant and what the controller gets, the controller steps (or not).
+/// Returns the frame the controller stepped on with its outputs (`None`: no
+/// step ran) and whether the outputs came late (half a period or more).
+fn control_step(
+    controller: &mut dyn DriveController,
+    hook: &mut Option<&mut dyn FaultHook>,
+    plant: &mut Plant,
+    t_k: f64,
+    ts: f64,
+) -> Result<(Option<(SensorFrame, ControlOutput)>, bool), SimError> {
+    if let Some(hook) = hook.as_deref_mut() {
+        hook.before_step(t_k, plant);
+    }
+    let sensors = plant.sensor_frame();
+    let action = match hook.as_deref_mut() {
+        Some(hook) => hook.sensors(t_k, sensors, plant),
+        None => StepAction::Run(sensors),
+    };
+    let (stepped, late) = match action {
+        StepAction::Run(frame) => (Some((frame, controller.step(&frame)?)), false),
+        StepAction::Late { mut frame, delay_s } => {
+            frame.time_us = frame.time_us.wrapping_add((delay_s * 1.0e6).round() as u32);
+            (Some((frame, controller.step(&frame)?)), delay_s >= 0.5 * ts)
+        }
+        StepAction::Skip => (None, false),
+        StepAction::Corrupt { frame, byte_index, xor } => {
+            (controller.step_corrupted(&frame, byte_index, xor)?.map(|o| (frame, o)), false)
+        }
+    };
+    Ok((stepped, late))
+}
+
+/// The outputs in force after a control step: the step's (logged in `log`),
+/// else the `held` ones of the last step, else everything off (idle).
+fn output_in_force(
+    stepped: Option<(SensorFrame, ControlOutput)>,
+    held: Option<ControlOutput>,
+    log: &mut Option<&mut StepLog>,
+) -> ControlOutput {
+    match (stepped, held) {
+        (Some((frame, output)), _) => {
+            if let Some(log) = log.as_deref_mut() {
+                log.steps.push((frame, output));
+            }
+            output
+        }
+        (None, Some(previous)) => previous,
+        (None, None) => ControlOutput {
+            pwm_compare: [0; 3],
+            pwm_enabled: false,
+            brake_released: false,
+            state: DriveState::Idle,
+            telemetry: drive_core::controller::Telemetry::default(),
+        },
+    }
+}
+
+/// The drive tripped with `fault` at `t_k` (s): an error when the hook does
+/// not keep the run going after a trip, else whether the time it keeps it
+/// going (counted from the first trip, `tripped_at`) is over.
+fn trip_run_over(
+    hook: &Option<&mut dyn FaultHook>,
+    fault: drive_core::supervisor::Fault,
+    t_k: f64,
+    tripped_at: &mut Option<f64>,
+) -> Result<bool, SimError> {
+    match hook.as_deref().and_then(|h| h.keep_running_after_trip_s()) {
+        None => Err(SimError::Tripped { time_s: t_k, fault }),
+        Some(after_s) => {
+            let since = *tripped_at.get_or_insert(t_k);
+            Ok(t_k >= since + after_s)
+        }
+    }
+}
+
+/// The data acquisition of a travel: samples the plant every
+/// `sample_period` s while it advances through the PWM periods of `ts` s.
+struct Acquisition {
+    /// PWM period, s.
+    ts: f64,
+    /// Sample period of the acquisition, s.
+    sample_period: f64,
+    /// Index of the next sample to take.
+    next_sample: u64,
+    /// Longest integration step of the plant, s.
+    max_step_s: f64,
+}
+
+impl Acquisition {
+    /// Advances `plant` to `t_end` (s), recording into `run` every sample
+    /// instant on the way with the drive's `output`.
+    fn advance_to(&mut self, plant: &mut Plant, t_end: f64, run: &mut TravelRun, output: &ControlOutput) {
+        loop {
+            let t_sample = self.next_sample as f64 * self.sample_period;
+            if t_sample >= t_end {
+                break;
+            }
+            plant.advance(t_sample - plant.time_s(), self.max_step_s);
+            record(run, t_sample, &plant.observe(), output);
+            self.next_sample += 1;
+        }
+        plant.advance(t_end - plant.time_s(), self.max_step_s);
+    }
+
+    /// PWM period `k`: the brake output acts at once, `applied_first_half`
+    /// from the next counter underflow (half a period on) to the end of the
+    /// period; a `late` step's `output` loads at the end of the period.
+    fn period(
+        &mut self,
+        plant: &mut Plant,
+        run: &mut TravelRun,
+        k: u64,
+        output: &ControlOutput,
+        applied_first_half: ControlOutput,
+        late: bool,
+    ) {
+        let ts = self.ts;
+        let t_k = k as f64 * ts;
+        let mut inputs = plant.inputs();
+        inputs.brake_engaged = !applied_first_half.brake_released;
+        plant.set_inputs(inputs);
+        self.advance_to(plant, t_k + 0.5 * ts, run, output);
+        plant.set_inputs(PlantInputs {
+            pwm_compare: applied_first_half.pwm_compare,
+            pwm_enabled: applied_first_half.pwm_enabled,
+            brake_engaged: !applied_first_half.brake_released,
+        });
+        self.advance_to(plant, (k + 1) as f64 * ts, run, output);
+        if late {
+            plant.set_inputs(PlantInputs {
+                pwm_compare: output.pwm_compare,
+                pwm_enabled: output.pwm_enabled,
+                brake_engaged: !output.brake_released,
+            });
+        }
+    }
 }
 
 fn record(run: &mut TravelRun, t: f64, o: &PlantObservation, output: &drive_core::ControlOutput) {
