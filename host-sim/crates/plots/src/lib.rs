@@ -24,6 +24,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use plotters::backend::{BitMapBackend, RGBPixel};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::{ReverseCoordTranslate, Shift};
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
@@ -282,7 +283,44 @@ pub fn spectrogram_plot(
 ) -> Result<(), PlotError> {
     check_png_path(path)?;
     check_spectrogram(spectrogram)?;
-    let (db_lo, db_hi) = match db_range {
+    let (db_lo, db_hi) = spectrogram_db_range(spectrogram, db_range)?;
+    let overlay_runs = overlays.iter().map(prepare_series).collect::<Result<Vec<_>, _>>()?;
+    let axes = spectrogram_axes(spectrogram)?;
+
+    render(path, |root| {
+        let (main, bar_panel) = root.split_horizontally(PLOT_WIDTH_PX - COLORBAR_PANEL_PX);
+        let mut chart = ChartBuilder::on(&main)
+            .caption(title, (FONT_FAMILY, 26))
+            .margin(15)
+            .x_label_area_size(55)
+            .y_label_area_size(85)
+            .build_cartesian_2d(axes.t_range.clone(), axes.f_range.clone())
+            .map_err(draw_err)?;
+        let py_range = draw_heat_map(root, &chart, spectrogram, &axes, (db_lo, db_hi))?;
+
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("time [s]")
+            .y_desc("frequency [Hz]")
+            .label_style((FONT_FAMILY, 16))
+            .axis_desc_style((FONT_FAMILY, 18))
+            .draw()
+            .map_err(draw_err)?;
+        draw_overlays(&mut chart, overlays, &overlay_runs)?;
+        draw_colour_bar(&main, &bar_panel, py_range, (db_lo, db_hi))
+    })
+}
+
+/// The drawing area of a plot.
+type Area<'a> = DrawingArea<BitMapBackend<'a, RGBPixel>, Shift>;
+/// A chart with `f64` axes on a plot.
+type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b, RGBPixel>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The colour scale `(lo, hi)` in dB of a spectrogram plot: `db_range`
+/// checked, or for `None` the automatic one.
+fn spectrogram_db_range(spectrogram: &Spectrogram, db_range: Option<(f64, f64)>) -> Result<(f64, f64), PlotError> {
+    Ok(match db_range {
         Some((lo, hi)) => {
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
                 return Err(PlotError::InvalidDbRange { lo, hi });
@@ -290,9 +328,23 @@ pub fn spectrogram_plot(
             (lo, hi)
         }
         None => auto_db_range(spectrogram),
-    };
-    let overlay_runs = overlays.iter().map(prepare_series).collect::<Result<Vec<_>, _>>()?;
+    })
+}
 
+/// The axes of a spectrogram plot: the cells' edges and the ranges they span.
+struct SpectrogramAxes {
+    /// Edges of the time cells, s.
+    t_edges: Vec<f64>,
+    /// Edges of the frequency cells, Hz.
+    f_edges: Vec<f64>,
+    /// Span of the time axis, s.
+    t_range: Range<f64>,
+    /// Span of the frequency axis, Hz (from 0 when the first cell is at or above 0 Hz).
+    f_range: Range<f64>,
+}
+
+/// The axes of a checked spectrogram, or [`PlotError::RangeTooLarge`].
+fn spectrogram_axes(spectrogram: &Spectrogram) -> Result<SpectrogramAxes, PlotError> {
     let times = &spectrogram.times_s;
     let freqs = &spectrogram.frequency_hz;
     let t_edges = cell_edges(times);
@@ -305,104 +357,111 @@ pub fn spectrogram_plot(
             return Err(PlotError::RangeTooLarge { axis, lo: r.start, hi: r.end });
         }
     }
+    Ok(SpectrogramAxes { t_edges, f_edges, t_range, f_range })
+}
 
-    render(path, |root| {
-        let (main, bar_panel) = root.split_horizontally(PLOT_WIDTH_PX - COLORBAR_PANEL_PX);
-        let mut chart = ChartBuilder::on(&main)
-            .caption(title, (FONT_FAMILY, 26))
-            .margin(15)
-            .x_label_area_size(55)
-            .y_label_area_size(85)
-            .build_cartesian_2d(t_range.clone(), f_range.clone())
-            .map_err(draw_err)?;
+/// Heat map: every pixel of the plotting area of `chart` takes the colour
+/// of the cell under its centre (drawn on `root`), on the colour scale
+/// `(db_lo, db_hi)` dB. Returns the plotting area's pixel rows.
+fn draw_heat_map(
+    root: &Area<'_>,
+    chart: &Chart<'_, '_>,
+    spectrogram: &Spectrogram,
+    axes: &SpectrogramAxes,
+    (db_lo, db_hi): (f64, f64),
+) -> Result<Range<i32>, PlotError> {
+    let (px_range, py_range) = chart.plotting_area().get_pixel_range();
+    let spec = chart.as_coord_spec();
+    let columns: Vec<Option<usize>> = px_range
+        .clone()
+        .map(|px| spec.reverse_translate((px, py_range.start)).and_then(|(t, _)| cell_index(&axes.t_edges, t)))
+        .collect();
+    let rows: Vec<Option<usize>> = py_range
+        .clone()
+        .map(|py| spec.reverse_translate((px_range.start, py)).and_then(|(_, f)| cell_index(&axes.f_edges, f)))
+        .collect();
+    for (py, row) in py_range.clone().zip(&rows) {
+        let Some(k) = *row else { continue };
+        for (px, col) in px_range.clone().zip(&columns) {
+            let Some(i) = *col else { continue };
+            let db = spectrogram.psd_db[i][k];
+            let color = viridis((db - db_lo) / (db_hi - db_lo));
+            root.draw_pixel((px, py), &color).map_err(draw_err)?;
+        }
+    }
+    Ok(py_range)
+}
 
-        // Heat map: every pixel of the plotting area takes the colour of
-        // the cell under its centre.
-        let (px_range, py_range) = chart.plotting_area().get_pixel_range();
-        let spec = chart.as_coord_spec();
-        let columns: Vec<Option<usize>> = px_range
-            .clone()
-            .map(|px| spec.reverse_translate((px, py_range.start)).and_then(|(t, _)| cell_index(&t_edges, t)))
-            .collect();
-        let rows: Vec<Option<usize>> = py_range
-            .clone()
-            .map(|py| spec.reverse_translate((px_range.start, py)).and_then(|(_, f)| cell_index(&f_edges, f)))
-            .collect();
-        for (py, row) in py_range.clone().zip(&rows) {
-            let Some(k) = *row else { continue };
-            for (px, col) in px_range.clone().zip(&columns) {
-                let Some(i) = *col else { continue };
-                let db = spectrogram.psd_db[i][k];
-                let color = viridis((db - db_lo) / (db_hi - db_lo));
-                root.draw_pixel((px, py), &color).map_err(draw_err)?;
+/// The overlay curves on `chart` (their finite runs `overlay_runs`),
+/// alternately white and black with a contrasting outline, and their legend.
+fn draw_overlays<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    overlays: &[Series],
+    overlay_runs: &[Vec<Vec<(f64, f64)>>],
+) -> Result<(), PlotError> {
+    for (i, (s, runs)) in overlays.iter().zip(overlay_runs).enumerate() {
+        let (core, halo) = if i % 2 == 0 { (WHITE, BLACK) } else { (BLACK, WHITE) };
+        let halo_style = ShapeStyle::from(halo).stroke_width(4);
+        let core_style = ShapeStyle::from(core).stroke_width(2);
+        for (j, run) in runs.iter().enumerate() {
+            chart.draw_series(LineSeries::new(run.iter().copied(), halo_style)).map_err(draw_err)?;
+            let drawn = chart.draw_series(LineSeries::new(run.iter().copied(), core_style)).map_err(draw_err)?;
+            if j == 0 {
+                drawn.label(s.name.as_str()).legend(move |(x, y)| {
+                    EmptyElement::at((x, y))
+                        + PathElement::new(vec![(0, 0), (24, 0)], halo_style)
+                        + PathElement::new(vec![(0, 0), (24, 0)], core_style)
+                });
             }
         }
-
+    }
+    if !overlays.is_empty() {
         chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("time [s]")
-            .y_desc("frequency [Hz]")
-            .label_style((FONT_FAMILY, 16))
-            .axis_desc_style((FONT_FAMILY, 18))
+            .configure_series_labels()
+            .label_font((FONT_FAMILY, 16))
+            .background_style(RGBColor(128, 128, 128).mix(0.6))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
             .draw()
             .map_err(draw_err)?;
+    }
+    Ok(())
+}
 
-        for (i, (s, runs)) in overlays.iter().zip(&overlay_runs).enumerate() {
-            let (core, halo) = if i % 2 == 0 { (WHITE, BLACK) } else { (BLACK, WHITE) };
-            let halo_style = ShapeStyle::from(halo).stroke_width(4);
-            let core_style = ShapeStyle::from(core).stroke_width(2);
-            for (j, run) in runs.iter().enumerate() {
-                chart.draw_series(LineSeries::new(run.iter().copied(), halo_style)).map_err(draw_err)?;
-                let drawn = chart.draw_series(LineSeries::new(run.iter().copied(), core_style)).map_err(draw_err)?;
-                if j == 0 {
-                    drawn.label(s.name.as_str()).legend(move |(x, y)| {
-                        EmptyElement::at((x, y))
-                            + PathElement::new(vec![(0, 0), (24, 0)], halo_style)
-                            + PathElement::new(vec![(0, 0), (24, 0)], core_style)
-                    });
-                }
-            }
-        }
-        if !overlays.is_empty() {
-            chart
-                .configure_series_labels()
-                .label_font((FONT_FAMILY, 16))
-                .background_style(RGBColor(128, 128, 128).mix(0.6))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
-                .map_err(draw_err)?;
-        }
-
-        // Colour bar aligned with the plotting area.
-        let (_, main_h) = main.dim_in_pixel();
-        let top = py_range.start.max(0) as u32;
-        let bottom = main_h.saturating_sub(py_range.end.max(0) as u32);
-        let bar_area = bar_panel.margin(top, bottom, 10, 12);
-        let mut bar = ChartBuilder::on(&bar_area)
-            .y_label_area_size(0)
-            .right_y_label_area_size(88)
-            .build_cartesian_2d(0.0..1.0, db_lo..db_hi)
-            .map_err(draw_err)?;
-        const STEPS: usize = 256;
-        bar.draw_series((0..STEPS).map(|s| {
-            let v0 = db_lo + (db_hi - db_lo) * s as f64 / STEPS as f64;
-            let v1 = db_lo + (db_hi - db_lo) * (s + 1) as f64 / STEPS as f64;
-            let color = viridis((s as f64 + 0.5) / STEPS as f64);
-            Rectangle::new([(0.0, v0), (1.0, v1)], color.filled())
-        }))
+/// The colour bar of the scale `(db_lo, db_hi)` dB in `bar_panel`, aligned
+/// with the plotting area's pixel rows `py_range` of `main`.
+fn draw_colour_bar(
+    main: &Area<'_>,
+    bar_panel: &Area<'_>,
+    py_range: Range<i32>,
+    (db_lo, db_hi): (f64, f64),
+) -> Result<(), PlotError> {
+    let (_, main_h) = main.dim_in_pixel();
+    let top = py_range.start.max(0) as u32;
+    let bottom = main_h.saturating_sub(py_range.end.max(0) as u32);
+    let bar_area = bar_panel.margin(top, bottom, 10, 12);
+    let mut bar = ChartBuilder::on(&bar_area)
+        .y_label_area_size(0)
+        .right_y_label_area_size(88)
+        .build_cartesian_2d(0.0..1.0, db_lo..db_hi)
         .map_err(draw_err)?;
-        bar.configure_mesh()
-            .disable_mesh()
-            .disable_x_axis()
-            .y_desc("PSD [dB]")
-            .label_style((FONT_FAMILY, 15))
-            .axis_desc_style((FONT_FAMILY, 17))
-            .draw()
-            .map_err(draw_err)?;
-        Ok(())
-    })
+    const STEPS: usize = 256;
+    bar.draw_series((0..STEPS).map(|s| {
+        let v0 = db_lo + (db_hi - db_lo) * s as f64 / STEPS as f64;
+        let v1 = db_lo + (db_hi - db_lo) * (s + 1) as f64 / STEPS as f64;
+        let color = viridis((s as f64 + 0.5) / STEPS as f64);
+        Rectangle::new([(0.0, v0), (1.0, v1)], color.filled())
+    }))
+    .map_err(draw_err)?;
+    bar.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc("PSD [dB]")
+        .label_style((FONT_FAMILY, 15))
+        .axis_desc_style((FONT_FAMILY, 17))
+        .draw()
+        .map_err(draw_err)?;
+    Ok(())
 }
 
 /// Viridis colour map (matplotlib), `t` in [0, 1] (clamped; NaN gives the
