@@ -152,14 +152,14 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> Result<Vec<(String, 
     Ok(out)
 }
 
-/// Rope elements of the decay model (a continuous rope for Eqn 9): the
-/// project's datasets and the diagnosis's counterparts of their decays.
-pub const DECAY_ROPE_ELEMENTS: usize = 40;
-
 /// Rope elements of the free decays of a foreign rig: with 40 the rope's own
 /// first ten or so modes (the second of a 2.5 m rope near 650 Hz) ring
 /// within a few percent of the continuous rope's frequencies.
 pub const FOREIGN_DECAY_ROPE_ELEMENTS: usize = 40;
+
+/// Rope elements of the decay model (a continuous rope for Eqn 9): the
+/// project's datasets and the diagnosis's counterparts of their decays.
+pub const DECAY_ROPE_ELEMENTS: usize = 40;
 
 /// Recording after the drive switches off when the foreign acquisition's
 /// duration is automatic, s.
