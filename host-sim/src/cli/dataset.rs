@@ -10,11 +10,11 @@ use clap::{Args, ValueEnum};
 use rand::SeedableRng;
 
 use super::create_out_dir;
-use crate::config::RigConfig;
-use crate::foreign::{Acquisition, ForeignDrive, ForeignRig};
-use crate::plant::effects::Effects;
-use crate::recording::write_recording;
-use crate::synthetic::{make_dataset, make_foreign_dataset, DatasetSpec};
+use closed_loop::foreign::{Acquisition, ForeignDrive, ForeignRig};
+use closed_loop::synthetic::{make_dataset, make_foreign_dataset, DatasetSpec};
+use plant::effects::Effects;
+use recording::write_recording;
+use rig_config::RigConfig;
 
 /// Default RMS accelerometer noise of the project's acquisition, m/s^2.
 const DEFAULT_ACC_NOISE_MPS2: f64 = 0.01;
@@ -24,7 +24,7 @@ const DEFAULT_CURRENT_NOISE_A: f64 = 0.02;
 /// Which drive runs the rig.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum DriveArg {
-    /// The project's drive core (`shared::Controller`).
+    /// The project's drive core (`drive_core::Controller`).
     Project,
     /// A generic commercial drive (`host_sim::foreign::commercial_drive`).
     Commercial,

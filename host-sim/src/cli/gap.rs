@@ -6,14 +6,14 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::create_out_dir;
-use crate::analysis::{decimate, stft_spectrogram};
-use crate::config::RigConfig;
-use crate::diagnosis::signals::decimation_factor;
-use crate::diagnosis::simulate::{model_step_s, simulate_recording};
-use crate::diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
-use crate::plant::effects::{EffectKind, Effects};
-use crate::plots::spectrogram_plot;
-use crate::recording::{read_dataset, ACC_CAR};
+use diagnosis::signals::decimation_factor;
+use diagnosis::simulate::{model_step_s, simulate_recording};
+use diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
+use dsp::{decimate, stft_spectrogram};
+use plant::effects::{EffectKind, Effects};
+use plots::spectrogram_plot;
+use recording::{read_dataset, ACC_CAR};
+use rig_config::RigConfig;
 
 /// Arguments of `gap`.
 #[derive(Debug, Args)]
@@ -33,10 +33,10 @@ pub struct GapArgs {
     pub effects: Vec<String>,
     /// Largest mean excess gap (dB) of the calibrated nominal model still
     /// called `nominal`.
-    #[arg(long, value_name = "DB", default_value_t = crate::diagnosis::NOMINAL_EXCESS_DB)]
+    #[arg(long, value_name = "DB", default_value_t = diagnosis::NOMINAL_EXCESS_DB)]
     pub nominal_excess_db: f64,
     /// Smallest held-out shrink of the gap (0-1) for `explained`.
-    #[arg(long, value_name = "FRACTION", default_value_t = crate::diagnosis::EXPLAINED_SHRINK)]
+    #[arg(long, value_name = "FRACTION", default_value_t = diagnosis::EXPLAINED_SHRINK)]
     pub explained_shrink: f64,
 }
 
@@ -51,7 +51,7 @@ pub enum DriveArg {
     Foreign,
 }
 
-impl From<DriveArg> for crate::diagnosis::DriveAssumption {
+impl From<DriveArg> for diagnosis::DriveAssumption {
     fn from(d: DriveArg) -> Self {
         match d {
             DriveArg::Auto => Self::Auto,

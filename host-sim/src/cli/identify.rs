@@ -11,11 +11,11 @@ use clap::Args;
 use serde::Serialize;
 
 use super::create_out_dir;
-use crate::analysis::identify_dataset::{identify_dataset, LeftOut};
-use crate::config::RigConfig;
-use crate::plots::{line_plot, Series};
-use crate::recording::read::read_dataset;
-use crate::recording::RecordingKind;
+use diagnosis::identify_dataset::{identify_dataset, LeftOut};
+use plots::{line_plot, Series};
+use recording::read::read_dataset;
+use recording::RecordingKind;
+use rig_config::RigConfig;
 
 /// Options of `identify`.
 #[derive(Debug, Args)]

@@ -18,8 +18,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
-use crate::config::RigConfig;
-use crate::recording::Recording;
+use recording::Recording;
+use rig_config::RigConfig;
 
 /// Elevator drive simulator: the nominal 5-DOF plant of Arrasate et al.
 /// closed around the fixed-point drive core that also runs on the STM32G474.
@@ -123,8 +123,6 @@ pub fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::R
         .with_context(|| format!("recording `{stem}`: column `{name}` missing"))
 }
 
-pub use crate::analysis::travel_signals::{travel_torque, TravelTorque};
-
 /// Creates the output directory.
 pub fn create_out_dir(dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))
@@ -147,8 +145,8 @@ pub enum StrategyArg {
 
 impl StrategyArg {
     /// The strategy.
-    pub fn strategy(self) -> shared::ripple::Strategy {
-        use shared::ripple::Strategy;
+    pub fn strategy(self) -> drive_core::ripple::Strategy {
+        use drive_core::ripple::Strategy;
         match self {
             StrategyArg::Off => Strategy::Off,
             StrategyArg::Table => Strategy::Table,
