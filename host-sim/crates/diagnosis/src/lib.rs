@@ -317,6 +317,9 @@ struct Prepared {
     /// The rig drive's speed loop as identified, or why not, where the
     /// model is driven.
     speed_loop: Option<Result<drive_law::SpeedController, String>>,
+    /// Simulations run: the nominal model, its perturbations, the
+    /// counterpart's alternatives and the noise response.
+    simulations: usize,
 }
 
 /// `signal` plus white Gaussian noise of one-sided density `density`
@@ -488,7 +491,8 @@ fn counterpart(
     } else {
         None
     };
-    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop })
+    let simulations = 1 + perturbed.len() + usize::from(noise_response.is_some());
+    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop, simulations })
 }
 
 /// The rig drive's speed controller identified from the travel
@@ -612,6 +616,215 @@ fn foreign_rig_cells(
     }
 }
 
+/// What the diagnosis compares, per recording kept: the targets of the
+/// attribution, the measured signals, and where they came from.
+struct Compared {
+    /// One per recording kept.
+    targets: Vec<Target>,
+    /// The measured chain signals of each target.
+    measured: Vec<ChainSignals>,
+    /// Index of each target's recording in the dataset.
+    used: Vec<usize>,
+    /// The analysis bands (one sample rate for the dataset).
+    bands: Bands,
+    /// The rig drive's speed loop per travel under another drive.
+    rig_speed_loops: Vec<RigSpeedLoop>,
+    /// Simulations run for the nominal model, its perturbations and the
+    /// counterpart's alternatives.
+    simulations: usize,
+}
+
+/// One recording's comparison target from its prepared counterpart: the
+/// measured and simulated cells on the analysis bands, the tolerances from
+/// the perturbed runs; `bands_so_far` are the dataset's bands when an
+/// earlier recording set them. The reason in words when it cannot be
+/// compared.
+fn target_of(
+    prepared: Prepared,
+    recording: &Recording,
+    bands_so_far: Option<&Bands>,
+    drive: DriveModel,
+    model: &RigConfig,
+) -> std::result::Result<(Target, ChainSignals, Bands), String> {
+    let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, .. } = prepared;
+    let measured_for_perturbed = measured.clone();
+    align_phases(&mut measured, &mut nominal);
+    for p in perturbed.iter_mut() {
+        align_phases(&mut measured_for_perturbed.clone(), p);
+    }
+    let seg_measured = Segmentation::of(&measured);
+    let seg_model = Segmentation::of(&nominal);
+    let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len);
+    if bands_so_far.is_some_and(|b| b.edges_hz != bands.edges_hz) {
+        return Err(format!(
+            "its sample rate ({} Hz) gives other analysis bands than the dataset's first recording; \
+             expected one sample rate for the whole dataset",
+            recording.meta.sample_rate_hz
+        ));
+    }
+    let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
+    let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
+    let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
+    if drive == DriveModel::Foreign {
+        foreign_rig_cells(&mut measured_cells, recording, &bands, model, noise_response.as_ref());
+    }
+    let nominal_cells = cell_powers(&[(&nominal_spectra, 1.0)], &bands);
+    let perturbed_cells: Vec<_> = perturbed
+        .iter()
+        .map(|p| cell_powers(&[(&ChainSpectra::compute(p, &Segmentation::of(p), &bands), 1.0)], &bands))
+        .collect();
+    let tolerances = measure::tolerances(&measured_cells, &measured.noise_density, &nominal_cells, &perturbed_cells);
+    let group = match recording.meta.kind {
+        RecordingKind::Travel { m_car_kg, .. } => format!("{m_car_kg:.1} kg"),
+        RecordingKind::FreeDecay { mass_kg, .. } => format!("{mass_kg:.1} kg"),
+    };
+    let target = Target {
+        stem,
+        group,
+        recording: light_copy(recording),
+        measured: measured_cells,
+        noise: measured.noise_density.clone(),
+        tolerances,
+        segmentation: seg_model,
+        nominal: nominal_spectra,
+    };
+    Ok((target, measured, bands))
+}
+
+/// The comparison targets of every prepared recording; what cannot be
+/// compared goes to `left_out` with its reason.
+fn compared(
+    dataset: &[(String, Recording)],
+    prepared: Vec<(usize, Result<Prepared>)>,
+    drive: DriveModel,
+    model: &RigConfig,
+    left_out: &mut Vec<LeftOut>,
+) -> Option<Compared> {
+    let (mut targets, mut measured_all, mut used, mut rig_speed_loops) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut bands_all: Option<Bands> = None;
+    let mut simulations = 0;
+    for (i, prepared) in prepared {
+        let (stem, recording) = &dataset[i];
+        let prepared = match prepared {
+            Ok(p) => p,
+            Err(e) => {
+                left_out.push(LeftOut { recording: stem.clone(), reason: format!("{e:#}") });
+                continue;
+            }
+        };
+        simulations += prepared.simulations;
+        if let Some(found) = &prepared.speed_loop {
+            let (controller, refused) = match found {
+                Ok(c) => (Some(*c), None),
+                Err(reason) => (None, Some(reason.clone())),
+            };
+            rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused });
+        }
+        match target_of(prepared, recording, bands_all.as_ref(), drive, model) {
+            Ok((target, measured, bands)) => {
+                targets.push(target);
+                measured_all.push(measured);
+                used.push(i);
+                bands_all = Some(bands);
+            }
+            Err(reason) => left_out.push(LeftOut { recording: stem.clone(), reason }),
+        }
+    }
+    let bands = bands_all?;
+    Some(Compared { targets, measured: measured_all, used, bands, rig_speed_loops, simulations })
+}
+
+/// The nominal model's cells of every target and each recording's gap
+/// (with the project's drive, the replay's too).
+fn nominal_gaps(
+    model: &RigConfig,
+    dataset: &[(String, Recording)],
+    c: &Compared,
+    drive: DriveModel,
+) -> (Vec<Vec<CellGap>>, Vec<RecordingGap>) {
+    let bands = &c.bands;
+    let nominal_cells: Vec<Vec<CellGap>> = c
+        .targets
+        .iter()
+        .map(|t| cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&t.nominal, 1.0)], bands)))
+        .collect();
+    let replays: Vec<Option<Vec<CellGap>>> = c
+        .used
+        .par_iter()
+        .zip(c.measured.par_iter())
+        .zip(c.targets.par_iter())
+        .map(|((&i, measured), target)| {
+            let (stem, recording) = &dataset[i];
+            let project = drive == DriveModel::Project;
+            project.then(|| replay::replay_cells(model, recording, stem, measured, target, bands).ok()).flatten()
+        })
+        .collect();
+    let low_acc = |c: &&CellGap| {
+        c.channel.subsystem() == signals::Subsystem::Mechanical
+            && !bands.is_line(c.band)
+            && bands.edges_hz[c.band].1 <= 80.0
+    };
+    let recordings = c
+        .targets
+        .iter()
+        .zip(&nominal_cells)
+        .zip(&replays)
+        .map(|((t, cells), replay)| {
+            let nominal = gap_of_cells(cells.iter());
+            let travel = matches!(t.recording.meta.kind, RecordingKind::Travel { .. });
+            RecordingGap {
+                recording: t.stem.clone(),
+                kind: if travel { "travel" } else { "free_decay" },
+                nominal,
+                nominal_excess_db: nominal.excess_db(),
+                closed_loop_acceleration_excess_db: travel
+                    .then(|| gap_of_cells(cells.iter().filter(low_acc)).excess_db()),
+                replay_acceleration_excess_db: replay
+                    .as_ref()
+                    .map(|r| gap_of_cells(r.iter().filter(low_acc)).excess_db()),
+                explained: None,
+                explained_excess_db: None,
+            }
+        })
+        .collect();
+    (nominal_cells, recordings)
+}
+
+/// The explaining model (`effects`) on every target: each recording's gap
+/// after, and the car-acceleration cells of the map after.
+fn gap_after(model: &RigConfig, effects: &Effects, c: &Compared, recordings: &mut [RecordingGap]) -> Vec<CellGap> {
+    let bands = &c.bands;
+    let after: Vec<Option<Vec<CellGap>>> = c
+        .targets
+        .par_iter()
+        .map(|t| {
+            let s = simulate_counterpart(model, effects, &t.recording, &t.stem, model_step_s(model)).ok()?;
+            let spectra = ChainSpectra::compute(&s, &t.segmentation, bands);
+            Some(cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&spectra, 1.0)], bands)))
+        })
+        .collect();
+    for (r, cells) in recordings.iter_mut().zip(&after) {
+        if let Some(cells) = cells {
+            let g = gap_of_cells(cells.iter());
+            r.explained = Some(g);
+            r.explained_excess_db = Some(g.excess_db());
+        }
+    }
+    after.into_iter().flatten().flatten().filter(|c| c.channel == signals::Channel::CarAcceleration).collect()
+}
+
+/// The verdict from the nominal model's excess gap and the best candidate.
+fn verdict_of(is_nominal: bool, best: Option<&Candidate>, options: &GapOptions) -> Verdict {
+    if is_nominal {
+        Verdict::Nominal
+    } else if best.is_some_and(|b| b.held_out_shrink >= options.explained_shrink) {
+        Verdict::Explained
+    } else {
+        Verdict::Unexplained
+    }
+}
+
 /// Runs the diagnosis of `dataset` (named `name`) on `rig`; `progress`
 /// gets (step, runs done, runs planned). A recording that cannot be
 /// measured or simulated is left out with the reason; the verdict is given
@@ -643,130 +856,16 @@ pub fn diagnose(
             (i, counterpart(models, drive.drive, stem, recording, measured, closed))
         })
         .collect();
-    let mut targets = Vec::new();
-    let mut measured_all = Vec::new();
-    let mut used = Vec::new();
-    let mut bands_all: Option<Bands> = None;
-    let mut rig_speed_loops = Vec::new();
-    for (i, prepared) in prepared {
-        let recording = &dataset[i].1;
-        let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, speed_loop } = match prepared {
-            Ok(p) => p,
-            Err(e) => {
-                left_out.push(LeftOut { recording: dataset[i].0.clone(), reason: format!("{e:#}") });
-                continue;
-            }
-        };
-        if let Some(found) = speed_loop {
-            let (controller, refused) = match found {
-                Ok(c) => (Some(c), None),
-                Err(reason) => (None, Some(reason)),
-            };
-            rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused });
-        }
-        let measured_for_perturbed = measured.clone();
-        align_phases(&mut measured, &mut nominal);
-        for p in perturbed.iter_mut() {
-            align_phases(&mut measured_for_perturbed.clone(), p);
-        }
-        let seg_measured = Segmentation::of(&measured);
-        let seg_model = Segmentation::of(&nominal);
-        let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len);
-        if bands_all.as_ref().is_some_and(|b| b.edges_hz != bands.edges_hz) {
-            left_out.push(LeftOut {
-                recording: stem.clone(),
-                reason: format!(
-                    "its sample rate ({} Hz) gives other analysis bands than the dataset's first recording; \
-                     expected one sample rate for the whole dataset",
-                    recording.meta.sample_rate_hz
-                ),
-            });
-            continue;
-        }
-        let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
-        let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
-        let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
-        if drive.drive == DriveModel::Foreign {
-            foreign_rig_cells(&mut measured_cells, recording, &bands, &model, noise_response.as_ref());
-        }
-        let nominal_cells = cell_powers(&[(&nominal_spectra, 1.0)], &bands);
-        let perturbed_cells: Vec<_> = perturbed
-            .iter()
-            .map(|p| cell_powers(&[(&ChainSpectra::compute(p, &Segmentation::of(p), &bands), 1.0)], &bands))
-            .collect();
-        let tolerances =
-            measure::tolerances(&measured_cells, &measured.noise_density, &nominal_cells, &perturbed_cells);
-        let group = match recording.meta.kind {
-            RecordingKind::Travel { m_car_kg, .. } => format!("{m_car_kg:.1} kg"),
-            RecordingKind::FreeDecay { mass_kg, .. } => format!("{mass_kg:.1} kg"),
-        };
-        targets.push(Target {
-            stem,
-            group,
-            recording: light_copy(recording),
-            measured: measured_cells,
-            noise: measured.noise_density.clone(),
-            tolerances,
-            segmentation: seg_model,
-            nominal: nominal_spectra,
-        });
-        measured_all.push(measured);
-        used.push(i);
-        bands_all = Some(bands);
-    }
-    if targets.is_empty() {
+    let Some(mut compared) = compared(dataset, prepared, drive.drive, &model, &mut left_out) else {
         let reasons: Vec<String> = left_out.iter().map(|l| format!("`{}`: {}", l.recording, l.reason)).collect();
         bail!("dataset {name}: no recording could be diagnosed: {}", reasons.join("; "));
-    }
-    let bands = bands_all.unwrap_or_else(|| Bands::new(2048.0, 2048));
-    progress("nominal model", dataset.len(), dataset.len());
-
-    // Gap of the nominal model, and the replay of the travels.
-    let nominal_cells: Vec<Vec<CellGap>> = targets
-        .iter()
-        .map(|t| cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&t.nominal, 1.0)], &bands)))
-        .collect();
-    let replays: Vec<Option<Vec<CellGap>>> = used
-        .par_iter()
-        .zip(measured_all.par_iter())
-        .zip(targets.par_iter())
-        .map(|((&i, measured), target)| {
-            let (stem, recording) = &dataset[i];
-            let project = drive.drive == DriveModel::Project;
-            project.then(|| replay::replay_cells(&model, recording, stem, measured, target, &bands).ok()).flatten()
-        })
-        .collect();
-    let low_acc = |c: &&CellGap| {
-        c.channel.subsystem() == signals::Subsystem::Mechanical
-            && !bands.is_line(c.band)
-            && bands.edges_hz[c.band].1 <= 80.0
     };
-    let mut recordings: Vec<RecordingGap> = targets
-        .iter()
-        .zip(&nominal_cells)
-        .zip(&replays)
-        .map(|((t, cells), replay)| {
-            let nominal = gap_of_cells(cells.iter());
-            let travel = matches!(t.recording.meta.kind, RecordingKind::Travel { .. });
-            RecordingGap {
-                recording: t.stem.clone(),
-                kind: if travel { "travel" } else { "free_decay" },
-                nominal,
-                nominal_excess_db: nominal.excess_db(),
-                closed_loop_acceleration_excess_db: travel
-                    .then(|| gap_of_cells(cells.iter().filter(low_acc)).excess_db()),
-                replay_acceleration_excess_db: replay
-                    .as_ref()
-                    .map(|r| gap_of_cells(r.iter().filter(low_acc)).excess_db()),
-                explained: None,
-                explained_excess_db: None,
-            }
-        })
-        .collect();
+    progress("nominal model", dataset.len(), dataset.len());
+    let (nominal_cells, mut recordings) = nominal_gaps(&model, dataset, &compared, drive.drive);
     let n = recordings.len() as f64;
     let nominal_excess_db = recordings.iter().map(|r| r.nominal_excess_db).sum::<f64>() / n;
     let noise_gap_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;
-    let location = locate(&nominal_cells, &recordings, &bands, &targets, &measured_all);
+    let location = locate(&nominal_cells, &recordings, &compared.bands, &compared.targets, &compared.measured);
 
     // Attribution.
     let planned = std::sync::atomic::AtomicUsize::new(0);
@@ -776,8 +875,8 @@ pub fn diagnose(
     };
     let lab = Lab {
         rig: &model,
-        targets: &targets,
-        bands: &bands,
+        targets: &compared.targets,
+        bands: &compared.bands,
         reference_tension_n: calibration.reference_tension_n,
         progress: &report_progress,
     };
@@ -793,40 +892,15 @@ pub fn diagnose(
         attribute(&lab, &options.effects)
     };
     let best = ranking.first();
-    let verdict = if is_nominal {
-        Verdict::Nominal
-    } else if best.is_some_and(|b| b.held_out_shrink >= options.explained_shrink) {
-        Verdict::Explained
-    } else {
-        Verdict::Unexplained
-    };
-    // The nominal model and its two perturbations, then the attribution's runs.
-    let mut simulations = (3 + planned.load(std::sync::atomic::Ordering::Relaxed)) * targets.len();
-
-    // The explaining model on every recording: the gap after.
-    let mut map_after = Vec::new();
+    let verdict = verdict_of(is_nominal, best, options);
+    let mut simulations =
+        compared.simulations + planned.load(std::sync::atomic::Ordering::Relaxed) * compared.targets.len();
     let explained_by = (verdict == Verdict::Explained).then(|| best.map(|b| b.name.clone())).flatten();
+    let mut map_after = Vec::new();
     if let (Verdict::Explained, Some(best)) = (verdict, best) {
-        progress(&format!("checking {}", best.effects.summary()), 0, targets.len());
-        let after: Vec<Option<Vec<CellGap>>> = targets
-            .par_iter()
-            .map(|t| {
-                let s =
-                    simulate_counterpart(&model, &best.effects, &t.recording, &t.stem, model_step_s(&model)).ok()?;
-                let spectra = ChainSpectra::compute(&s, &t.segmentation, &bands);
-                Some(cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&spectra, 1.0)], &bands)))
-            })
-            .collect();
-        simulations += targets.len();
-        for (r, cells) in recordings.iter_mut().zip(&after) {
-            if let Some(cells) = cells {
-                let g = gap_of_cells(cells.iter());
-                r.explained = Some(g);
-                r.explained_excess_db = Some(g.excess_db());
-            }
-        }
-        map_after =
-            after.into_iter().flatten().flatten().filter(|c| c.channel == signals::Channel::CarAcceleration).collect();
+        progress(&format!("checking {}", best.effects.summary()), 0, compared.targets.len());
+        map_after = gap_after(&model, &best.effects, &compared, &mut recordings);
+        simulations += compared.targets.len();
     }
     let map_before =
         nominal_cells.into_iter().flatten().filter(|c| c.channel == signals::Channel::CarAcceleration).collect();
@@ -834,7 +908,7 @@ pub fn diagnose(
         dataset: name.to_string(),
         verdict,
         drive,
-        rig_speed_loops,
+        rig_speed_loops: std::mem::take(&mut compared.rig_speed_loops),
         left_out,
         attribution_refused,
         explained_by,
@@ -845,7 +919,7 @@ pub fn diagnose(
         location,
         ranking,
         recordings,
-        bands_hz: bands.edges_hz.clone(),
+        bands_hz: compared.bands.edges_hz.clone(),
         map_before,
         map_after,
         runtime_s: started.elapsed().as_secs_f64(),
