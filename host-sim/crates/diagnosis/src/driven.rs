@@ -184,6 +184,74 @@ pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> Ri
     ripple
 }
 
+/// The rig drive's speed estimate of the model's shaft, as the identified
+/// estimate's dead time and lag make it, and the integral of its departure
+/// from the rig's estimate.
+struct ModelEstimate {
+    /// The estimate, rad/s.
+    estimate_radps: f64,
+    /// Integral of (model's estimate - rig's estimate), rad.
+    departure_integral_rad: f64,
+    /// The model's shaft speeds within the dead time, rad/s.
+    speeds: std::collections::VecDeque<f64>,
+    /// Per-sample decay of the estimate's first-order lag.
+    decay: f64,
+}
+
+impl ModelEstimate {
+    fn new(controller: &SpeedController, fs: f64, start_radps: f64) -> Self {
+        let decay = if controller.estimate_lag_s > 0.0 { (-1.0 / (fs * controller.estimate_lag_s)).exp() } else { 0.0 };
+        let dead_samples = (controller.estimate_delay_s * fs).round() as usize;
+        Self {
+            estimate_radps: start_radps,
+            departure_integral_rad: 0.0,
+            speeds: std::collections::VecDeque::from(vec![start_radps; dead_samples + 1]),
+            decay,
+        }
+    }
+
+    /// At standstill: the estimate is the rig's, nothing departs.
+    fn hold(&mut self, rig_estimate_radps: f64) {
+        self.estimate_radps = rig_estimate_radps;
+        self.departure_integral_rad = 0.0;
+        self.speeds.iter_mut().for_each(|v| *v = 0.0);
+    }
+
+    /// One sample of `h` s: the model's shaft speed in, the departure from
+    /// the rig's estimate integrated.
+    fn advance(&mut self, shaft_speed_radps: f64, rig_estimate_radps: f64, h: f64) {
+        self.speeds.push_back(shaft_speed_radps);
+        let speed = self.speeds.pop_front().unwrap_or(0.0);
+        self.departure_integral_rad += (self.estimate_radps - rig_estimate_radps) * h;
+        self.estimate_radps = self.decay * self.estimate_radps + (1.0 - self.decay) * speed;
+    }
+}
+
+/// One classical Runge-Kutta step of `h` s from `state`; `deriv(s, frac)`
+/// is the state's rate at the fraction `frac` of the step.
+fn rk4_step(state: &ChainState, h: f64, deriv: impl Fn(&ChainState, f64) -> ChainState) -> ChainState {
+    let add = |s: &ChainState, d: &ChainState, f: f64| {
+        let mut o = *s;
+        for i in 0..DOF {
+            o.position_m[i] += f * d.position_m[i];
+            o.velocity_mps[i] += f * d.velocity_mps[i];
+        }
+        o
+    };
+    let k1 = deriv(state, 0.0);
+    let k2 = deriv(&add(state, &k1, 0.5 * h), 0.5);
+    let k3 = deriv(&add(state, &k2, 0.5 * h), 0.5);
+    let k4 = deriv(&add(state, &k3, h), 1.0);
+    let mut next = *state;
+    for i in 0..DOF {
+        next.position_m[i] +=
+            h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
+        next.velocity_mps[i] +=
+            h / 6.0 * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
+    }
+    next
+}
+
 /// Car and counterweight accelerations (m/s^2, positive up) of the nominal
 /// chain of `rig` driven by the measured torque of `travel` plus the ripple
 /// (RK4, one step per sample, the torque linear between samples).
@@ -217,9 +285,6 @@ pub fn torque_driven_accelerations(
     let h = 1.0 / fs;
     let theta0 = travel.shaft_angle_rad[0];
     let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
-    let estimate_decay = if feedback.estimate_lag_s > 0.0 { (-h / feedback.estimate_lag_s).exp() } else { 0.0 };
-    // The model's shaft speed, kept for the estimate's dead time.
-    let dead_samples = (feedback.estimate_delay_s * fs).round() as usize;
     // Accelerations at sample k + frac. While the rig moves, the tracking loop
     // acts on the rigid-body coordinate (the mass-weighted mean of the
     // chain's displacements) as a force spread in proportion to mass: it
@@ -251,48 +316,23 @@ pub fn torque_driven_accelerations(
         };
         ChainState { position_m: s.velocity_mps, velocity_mps: a }
     };
-    let add = |s: &ChainState, d: &ChainState, f: f64| {
-        let mut o = *s;
-        for i in 0..DOF {
-            o.position_m[i] += f * d.position_m[i];
-            o.velocity_mps[i] += f * d.velocity_mps[i];
-        }
-        o
-    };
     let mut state = ChainState::default();
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    let mut model_estimate = travel.speed_estimate_radps[0];
-    let mut departure_integral = 0.0;
-    // The model's shaft speed, kept for the estimate's dead time.
-    let mut speeds = std::collections::VecDeque::from(vec![model_estimate; dead_samples + 1]);
+    let mut estimate = ModelEstimate::new(&feedback, fs, travel.speed_estimate_radps[0]);
     for k in 0..n {
         if !travel.motion.contains(&k) {
             state.velocity_mps[SHEAVE] = 0.0;
-            model_estimate = travel.speed_estimate_radps[k];
-            departure_integral = 0.0;
-            speeds.iter_mut().for_each(|v| *v = 0.0);
+            estimate.hold(travel.speed_estimate_radps[k]);
         }
-        let e = (model_estimate, departure_integral);
+        let e = (estimate.estimate_radps, estimate.departure_integral_rad);
         let a = deriv(&state, k, 0.0, e).velocity_mps;
         car.push(a[CAR]);
         cw.push(-a[CW]);
         if k + 1 == n {
             break;
         }
-        let k1 = deriv(&state, k, 0.0, e);
-        let k2 = deriv(&add(&state, &k1, 0.5 * h), k, 0.5, e);
-        let k3 = deriv(&add(&state, &k2, 0.5 * h), k, 0.5, e);
-        let k4 = deriv(&add(&state, &k3, h), k, 1.0, e);
-        for i in 0..DOF {
-            state.position_m[i] +=
-                h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
-            state.velocity_mps[i] += h / 6.0
-                * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
-        }
-        speeds.push_back(state.velocity_mps[SHEAVE] / r);
-        let speed = speeds.pop_front().unwrap_or(0.0);
-        departure_integral += (model_estimate - travel.speed_estimate_radps[k]) * h;
-        model_estimate = estimate_decay * model_estimate + (1.0 - estimate_decay) * speed;
+        state = rk4_step(&state, h, |s, frac| deriv(s, k, frac, e));
+        estimate.advance(state.velocity_mps[SHEAVE] / r, travel.speed_estimate_radps[k], h);
         if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
             bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
         }
