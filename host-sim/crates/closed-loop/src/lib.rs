@@ -419,6 +419,17 @@ fn travel_command(spec: &TravelSpec, total_m: f64) -> Result<(TravelCommand, f64
     Ok((command, distance))
 }
 
+/// The plant's sensor readings as the drive core's frame.
+pub fn sensor_frame(plant: &Plant) -> SensorFrame {
+    let r = plant.sensor_readings();
+    SensorFrame {
+        phase_current_codes: r.phase_current_codes,
+        encoder_count: r.encoder_count,
+        dc_bus_code: r.dc_bus_code,
+        time_us: r.time_us,
+    }
+}
+
 /// The control step at `t_k` (s) of a PWM period `ts` (s): the hook changes
 /// the plant and what the controller gets, the controller steps (or not).
 /// Returns the frame the controller stepped on with its outputs (`None`: no
@@ -433,7 +444,7 @@ fn control_step(
     if let Some(hook) = hook.as_deref_mut() {
         hook.before_step(t_k, plant);
     }
-    let sensors = plant.sensor_frame();
+    let sensors = sensor_frame(plant);
     let action = match hook.as_deref_mut() {
         Some(hook) => hook.sensors(t_k, sensors, plant),
         None => StepAction::Run(sensors),

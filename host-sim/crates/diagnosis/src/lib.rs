@@ -862,6 +862,29 @@ pub fn diagnose(
     };
     progress("nominal model", dataset.len(), dataset.len());
     let (nominal_cells, mut recordings) = nominal_gaps(&model, dataset, &compared, drive.drive);
+    if std::env::var("GAP_DEBUG").is_ok() {
+        for (t, cells) in compared.targets.iter().zip(&nominal_cells) {
+            let mut v: Vec<_> = cells
+                .iter()
+                .map(|c| ((c.d_db.abs() - 2.0 * c.noise_db - c.tolerance_db).max(0.0), c))
+                .filter(|x| x.0 > 0.0)
+                .collect();
+            v.sort_by(|a, b| b.0.total_cmp(&a.0));
+            eprintln!("== {}", t.stem);
+            for (b, c) in v.iter().take(8) {
+                eprintln!(
+                    "{:.2} {:?} {:?} {} d {:.1} sig {:.2} tol {:.2}",
+                    b,
+                    c.channel,
+                    c.phase,
+                    compared.bands.label(c.band),
+                    c.d_db,
+                    c.noise_db,
+                    c.tolerance_db
+                );
+            }
+        }
+    }
     let n = recordings.len() as f64;
     let nominal_excess_db = recordings.iter().map(|r| r.nominal_excess_db).sum::<f64>() / n;
     let noise_gap_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;

@@ -19,9 +19,9 @@
 //!
 //! In the data flow config -> plant <-> controller -> recording -> analysis
 //! -> diagnosis this crate is the plant: it reads the rig (`rig-config`) and
-//! never knows which controller drives it. Of the drive core it uses only
-//! the interface type [`drive_core::SensorFrame`], the readings it hands to
-//! whichever controller closes the loop ([`Plant::sensor_frame`]).
+//! never knows which controller drives it: it depends on the rig
+//! description alone, takes the inverter's inputs ([`PlantInputs`]) and
+//! hands out its sensors' readings ([`SensorReadings`]).
 
 #![warn(missing_docs)]
 
@@ -38,8 +38,6 @@ pub mod sensors;
 
 pub use mechanics::{Chain, ChainState};
 pub use rope::ChainParams;
-
-use drive_core::SensorFrame;
 
 use effects::Effects;
 use inverter::{alpha_beta_v, phase_voltages_v};
@@ -158,6 +156,21 @@ pub struct Plant {
     phase_v: [f64; 3],
     short_current_a: f64,
     time_s: f64,
+}
+
+/// What the drive's sensors hand to whichever controller closes the loop,
+/// in their own units: ADC codes, encoder counts, microseconds. The closed
+/// loop turns them into its controller's frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SensorReadings {
+    /// ADC codes of the phase currents a, b, c (mid-scale is 0 A).
+    pub phase_current_codes: [u16; 3],
+    /// Free-running quadrature counter (wraps modulo 2^32), counts.
+    pub encoder_count: u32,
+    /// ADC code of the DC-bus voltage.
+    pub dc_bus_code: u16,
+    /// Time stamp of the sample (wraps modulo 2^32), microseconds.
+    pub time_us: u32,
 }
 
 impl Plant {
@@ -461,9 +474,9 @@ impl Plant {
         self.time_s += duration_s;
     }
 
-    /// The sensor readings the drive takes now (with the transducer errors
+    /// The sensor readings a drive takes now (with the transducer errors
     /// of `current_sensor_error` and the encoder's of `encoder_error`).
-    pub fn sensor_frame(&self) -> SensorFrame {
+    pub fn sensor_readings(&self) -> SensorReadings {
         let o = self.observe();
         let currents = match &self.effects.current_sensor_error {
             None => o.phase_currents_a,
@@ -473,7 +486,7 @@ impl Plant {
             None => o.shaft_angle_rad,
             Some(e) => e.measured_angle_rad(o.shaft_angle_rad),
         };
-        SensorFrame {
+        SensorReadings {
             phase_current_codes: currents.map(|i| self.sensors.current_code(i)),
             encoder_count: self.sensors.encoder_count(angle),
             dc_bus_code: self.sensors.dc_bus_code(self.dc_bus_v),

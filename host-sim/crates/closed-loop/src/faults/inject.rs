@@ -109,7 +109,7 @@ fn ramp_v(from_v: f64, to_v: f64, rate_v_per_s: f64, elapsed_s: f64) -> f64 {
 impl FaultHook for FaultInjector {
     fn before_step(&mut self, t_s: f64, plant: &mut Plant) {
         let nominal_bus = *self.nominal_dc_bus_v.get_or_insert(plant.dc_bus_v);
-        let true_encoder = plant.sensor_frame().encoder_count;
+        let true_encoder = plant.sensor_readings().encoder_count;
         for fault in &mut self.faults {
             if t_s < fault.onset_s {
                 continue;
