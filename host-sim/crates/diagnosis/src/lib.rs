@@ -476,7 +476,16 @@ fn counterpart(
         }
         (run_driven(models[0], &settings)?, perturbed)
     } else {
-        (closed?, vec![run_closed(models[1])?, run_closed(models[2])?])
+        let mut runs = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
+        if drive == DriveModel::Foreign {
+            // Another rig's data acquisition: its accelerometers' high-pass
+            // found from the decay itself and applied to the model's.
+            let corner_hz = decay_highpass_hz(&measured, &runs.0)?;
+            for run in std::iter::once(&mut runs.0).chain(runs.1.iter_mut()) {
+                highpass_accelerations(run, corner_hz);
+            }
+        }
+        runs
     };
     let noise_response = if driven {
         let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
@@ -493,6 +502,42 @@ fn counterpart(
     };
     let simulations = 1 + perturbed.len() + usize::from(noise_response.is_some());
     Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop, simulations })
+}
+
+/// The first-order high-pass (corner, Hz) that brings the model's car
+/// acceleration closest to the measured one below
+/// [`acquisition::COMPARISON_LOWPASS_HZ`], the model read at the measured
+/// signal's instants (linear interpolation).
+fn decay_highpass_hz(measured: &ChainSignals, model: &ChainSignals) -> Result<f64> {
+    let (Some(data), Some(sim)) =
+        (measured.channel(signals::Channel::CarAcceleration), model.channel(signals::Channel::CarAcceleration))
+    else {
+        return Ok(0.0);
+    };
+    let ratio = model.sample_rate_hz / measured.sample_rate_hz;
+    let at = |k: usize| {
+        let x = k as f64 * ratio;
+        let i = x.floor() as usize;
+        let f = x - i as f64;
+        match (sim.get(i), sim.get(i + 1)) {
+            (Some(a), Some(b)) => Some(a + f * (b - a)),
+            (Some(a), None) => Some(*a),
+            _ => None,
+        }
+    };
+    let resampled: Vec<f64> = (0..data.len()).map_while(at).collect();
+    acquisition::identify_highpass_hz(data, &resampled, measured.sample_rate_hz)
+}
+
+/// `signals`' accelerations through a first-order high-pass of corner
+/// `corner_hz` (none for 0).
+fn highpass_accelerations(signals: &mut ChainSignals, corner_hz: f64) {
+    let fs = signals.sample_rate_hz;
+    for (channel, values) in signals.channels.iter_mut() {
+        if channel.subsystem() == signals::Subsystem::Mechanical {
+            *values = acquisition::first_order_highpass(values, fs, corner_hz);
+        }
+    }
 }
 
 /// The rig drive's speed controller identified from the travel
@@ -862,29 +907,6 @@ pub fn diagnose(
     };
     progress("nominal model", dataset.len(), dataset.len());
     let (nominal_cells, mut recordings) = nominal_gaps(&model, dataset, &compared, drive.drive);
-    if std::env::var("GAP_DEBUG").is_ok() {
-        for (t, cells) in compared.targets.iter().zip(&nominal_cells) {
-            let mut v: Vec<_> = cells
-                .iter()
-                .map(|c| ((c.d_db.abs() - 2.0 * c.noise_db - c.tolerance_db).max(0.0), c))
-                .filter(|x| x.0 > 0.0)
-                .collect();
-            v.sort_by(|a, b| b.0.total_cmp(&a.0));
-            eprintln!("== {}", t.stem);
-            for (b, c) in v.iter().take(8) {
-                eprintln!(
-                    "{:.2} {:?} {:?} {} d {:.1} sig {:.2} tol {:.2}",
-                    b,
-                    c.channel,
-                    c.phase,
-                    compared.bands.label(c.band),
-                    c.d_db,
-                    c.noise_db,
-                    c.tolerance_db
-                );
-            }
-        }
-    }
     let n = recordings.len() as f64;
     let nominal_excess_db = recordings.iter().map(|r| r.nominal_excess_db).sum::<f64>() / n;
     let noise_gap_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;
