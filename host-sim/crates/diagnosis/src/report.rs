@@ -441,14 +441,14 @@ mod tests {
             held_out_gap_before_db: 1.2,
             held_out_gap_after_db: 0.3,
             held_out_shrink: 0.75,
-            score_db: 0.318,
+            score_db: 0.336,
             effects: Effects::none(),
         };
         let mut s = String::new();
         ranking_section(&mut s, &[c.clone(), c]);
         let rows: Vec<&str> = s.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| rank")).collect();
         assert_eq!(rows.len(), 2);
-        assert_eq!(rows[0], "| 1 | a + b | p=1.250e-3+-2.5e-4, q=4.000e1+-NaN | 1.00/0.50 | 1.20/0.30 | 75 % | 0.32 |");
+        assert_eq!(rows[0], "| 1 | a + b | p=1.250e-3+-2.5e-4, q=4.000e1+-NaN | 1.00/0.50 | 1.20/0.30 | 75 % | 0.34 |");
         assert!(rows[1].starts_with("| 2 | a + b |"));
     }
 
