@@ -1001,3 +1001,233 @@ fn add_pairs(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs told apart by their length: `runs(n)` has `n` recordings.
+    fn runs(n: usize) -> Runs {
+        vec![None; n]
+    }
+
+    fn grid_family(kind: EffectKind, points: &[f64]) -> Family {
+        Family {
+            kinds: vec![kind],
+            bases: points
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| {
+                    let mut v = kind.defaults();
+                    v[0] = x;
+                    Base { point: vec![(kind, v)], runs: runs(10 + i) }
+                })
+                .collect(),
+            linear: Vec::new(),
+            cross: Vec::new(),
+        }
+    }
+
+    fn linear_family(kind: EffectKind, probes: usize) -> Family {
+        Family {
+            kinds: vec![kind],
+            bases: vec![Base { point: Vec::new(), runs: runs(1) }],
+            linear: vec![LinearEffect {
+                kind,
+                search: search(kind, None),
+                probes: (0..probes).map(|p| runs(20 + p)).collect(),
+            }],
+            cross: Vec::new(),
+        }
+    }
+
+    fn candidate(name: &str, shrink: f64, after_db: f64) -> Candidate {
+        Candidate {
+            name: name.to_string(),
+            parameters: Vec::new(),
+            fitted_parameters: 1,
+            training_gap_before_db: 1.0,
+            training_gap_after_db: after_db,
+            held_out_gap_before_db: 1.0,
+            held_out_gap_after_db: after_db,
+            held_out_shrink: shrink,
+            score_db: after_db,
+            effects: Effects::none(),
+        }
+    }
+
+    #[test]
+    fn first_stage_numbers_every_point_in_turn() {
+        let kinds = [EffectKind::DivertingPulley, EffectKind::DeadTime, EffectKind::SheaveEccentricity];
+        let plan = plan_first_stage(&kinds, None);
+        // 4 pulley inertias, 1 dead-time probe, 2 eccentricity probes.
+        assert_eq!(plan.models.len(), 7);
+        let idx: Vec<&[usize]> = plan.effects.iter().map(|e| e.models.as_slice()).collect();
+        assert_eq!(idx, [&[0, 1, 2, 3][..], &[4], &[5, 6]]);
+        assert_eq!(plan.effects[1].kind, EffectKind::DeadTime);
+        assert_eq!(plan.models[0].values(EffectKind::DivertingPulley).unwrap()[0], 0.004);
+        assert_eq!(plan.models[3].values(EffectKind::DivertingPulley).unwrap()[0], 0.1);
+        assert_eq!(plan.models[4].values(EffectKind::DeadTime).unwrap()[0], DEAD_TIME_PROBE_S);
+        assert_eq!(plan.models[6].values(EffectKind::SheaveEccentricity).unwrap(), [ECCENTRICITY_PROBE, 0.25 * TAU]);
+        assert_eq!(plan.models[4].enabled(), [EffectKind::DeadTime]);
+    }
+
+    #[test]
+    fn families_of_grid_and_linear_effects() {
+        let plan = plan_first_stage(&[EffectKind::RopeDiscretization, EffectKind::SheaveEccentricity], None);
+        let all_runs: Vec<Runs> = (0..plan.models.len()).map(|m| runs(100 + m)).collect();
+        let nominal = runs(7);
+        let grid = family_of(&plan.effects[0], &all_runs, &nominal);
+        assert_eq!(grid.kinds, [EffectKind::RopeDiscretization]);
+        assert!(grid.linear.is_empty());
+        let elements: Vec<f64> = grid.bases.iter().map(|b| b.point[0].1[0]).collect();
+        assert_eq!(elements, [2.0, 4.0, 8.0]);
+        assert_eq!(grid.bases.iter().map(|b| b.runs.len()).collect::<Vec<_>>(), [100, 101, 102]);
+        let linear = family_of(&plan.effects[1], &all_runs, &nominal);
+        assert_eq!(linear.bases.len(), 1);
+        assert!(linear.bases[0].point.is_empty());
+        assert_eq!(linear.bases[0].runs.len(), 7);
+        assert_eq!(linear.linear[0].probes.iter().map(Vec::len).collect::<Vec<_>>(), [103, 104]);
+        assert_eq!(linear.coefficient_count(), 2);
+    }
+
+    #[test]
+    fn refinement_adds_midpoints_and_reports_each_family_once() {
+        // Integer scale: 4 between 2 and 8 gives 3 and 6.
+        let grid = [vec![2.0], vec![4.0], vec![8.0]];
+        assert_eq!(refinement(EffectKind::RopeDiscretization, &grid, 1), [vec![3.0], vec![6.0]]);
+        // Log scale: geometric mean towards the one neighbour.
+        let grid = [vec![4.0e3, 5.0], vec![1.6e4, 5.0]];
+        let r = refinement(EffectKind::BrakeStop, &grid, 0);
+        assert_eq!(r.len(), 1);
+        assert!((r[0][0] - 8.0e3).abs() < 1e-9 && r[0][1] == 5.0);
+
+        let mut families = vec![
+            grid_family(EffectKind::RopeDiscretization, &[2.0, 4.0]),
+            grid_family(EffectKind::BrakeStop, &[4.0e3]),
+        ];
+        let point = |family, kind: EffectKind, x| {
+            let mut values = kind.defaults();
+            values[0] = x;
+            RefinementPoint { family, kind, values }
+        };
+        let points = vec![
+            point(0, EffectKind::RopeDiscretization, 3.0),
+            point(0, EffectKind::RopeDiscretization, 6.0),
+            point(1, EffectKind::BrakeStop, 8.0e3),
+        ];
+        let touched = add_refinement(&mut families, points, vec![runs(1), runs(2), runs(3)]);
+        assert_eq!(touched, [0, 1]);
+        let elements: Vec<f64> = families[0].bases.iter().map(|b| b.point[0].1[0]).collect();
+        assert_eq!(elements, [2.0, 4.0, 3.0, 6.0]);
+        assert_eq!(families[0].bases[3].runs.len(), 2);
+        assert_eq!(families[1].bases[1].point, [(EffectKind::BrakeStop, vec![8.0e3, 5.0])]);
+    }
+
+    #[test]
+    fn pairs_only_when_the_best_single_falls_short() {
+        let short = candidate("a", PAIR_TRIGGER_SHRINK - 0.01, 0.5);
+        let enough = candidate("a", PAIR_TRIGGER_SHRINK, 0.5);
+        let other = candidate("b", 0.0, 1.0);
+        assert!(wants_pairs(&[short.clone(), other.clone()]));
+        assert!(!wants_pairs(&[enough, other]));
+        assert!(!wants_pairs(&[short]));
+        assert!(!wants_pairs(&[]));
+    }
+
+    #[test]
+    fn top_singles_are_the_best_three_single_effects() {
+        let families = [
+            grid_family(EffectKind::RopeDiscretization, &[2.0]),
+            linear_family(EffectKind::DeadTime, 1),
+            grid_family(EffectKind::BrakeStop, &[4.0e3]),
+            linear_family(EffectKind::EncoderError, 2),
+        ];
+        let ranked = [
+            candidate("dead_time", 0.1, 0.1),
+            candidate("dead_time + brake_stop", 0.1, 0.2),
+            candidate("encoder_error", 0.1, 0.3),
+            candidate("rope_discretization", 0.1, 0.4),
+        ];
+        assert_eq!(top_singles(&ranked, &families), [1, 3]);
+    }
+
+    #[test]
+    fn grid_pairs_combine_the_best_two_points_of_each() {
+        let f = grid_family(EffectKind::RopeDiscretization, &[1.0, 2.0, 4.0, 8.0]);
+        let scores = [3.0, 1.0, 2.0, 1.5];
+        let best = best_two_bases(&f, |k| scores[k]);
+        assert_eq!(best.iter().map(|p| p[0].1[0]).collect::<Vec<_>>(), [2.0, 8.0]);
+        let a = |x: f64| vec![(EffectKind::RopeDiscretization, vec![x])];
+        let b = |x: f64| vec![(EffectKind::BrakeStop, vec![x, 5.0])];
+        let combos = grid_combos(&[a(2.0), a(8.0)], &[b(1.0e3), b(1.0e4)]);
+        assert_eq!(combos.len(), 4);
+        assert_eq!(combos[1], [a(2.0)[0].clone(), b(1.0e4)[0].clone()]);
+        assert_eq!(combos[2], [a(8.0)[0].clone(), b(1.0e3)[0].clone()]);
+    }
+
+    #[test]
+    fn pair_families_take_bases_and_probes_from_their_members() {
+        let grid = grid_family(EffectKind::RopeDiscretization, &[2.0, 4.0]);
+        let lin_a = linear_family(EffectKind::DeadTime, 1);
+        let lin_b = linear_family(EffectKind::EncoderError, 2);
+        let nominal = runs(7);
+        // Linear first, grid second: the grid's bases, the linear's probes.
+        let f = pair_family(&lin_a, &grid, None, &[], &nominal);
+        assert_eq!(f.kinds, [EffectKind::DeadTime, EffectKind::RopeDiscretization]);
+        assert_eq!(f.bases.iter().map(|b| b.runs.len()).collect::<Vec<_>>(), [10, 11]);
+        assert_eq!(f.coefficient_count(), 1);
+        // Two linear effects: the nominal base, both probes sets in order.
+        let f = pair_family(&lin_a, &lin_b, None, &[], &nominal);
+        assert_eq!(f.bases.len(), 1);
+        assert_eq!(f.bases[0].runs.len(), 7);
+        assert_eq!(
+            f.linear.iter().map(|l| l.kind).collect::<Vec<_>>(),
+            [EffectKind::DeadTime, EffectKind::EncoderError]
+        );
+        assert_eq!(f.coefficient_count(), 3);
+        assert_eq!(f.fitted_parameters(), 3);
+        // Grid x grid: the combinations with their own runs, from `first_model` on.
+        let combos =
+            vec![vec![(EffectKind::RopeDiscretization, vec![2.0])], vec![(EffectKind::RopeDiscretization, vec![4.0])]];
+        let pair_runs: Vec<Runs> = (0..5).map(|m| runs(30 + m)).collect();
+        let f =
+            pair_family(&grid, &grid, Some(GridPair { first_model: 3, combos: combos.clone() }), &pair_runs, &nominal);
+        assert_eq!(
+            f.bases.iter().map(|b| (b.point.clone(), b.runs.len())).collect::<Vec<_>>(),
+            [(combos[0].clone(), 33), (combos[1].clone(), 34)]
+        );
+        assert!(f.linear.is_empty());
+    }
+
+    #[test]
+    fn a_pair_is_kept_only_clearly_below_its_better_member() {
+        let ranked = [candidate("a", 0.1, 1.0), candidate("b", 0.1, 0.5), candidate("c", 0.1, 0.1)];
+        // The better member of (a, b) leaves 0.5 dB: the pair must leave < 0.4 dB.
+        assert!(keeps_pair(&ranked, ["a", "b"], &candidate("a + b", 0.0, 0.39)));
+        assert!(!keeps_pair(&ranked, ["a", "b"], &candidate("a + b", 0.0, 0.4)));
+        assert!(!keeps_pair(&ranked, ["b", "c"], &candidate("b + c", 0.0, 0.39)));
+    }
+
+    #[test]
+    fn jackknife_error_of_the_fold_values() {
+        // Mean 2, deviations +-1: sqrt(1/2 * 2) = 1.
+        assert!((jackknife_error(&[1.0, 3.0]) - 1.0).abs() < 1e-15);
+        // Mean 2, squares 1 + 0 + 1: sqrt(2/3 * 2).
+        assert!((jackknife_error(&[1.0, 2.0, 3.0]) - (4.0f64 / 3.0).sqrt()).abs() < 1e-15);
+        assert!(jackknife_error(&[5.0]).is_nan());
+        assert!(jackknife_error(&[]).is_nan());
+    }
+
+    #[test]
+    fn fitted_parameter_list_skips_the_fixed_parameters() {
+        let params = vec![(EffectKind::DeadTime, vec![2.0e-6, 0.3])];
+        let folds =
+            vec![vec![(EffectKind::DeadTime, vec![1.0e-6, 0.3])], vec![(EffectKind::DeadTime, vec![3.0e-6, 0.3])]];
+        let list = fitted_parameter_list(&params, &folds);
+        assert_eq!(list.len(), 1);
+        assert_eq!((list[0].effect, list[0].name, list[0].unit), ("dead_time", "dead_time_s", "s"));
+        assert_eq!(list[0].value, 2.0e-6);
+        assert!((list[0].uncertainty - 1.0e-6).abs() < 1e-18);
+    }
+}
