@@ -269,6 +269,7 @@ fn refinement(kind: EffectKind, grid: &[Vec<f64>], best: usize) -> Vec<Vec<f64>>
     out
 }
 
+/// Per recording, the spectra of one model's run (`None` where it failed).
 type Runs = Vec<Option<ChainSpectra>>;
 /// The parameter vectors of the grid effects of one model.
 type GridPoint = Vec<(EffectKind, Vec<f64>)>;
@@ -281,9 +282,19 @@ fn effects_of(points: &[(EffectKind, Vec<f64>)]) -> Option<Effects> {
     Some(e)
 }
 
+/// How many runs are done and planned, for [`Lab::progress`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct RunCount {
+    /// Models run on every recording so far.
+    done: usize,
+    /// Models planned so far.
+    planned: usize,
+}
+
 impl Lab<'_> {
-    /// Runs the model with each of `models` on every recording, in parallel.
-    fn run_all(&self, models: &[Effects], done: &mut usize, planned: usize) -> Vec<Runs> {
+    /// Runs the model with each of `models` on every recording, in parallel;
+    /// counts them as done and reports the progress.
+    fn run_all(&self, models: &[Effects], count: &mut RunCount) -> Vec<Runs> {
         let jobs: Vec<(usize, usize)> =
             (0..models.len()).flat_map(|m| (0..self.targets.len()).map(move |t| (m, t))).collect();
         let results: Vec<Option<ChainSpectra>> = jobs
@@ -295,8 +306,8 @@ impl Lab<'_> {
                     .map(|signals| ChainSpectra::compute(&signals, &target.segmentation, self.bands))
             })
             .collect();
-        *done += models.len();
-        (self.progress)(*done, planned);
+        count.done += models.len();
+        (self.progress)(count.done, count.planned);
         let mut out = vec![Vec::with_capacity(self.targets.len()); models.len()];
         for ((m, _), r) in jobs.into_iter().zip(results) {
             out[m].push(r);
@@ -314,37 +325,75 @@ impl Lab<'_> {
             .map(|t| self.excess(t, &CrossPowers::compute(&[&self.targets[t].nominal], self.bands).powers(&[1.0])))
             .collect()
     }
+
+    /// Every recording's index.
+    fn all(&self) -> Vec<usize> {
+        (0..self.targets.len()).collect()
+    }
+}
+
+/// A base model of a family: one point of its grid effects (or the nominal
+/// model) with its runs.
+#[derive(Clone, Debug)]
+struct Base {
+    /// The grid effects' parameter vectors (empty for the nominal model).
+    point: GridPoint,
+    /// Its runs.
+    runs: Runs,
+}
+
+/// A linear effect of a family with its probe runs.
+#[derive(Clone, Debug)]
+struct LinearEffect {
+    /// The effect.
+    kind: EffectKind,
+    /// Its search ([`Search::Linear`]).
+    search: Search,
+    /// Per probe, its runs.
+    probes: Vec<Runs>,
+}
+
+/// A family's best fit on a set of recordings.
+#[derive(Clone, Debug, PartialEq)]
+struct Fit {
+    /// Index of the base in [`Family::bases`].
+    base: usize,
+    /// The linear effects' coefficients (clamped), one per probe.
+    coefficients: Vec<f64>,
+    /// Mean excess gap over the set, dB.
+    excess_db: f64,
 }
 
 /// A family of models: base runs (grid points, or the nominal model) and
 /// linear probes, fitted jointly.
 struct Family {
+    /// Its effects (one, or the two of a pair).
     kinds: Vec<EffectKind>,
-    /// Per base: the grid effects' parameter vectors and the runs.
-    bases: Vec<(GridPoint, Runs)>,
-    /// Per linear effect: its kind, its search, its probe runs.
-    linear: Vec<(EffectKind, Search, Vec<Runs>)>,
+    /// The grid effects' points (or the nominal model) with their runs.
+    bases: Vec<Base>,
+    /// The linear effects with their probe runs.
+    linear: Vec<LinearEffect>,
     /// Per base, per recording: cross powers of [base, nominal, probes...].
     cross: Vec<Vec<Option<CrossPowers>>>,
 }
 
 impl Family {
     fn coefficient_count(&self) -> usize {
-        self.linear.iter().map(|(_, _, p)| p.len()).sum()
+        self.linear.iter().map(|l| l.probes.len()).sum()
     }
 
     fn prepare(&mut self, lab: &Lab) {
         self.cross = self
             .bases
             .iter()
-            .map(|(_, runs)| {
+            .map(|base| {
                 (0..lab.targets.len())
                     .into_par_iter()
                     .map(|t| {
-                        let base = runs[t].as_ref()?;
+                        let base = base.runs[t].as_ref()?;
                         let mut parts: Vec<&ChainSpectra> = vec![base, &lab.targets[t].nominal];
-                        for (_, _, probes) in &self.linear {
-                            for p in probes {
+                        for l in &self.linear {
+                            for p in &l.probes {
                                 parts.push(p[t].as_ref()?);
                             }
                         }
@@ -358,9 +407,9 @@ impl Family {
     fn clamp(&self, c: &[f64]) -> Vec<f64> {
         let mut out = Vec::with_capacity(c.len());
         let mut i = 0;
-        for (_, s, probes) in &self.linear {
-            let n = probes.len();
-            if let Search::Linear { clamp, .. } = s {
+        for l in &self.linear {
+            let n = l.probes.len();
+            if let Search::Linear { clamp, .. } = &l.search {
                 out.extend(clamp(&c[i..i + n]));
             }
             i += n;
@@ -383,10 +432,10 @@ impl Family {
         sum / set.len().max(1) as f64
     }
 
-    /// Best `(base, coefficients, score)` on `set`.
-    fn fit(&self, lab: &Lab, set: &[usize]) -> (usize, Vec<f64>, f64) {
+    /// Best fit on `set`.
+    fn fit(&self, lab: &Lab, set: &[usize]) -> Fit {
         let d = self.coefficient_count();
-        let mut best = (0, vec![0.0; d], f64::INFINITY);
+        let mut best = Fit { base: 0, coefficients: vec![0.0; d], excess_db: f64::INFINITY };
         for b in 0..self.bases.len() {
             let (c, s) = if d == 0 {
                 (Vec::new(), self.score(lab, b, &[], set))
@@ -418,8 +467,8 @@ impl Family {
                 let (x1, _) = nelder_mead(|x| self.score(lab, b, x, set), &x0, 0.5, 60 * d + 40);
                 nelder_mead(|x| self.score(lab, b, x, set), &x1, 0.2, 60 * d + 40)
             };
-            if s < best.2 {
-                best = (b, self.clamp(&c), s);
+            if s < best.excess_db {
+                best = Fit { base: b, coefficients: self.clamp(&c), excess_db: s };
             }
         }
         best
@@ -427,12 +476,12 @@ impl Family {
 
     /// The parameters (per effect, full vectors) at `(b, c)`.
     fn parameters(&self, b: usize, c: &[f64]) -> Vec<(EffectKind, Vec<f64>)> {
-        let mut out = self.bases[b].0.clone();
+        let mut out = self.bases[b].point.clone();
         let mut i = 0;
-        for (kind, s, probes) in &self.linear {
-            let n = probes.len();
-            if let Search::Linear { map, .. } = s {
-                out.push((*kind, map(&c[i..i + n])));
+        for l in &self.linear {
+            let n = l.probes.len();
+            if let Search::Linear { map, .. } = &l.search {
+                out.push((l.kind, map(&c[i..i + n])));
             }
             i += n;
         }
@@ -543,27 +592,22 @@ fn folds(targets: &[Target]) -> Vec<(Vec<usize>, Vec<usize>)> {
         .collect()
 }
 
-/// Cross-validates `family` into a candidate.
-fn evaluate(lab: &Lab, family: &Family, nominal: &[f64]) -> Candidate {
-    let all: Vec<usize> = (0..lab.targets.len()).collect();
-    let folds = folds(lab.targets);
-    let mut held_after = vec![f64::NAN; lab.targets.len()];
-    let mut train_before = 0.0;
-    let mut train_after = 0.0;
-    let mut fold_params: Vec<Vec<(EffectKind, Vec<f64>)>> = Vec::new();
-    for (train, held) in &folds {
-        let (b, c, s) = family.fit(lab, train);
-        train_before += train.iter().map(|&t| nominal[t]).sum::<f64>() / train.len() as f64;
-        train_after += s;
-        for &t in held {
-            held_after[t] = family.score(lab, b, &c, &[t]);
-        }
-        fold_params.push(family.parameters(b, &c));
+/// Jackknife standard error of one parameter from its values fitted per
+/// fold (same unit); NaN with fewer than two folds.
+fn jackknife_error(per_fold: &[f64]) -> f64 {
+    let mean = per_fold.iter().sum::<f64>() / per_fold.len().max(1) as f64;
+    if per_fold.len() >= 2 {
+        let n = per_fold.len() as f64;
+        ((n - 1.0) / n * per_fold.iter().map(|v| (v - mean).powi(2)).sum::<f64>()).sqrt()
+    } else {
+        f64::NAN
     }
-    let k = folds.len().max(1) as f64;
-    let (b, c, s_all) = family.fit(lab, &all);
-    let params = family.parameters(b, &c);
-    let effects = effects_of(&params).unwrap_or_default();
+}
+
+/// Step: the fitted parameters of `params` (fitted on all recordings), each
+/// with its jackknife error over `fold_params` (the same effects fitted per
+/// fold).
+fn fitted_parameter_list(params: &[(EffectKind, Vec<f64>)], fold_params: &[GridPoint]) -> Vec<FittedParameter> {
     let mut parameters = Vec::new();
     for (e, (kind, values)) in params.iter().enumerate() {
         for (j, spec) in kind.parameters().iter().enumerate() {
@@ -571,22 +615,41 @@ fn evaluate(lab: &Lab, family: &Family, nominal: &[f64]) -> Candidate {
                 continue;
             }
             let per_fold: Vec<f64> = fold_params.iter().map(|p| p[e].1[j]).collect();
-            let mean = per_fold.iter().sum::<f64>() / per_fold.len().max(1) as f64;
-            let uncertainty = if per_fold.len() >= 2 {
-                let n = per_fold.len() as f64;
-                ((n - 1.0) / n * per_fold.iter().map(|v| (v - mean).powi(2)).sum::<f64>()).sqrt()
-            } else {
-                f64::NAN
-            };
             parameters.push(FittedParameter {
                 effect: kind.name(),
                 name: spec.name,
                 unit: spec.unit,
                 value: values[j],
-                uncertainty,
+                uncertainty: jackknife_error(&per_fold),
             });
         }
     }
+    parameters
+}
+
+/// Cross-validates `family` into a candidate.
+fn evaluate(lab: &Lab, family: &Family, nominal: &[f64]) -> Candidate {
+    let all = lab.all();
+    let folds = folds(lab.targets);
+    let mut held_after = vec![f64::NAN; lab.targets.len()];
+    let mut train_before = 0.0;
+    let mut train_after = 0.0;
+    let mut fold_params: Vec<GridPoint> = Vec::new();
+    for (train, held) in &folds {
+        let fit = family.fit(lab, train);
+        train_before += train.iter().map(|&t| nominal[t]).sum::<f64>() / train.len() as f64;
+        train_after += fit.excess_db;
+        for &t in held {
+            held_after[t] = family.score(lab, fit.base, &fit.coefficients, &[t]);
+        }
+        fold_params.push(family.parameters(fit.base, &fit.coefficients));
+    }
+    let k = folds.len().max(1) as f64;
+    let fit_all = family.fit(lab, &all);
+    let s_all = fit_all.excess_db;
+    let params = family.parameters(fit_all.base, &fit_all.coefficients);
+    let effects = effects_of(&params).unwrap_or_default();
+    let parameters = fitted_parameter_list(&params, &fold_params);
     let held: Vec<usize> = (0..lab.targets.len()).filter(|&t| held_after[t].is_finite()).collect();
     let mean_of = |v: &dyn Fn(usize) -> f64| held.iter().map(|&t| v(t)).sum::<f64>() / held.len().max(1) as f64;
     let (before, after) = if held.is_empty() {
@@ -609,175 +672,562 @@ fn evaluate(lab: &Lab, family: &Family, nominal: &[f64]) -> Candidate {
     }
 }
 
-/// Fits every effect of the library (and pairs when needed); returns the
-/// candidates ranked best first.
-pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
-    let nominal = lab.nominal_excess();
-    let nominal_effects = Effects::none();
-    // Plan every run of the first stage.
-    let searches: Vec<(EffectKind, Search)> = kinds.iter().map(|&k| (k, search(k, lab.reference_tension_n))).collect();
+/// One effect of the first stage, as planned.
+struct PlannedEffect {
+    /// The effect.
+    kind: EffectKind,
+    /// How it is searched.
+    search: Search,
+    /// Indices in [`FirstStage::models`] of its grid points or probes, in order.
+    models: Vec<usize>,
+}
+
+/// Every run of the first stage: each effect's grid points or probes.
+struct FirstStage {
+    /// The effects, in the order asked.
+    effects: Vec<PlannedEffect>,
+    /// The models to run, every effect's points in turn.
+    models: Vec<Effects>,
+}
+
+/// Step: plans the first stage's runs of `kinds` (a point that the effect
+/// refuses runs as the nominal model).
+fn plan_first_stage(kinds: &[EffectKind], reference_tension_n: Option<f64>) -> FirstStage {
     let mut models: Vec<Effects> = Vec::new();
-    let mut index: Vec<Vec<usize>> = Vec::new();
-    for (kind, s) in &searches {
-        let points = match s {
+    let mut effects = Vec::new();
+    for &kind in kinds {
+        let search = search(kind, reference_tension_n);
+        let points = match &search {
             Search::Grid(points) => points.clone(),
             Search::Linear { probes, .. } => probes.clone(),
         };
         let mut idx = Vec::new();
         for p in points {
             idx.push(models.len());
-            models.push(effects_of(&[(*kind, p)]).unwrap_or(nominal_effects));
+            models.push(effects_of(&[(kind, p)]).unwrap_or(Effects::none()));
         }
-        index.push(idx);
+        effects.push(PlannedEffect { kind, search, models: idx });
     }
-    let mut planned = models.len();
-    let mut done = 0;
-    let runs = lab.run_all(&models, &mut done, planned);
-    let nominal_runs: Runs = lab.targets.iter().map(|t| Some(t.nominal.clone())).collect();
+    FirstStage { effects, models }
+}
 
-    // Build the families; refine the grids of the effects that reduce the
-    // gap at all, twice, around their best point on all recordings.
-    let mut families: Vec<Family> = Vec::new();
-    let all: Vec<usize> = (0..lab.targets.len()).collect();
-    let nominal_mean = nominal.iter().sum::<f64>() / nominal.len().max(1) as f64;
-    for ((kind, s), idx) in searches.iter().zip(&index) {
-        let mut f = match s {
-            Search::Grid(points) => Family {
-                kinds: vec![*kind],
-                bases: points.iter().zip(idx).map(|(p, &m)| (vec![(*kind, p.clone())], runs[m].clone())).collect(),
-                linear: Vec::new(),
-                cross: Vec::new(),
-            },
-            Search::Linear { .. } => Family {
-                kinds: vec![*kind],
-                bases: vec![(Vec::new(), nominal_runs.clone())],
-                linear: vec![(*kind, s.clone(), idx.iter().map(|&m| runs[m].clone()).collect())],
-                cross: Vec::new(),
-            },
-        };
-        f.prepare(lab);
-        families.push(f);
+/// Step: the family of one planned effect from the first stage's `runs`: a
+/// grid effect's bases are its points; a linear effect has the nominal
+/// model (`nominal_runs`) as its only base and its probes. Not prepared.
+fn family_of(planned: &PlannedEffect, runs: &[Runs], nominal_runs: &Runs) -> Family {
+    let kind = planned.kind;
+    match &planned.search {
+        Search::Grid(points) => Family {
+            kinds: vec![kind],
+            bases: points
+                .iter()
+                .zip(&planned.models)
+                .map(|(p, &m)| Base { point: vec![(kind, p.clone())], runs: runs[m].clone() })
+                .collect(),
+            linear: Vec::new(),
+            cross: Vec::new(),
+        },
+        Search::Linear { .. } => Family {
+            kinds: vec![kind],
+            bases: vec![Base { point: Vec::new(), runs: nominal_runs.clone() }],
+            linear: vec![LinearEffect {
+                kind,
+                search: planned.search.clone(),
+                probes: planned.models.iter().map(|&m| runs[m].clone()).collect(),
+            }],
+            cross: Vec::new(),
+        },
     }
-    for _round in 0..REFINEMENT_ROUNDS {
-        let mut refine_models = Vec::new();
-        let mut refine_owner = Vec::new();
-        for (i, f) in families.iter().enumerate() {
-            if !f.linear.is_empty() {
-                continue;
-            }
-            let (best, _, score) = f.fit(lab, &all);
-            if score >= REFINE_IF_BELOW * nominal_mean {
-                continue;
-            }
-            let kind = f.kinds[0];
-            let points: Vec<Vec<f64>> = f.bases.iter().map(|(p, _)| p[0].1.clone()).collect();
-            for p in refinement(kind, &points, best) {
-                refine_models.push(effects_of(&[(kind, p.clone())]).unwrap_or(nominal_effects));
-                refine_owner.push((i, kind, p));
-            }
+}
+
+/// A grid point to add to a family's grid.
+#[derive(Clone, Debug, PartialEq)]
+struct RefinementPoint {
+    /// Index of the family.
+    family: usize,
+    /// Its (only) effect.
+    kind: EffectKind,
+    /// The effect's full parameter vector.
+    values: Vec<f64>,
+}
+
+/// Step: the points of one refinement round: around the best point on all
+/// recordings of every grid family that leaves less than
+/// [`REFINE_IF_BELOW`] of `nominal_mean` (dB).
+fn refinement_points(lab: &Lab, families: &[Family], nominal_mean: f64) -> Vec<RefinementPoint> {
+    let all = lab.all();
+    let mut out = Vec::new();
+    for (i, f) in families.iter().enumerate() {
+        if !f.linear.is_empty() {
+            continue;
         }
-        if refine_models.is_empty() {
+        let fit = f.fit(lab, &all);
+        if fit.excess_db >= REFINE_IF_BELOW * nominal_mean {
+            continue;
+        }
+        let kind = f.kinds[0];
+        let points: Vec<Vec<f64>> = f.bases.iter().map(|b| b.point[0].1.clone()).collect();
+        for values in refinement(kind, &points, fit.base) {
+            out.push(RefinementPoint { family: i, kind, values });
+        }
+    }
+    out
+}
+
+/// Step: adds the refinement `points` with their `runs` as bases of their
+/// families; returns the families touched (in order, each once when the
+/// points come grouped by family).
+fn add_refinement(families: &mut [Family], points: Vec<RefinementPoint>, runs: Vec<Runs>) -> Vec<usize> {
+    let mut touched = Vec::new();
+    for (p, r) in points.into_iter().zip(runs) {
+        families[p.family].bases.push(Base { point: vec![(p.kind, p.values)], runs: r });
+        touched.push(p.family);
+    }
+    touched.dedup();
+    touched
+}
+
+/// Step: refines the grids of the effects that reduce the gap at all, up to
+/// [`REFINEMENT_ROUNDS`] times, around their best point on all recordings.
+fn refine_grids(lab: &Lab, families: &mut [Family], nominal_mean: f64, count: &mut RunCount) {
+    for _round in 0..REFINEMENT_ROUNDS {
+        let points = refinement_points(lab, families, nominal_mean);
+        let models: Vec<Effects> =
+            points.iter().map(|p| effects_of(&[(p.kind, p.values.clone())]).unwrap_or(Effects::none())).collect();
+        if models.is_empty() {
             break;
         }
-        planned = planned.max(done + refine_models.len());
-        let extra = lab.run_all(&refine_models, &mut done, planned);
-        let mut touched = Vec::new();
-        for ((f, kind, p), r) in refine_owner.into_iter().zip(extra) {
-            families[f].bases.push((vec![(kind, p)], r));
-            touched.push(f);
-        }
-        touched.dedup();
-        for f in touched {
+        count.planned = count.planned.max(count.done + models.len());
+        let runs = lab.run_all(&models, count);
+        for f in add_refinement(families, points, runs) {
             families[f].prepare(lab);
         }
     }
-    (lab.progress)(planned, planned);
-    let mut candidates: Vec<Candidate> = families.iter().map(|f| evaluate(lab, f, &nominal)).collect();
-    candidates.sort_by(|a, b| a.score_db.total_cmp(&b.score_db));
+}
 
-    // Pairs of the best three when no single effect explains the gap.
-    if candidates.first().is_some_and(|c| c.held_out_shrink < PAIR_TRIGGER_SHRINK) && candidates.len() >= 2 {
-        let top: Vec<usize> = candidates
-            .iter()
-            .take(3)
-            .filter_map(|c| families.iter().position(|f| f.kinds.len() == 1 && f.kinds[0].name() == c.name))
-            .collect();
-        let mut pair_models = Vec::new();
-        let mut pair_plan = Vec::new();
-        for i in 0..top.len() {
-            for j in i + 1..top.len() {
-                let (a, b) = (&families[top[i]], &families[top[j]]);
-                // Grid x grid: the best two points of each, combined.
-                if a.linear.is_empty() && b.linear.is_empty() {
-                    let best_two = |f: &Family| -> Vec<Vec<(EffectKind, Vec<f64>)>> {
-                        let mut scored: Vec<(usize, f64)> =
-                            (0..f.bases.len()).map(|k| (k, f.score(lab, k, &[], &all))).collect();
-                        scored.sort_by(|x, y| x.1.total_cmp(&y.1));
-                        scored.iter().take(2).map(|(k, _)| f.bases[*k].0.clone()).collect()
-                    };
-                    let mut combos = Vec::new();
-                    for pa in best_two(a) {
-                        for pb in best_two(b) {
-                            let mut both = pa.clone();
-                            both.extend(pb.clone());
-                            combos.push(both);
-                        }
-                    }
-                    let start = pair_models.len();
-                    for c in &combos {
-                        pair_models.push(effects_of(c).unwrap_or(nominal_effects));
-                    }
-                    pair_plan.push((top[i], top[j], Some((start, combos))));
-                } else {
-                    pair_plan.push((top[i], top[j], None));
-                }
-            }
-        }
-        let pair_runs = if pair_models.is_empty() {
-            Vec::new()
-        } else {
-            lab.run_all(&pair_models, &mut done, planned + pair_models.len())
-        };
-        for (ia, ib, grid) in pair_plan {
-            let (a, b) = (&families[ia], &families[ib]);
-            let mut f = match grid {
-                Some((start, combos)) => Family {
-                    kinds: vec![a.kinds[0], b.kinds[0]],
-                    bases: combos.into_iter().enumerate().map(|(k, c)| (c, pair_runs[start + k].clone())).collect(),
-                    linear: Vec::new(),
-                    cross: Vec::new(),
-                },
-                None => {
-                    // The grid one (if any) gives the bases; the linear ones add their probes.
-                    let (grid_f, lin): (Option<&Family>, Vec<&Family>) =
-                        match (a.linear.is_empty(), b.linear.is_empty()) {
-                            (true, false) => (Some(a), vec![b]),
-                            (false, true) => (Some(b), vec![a]),
-                            _ => (None, vec![a, b]),
-                        };
-                    Family {
-                        kinds: vec![a.kinds[0], b.kinds[0]],
-                        bases: grid_f.map_or_else(|| vec![(Vec::new(), nominal_runs.clone())], |g| g.bases.clone()),
-                        linear: lin.iter().flat_map(|f| f.linear.clone()).collect(),
-                        cross: Vec::new(),
-                    }
-                }
-            };
-            f.prepare(lab);
-            let pair = evaluate(lab, &f, &nominal);
-            // A pair must earn its extra parameters: it is kept only when it
-            // leaves clearly less of the held-out gap than its better member.
-            let members = [a.kinds[0].name(), b.kinds[0].name()];
-            let single_best = candidates
-                .iter()
-                .filter(|c| members.contains(&c.name.as_str()))
-                .map(|c| c.held_out_gap_after_db)
-                .fold(f64::INFINITY, f64::min);
-            if pair.held_out_gap_after_db < PAIR_MARGIN * single_best {
-                candidates.push(pair);
-            }
-        }
-        candidates.sort_by(|a, b| a.score_db.total_cmp(&b.score_db));
+/// Sorts candidates best first (lowest score).
+fn rank(candidates: &mut [Candidate]) {
+    candidates.sort_by(|a, b| a.score_db.total_cmp(&b.score_db));
+}
+
+/// Fits every effect of the library (and pairs when needed); returns the
+/// candidates ranked best first.
+pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
+    let nominal = lab.nominal_excess();
+    let plan = plan_first_stage(kinds, lab.reference_tension_n);
+    let mut count = RunCount { done: 0, planned: plan.models.len() };
+    let runs = lab.run_all(&plan.models, &mut count);
+    let nominal_runs: Runs = lab.targets.iter().map(|t| Some(t.nominal.clone())).collect();
+    let mut families: Vec<Family> = Vec::new();
+    for planned in &plan.effects {
+        let mut f = family_of(planned, &runs, &nominal_runs);
+        f.prepare(lab);
+        families.push(f);
+    }
+    let nominal_mean = nominal.iter().sum::<f64>() / nominal.len().max(1) as f64;
+    refine_grids(lab, &mut families, nominal_mean, &mut count);
+    (lab.progress)(count.planned, count.planned);
+    let mut candidates: Vec<Candidate> = families.iter().map(|f| evaluate(lab, f, &nominal)).collect();
+    rank(&mut candidates);
+    if wants_pairs(&candidates) {
+        add_pairs(lab, &families, &mut candidates, &nominal, &nominal_runs, &mut count);
+        rank(&mut candidates);
     }
     candidates
+}
+
+/// Whether pairs are tried: the best single effect shrinks the held-out gap
+/// by less than [`PAIR_TRIGGER_SHRINK`], and there are two effects at least.
+fn wants_pairs(candidates: &[Candidate]) -> bool {
+    candidates.first().is_some_and(|c| c.held_out_shrink < PAIR_TRIGGER_SHRINK) && candidates.len() >= 2
+}
+
+/// Step: the families of the best three candidates (ranked), those of a
+/// single effect.
+fn top_singles(candidates: &[Candidate], families: &[Family]) -> Vec<usize> {
+    candidates
+        .iter()
+        .take(3)
+        .filter_map(|c| families.iter().position(|f| f.kinds.len() == 1 && f.kinds[0].name() == c.name))
+        .collect()
+}
+
+/// The grid points of the best two bases of a grid family by `score` (mean
+/// excess gap of base `k`, dB), best first.
+fn best_two_bases(f: &Family, score: impl Fn(usize) -> f64) -> Vec<GridPoint> {
+    let mut scored: Vec<(usize, f64)> = (0..f.bases.len()).map(|k| (k, score(k))).collect();
+    scored.sort_by(|x, y| x.1.total_cmp(&y.1));
+    scored.iter().take(2).map(|(k, _)| f.bases[*k].point.clone()).collect()
+}
+
+/// Every point of `a` with every point of `b` (`a` the outer loop), joined.
+fn grid_combos(a: &[GridPoint], b: &[GridPoint]) -> Vec<GridPoint> {
+    let mut combos = Vec::new();
+    for pa in a {
+        for pb in b {
+            let mut both = pa.clone();
+            both.extend(pb.clone());
+            combos.push(both);
+        }
+    }
+    combos
+}
+
+/// A grid x grid pair's own runs.
+#[derive(Clone, Debug, PartialEq)]
+struct GridPair {
+    /// Index of the first combination's model in [`PairPlans::models`].
+    first_model: usize,
+    /// The combined grid points, in the order of their models.
+    combos: Vec<GridPoint>,
+}
+
+/// One pair of effects to fit.
+#[derive(Clone, Debug, PartialEq)]
+struct PairPlan {
+    /// Index of the first member's family.
+    first: usize,
+    /// Index of the second member's family.
+    second: usize,
+    /// For two grid effects, the combinations to run; `None` when one of
+    /// them is linear (the pair reuses the members' runs).
+    grid: Option<GridPair>,
+}
+
+/// The pairs to fit and the models they need run.
+struct PairPlans {
+    /// The models of every grid x grid combination.
+    models: Vec<Effects>,
+    /// The pairs, in order.
+    pairs: Vec<PairPlan>,
+}
+
+/// Step: plans every pair of the `top` families; two grid effects combine
+/// the best two points of each (on all recordings).
+fn plan_pairs(lab: &Lab, families: &[Family], top: &[usize]) -> PairPlans {
+    let all = lab.all();
+    let mut models = Vec::new();
+    let mut pairs = Vec::new();
+    for i in 0..top.len() {
+        for j in i + 1..top.len() {
+            let (a, b) = (&families[top[i]], &families[top[j]]);
+            let grid = if a.linear.is_empty() && b.linear.is_empty() {
+                let best = |f: &Family| best_two_bases(f, |k| f.score(lab, k, &[], &all));
+                let combos = grid_combos(&best(a), &best(b));
+                let first_model = models.len();
+                for c in &combos {
+                    models.push(effects_of(c).unwrap_or(Effects::none()));
+                }
+                Some(GridPair { first_model, combos })
+            } else {
+                None
+            };
+            pairs.push(PairPlan { first: top[i], second: top[j], grid });
+        }
+    }
+    PairPlans { models, pairs }
+}
+
+/// Step: the family of a pair of single-effect families `a` and `b`: a grid
+/// pair's bases are its combinations with their `pair_runs`; otherwise the
+/// grid member (if any) gives the bases (else the nominal model,
+/// `nominal_runs`) and the linear members add their probes. Not prepared.
+fn pair_family(a: &Family, b: &Family, grid: Option<GridPair>, pair_runs: &[Runs], nominal_runs: &Runs) -> Family {
+    match grid {
+        Some(GridPair { first_model, combos }) => Family {
+            kinds: vec![a.kinds[0], b.kinds[0]],
+            bases: combos
+                .into_iter()
+                .enumerate()
+                .map(|(k, c)| Base { point: c, runs: pair_runs[first_model + k].clone() })
+                .collect(),
+            linear: Vec::new(),
+            cross: Vec::new(),
+        },
+        None => {
+            let (grid_f, lin): (Option<&Family>, Vec<&Family>) = match (a.linear.is_empty(), b.linear.is_empty()) {
+                (true, false) => (Some(a), vec![b]),
+                (false, true) => (Some(b), vec![a]),
+                _ => (None, vec![a, b]),
+            };
+            Family {
+                kinds: vec![a.kinds[0], b.kinds[0]],
+                bases: grid_f
+                    .map_or_else(|| vec![Base { point: Vec::new(), runs: nominal_runs.clone() }], |g| g.bases.clone()),
+                linear: lin.iter().flat_map(|f| f.linear.clone()).collect(),
+                cross: Vec::new(),
+            }
+        }
+    }
+}
+
+/// Whether `pair` earns its extra parameters: its held-out gap after the
+/// fit is below [`PAIR_MARGIN`] times that of its better member (the
+/// candidates named in `members`).
+fn keeps_pair(candidates: &[Candidate], members: [&str; 2], pair: &Candidate) -> bool {
+    let single_best = candidates
+        .iter()
+        .filter(|c| members.contains(&c.name.as_str()))
+        .map(|c| c.held_out_gap_after_db)
+        .fold(f64::INFINITY, f64::min);
+    pair.held_out_gap_after_db < PAIR_MARGIN * single_best
+}
+
+/// Step: fits the pairs of the best three single effects and adds those
+/// that [`keeps_pair`] keeps to `candidates` (unranked).
+fn add_pairs(
+    lab: &Lab,
+    families: &[Family],
+    candidates: &mut Vec<Candidate>,
+    nominal: &[f64],
+    nominal_runs: &Runs,
+    count: &mut RunCount,
+) {
+    let top = top_singles(candidates, families);
+    let plans = plan_pairs(lab, families, &top);
+    let pair_runs = if plans.models.is_empty() {
+        Vec::new()
+    } else {
+        count.planned += plans.models.len();
+        lab.run_all(&plans.models, count)
+    };
+    for plan in plans.pairs {
+        let (a, b) = (&families[plan.first], &families[plan.second]);
+        let mut f = pair_family(a, b, plan.grid, &pair_runs, nominal_runs);
+        f.prepare(lab);
+        let pair = evaluate(lab, &f, nominal);
+        if keeps_pair(candidates, [a.kinds[0].name(), b.kinds[0].name()], &pair) {
+            candidates.push(pair);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs told apart by their length: `runs(n)` has `n` recordings.
+    fn runs(n: usize) -> Runs {
+        vec![None; n]
+    }
+
+    fn grid_family(kind: EffectKind, points: &[f64]) -> Family {
+        Family {
+            kinds: vec![kind],
+            bases: points
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| {
+                    let mut v = kind.defaults();
+                    v[0] = x;
+                    Base { point: vec![(kind, v)], runs: runs(10 + i) }
+                })
+                .collect(),
+            linear: Vec::new(),
+            cross: Vec::new(),
+        }
+    }
+
+    fn linear_family(kind: EffectKind, probes: usize) -> Family {
+        Family {
+            kinds: vec![kind],
+            bases: vec![Base { point: Vec::new(), runs: runs(1) }],
+            linear: vec![LinearEffect {
+                kind,
+                search: search(kind, None),
+                probes: (0..probes).map(|p| runs(20 + p)).collect(),
+            }],
+            cross: Vec::new(),
+        }
+    }
+
+    fn candidate(name: &str, shrink: f64, after_db: f64) -> Candidate {
+        Candidate {
+            name: name.to_string(),
+            parameters: Vec::new(),
+            fitted_parameters: 1,
+            training_gap_before_db: 1.0,
+            training_gap_after_db: after_db,
+            held_out_gap_before_db: 1.0,
+            held_out_gap_after_db: after_db,
+            held_out_shrink: shrink,
+            score_db: after_db,
+            effects: Effects::none(),
+        }
+    }
+
+    #[test]
+    fn first_stage_numbers_every_point_in_turn() {
+        let kinds = [EffectKind::DivertingPulley, EffectKind::DeadTime, EffectKind::SheaveEccentricity];
+        let plan = plan_first_stage(&kinds, None);
+        // 4 pulley inertias, 1 dead-time probe, 2 eccentricity probes.
+        assert_eq!(plan.models.len(), 7);
+        let idx: Vec<&[usize]> = plan.effects.iter().map(|e| e.models.as_slice()).collect();
+        assert_eq!(idx, [&[0, 1, 2, 3][..], &[4], &[5, 6]]);
+        assert_eq!(plan.effects[1].kind, EffectKind::DeadTime);
+        assert_eq!(plan.models[0].values(EffectKind::DivertingPulley).unwrap()[0], 0.004);
+        assert_eq!(plan.models[3].values(EffectKind::DivertingPulley).unwrap()[0], 0.1);
+        assert_eq!(plan.models[4].values(EffectKind::DeadTime).unwrap()[0], DEAD_TIME_PROBE_S);
+        assert_eq!(plan.models[6].values(EffectKind::SheaveEccentricity).unwrap(), [ECCENTRICITY_PROBE, 0.25 * TAU]);
+        assert_eq!(plan.models[4].enabled(), [EffectKind::DeadTime]);
+    }
+
+    #[test]
+    fn families_of_grid_and_linear_effects() {
+        let plan = plan_first_stage(&[EffectKind::RopeDiscretization, EffectKind::SheaveEccentricity], None);
+        let all_runs: Vec<Runs> = (0..plan.models.len()).map(|m| runs(100 + m)).collect();
+        let nominal = runs(7);
+        let grid = family_of(&plan.effects[0], &all_runs, &nominal);
+        assert_eq!(grid.kinds, [EffectKind::RopeDiscretization]);
+        assert!(grid.linear.is_empty());
+        let elements: Vec<f64> = grid.bases.iter().map(|b| b.point[0].1[0]).collect();
+        assert_eq!(elements, [2.0, 4.0, 8.0]);
+        assert_eq!(grid.bases.iter().map(|b| b.runs.len()).collect::<Vec<_>>(), [100, 101, 102]);
+        let linear = family_of(&plan.effects[1], &all_runs, &nominal);
+        assert_eq!(linear.bases.len(), 1);
+        assert!(linear.bases[0].point.is_empty());
+        assert_eq!(linear.bases[0].runs.len(), 7);
+        assert_eq!(linear.linear[0].probes.iter().map(Vec::len).collect::<Vec<_>>(), [103, 104]);
+        assert_eq!(linear.coefficient_count(), 2);
+    }
+
+    #[test]
+    fn refinement_adds_midpoints_and_reports_each_family_once() {
+        // Integer scale: 4 between 2 and 8 gives 3 and 6.
+        let grid = [vec![2.0], vec![4.0], vec![8.0]];
+        assert_eq!(refinement(EffectKind::RopeDiscretization, &grid, 1), [vec![3.0], vec![6.0]]);
+        // Log scale: geometric mean towards the one neighbour.
+        let grid = [vec![4.0e3, 5.0], vec![1.6e4, 5.0]];
+        let r = refinement(EffectKind::BrakeStop, &grid, 0);
+        assert_eq!(r.len(), 1);
+        assert!((r[0][0] - 8.0e3).abs() < 1e-9 && r[0][1] == 5.0);
+
+        let mut families = vec![
+            grid_family(EffectKind::RopeDiscretization, &[2.0, 4.0]),
+            grid_family(EffectKind::BrakeStop, &[4.0e3]),
+        ];
+        let point = |family, kind: EffectKind, x| {
+            let mut values = kind.defaults();
+            values[0] = x;
+            RefinementPoint { family, kind, values }
+        };
+        let points = vec![
+            point(0, EffectKind::RopeDiscretization, 3.0),
+            point(0, EffectKind::RopeDiscretization, 6.0),
+            point(1, EffectKind::BrakeStop, 8.0e3),
+        ];
+        let touched = add_refinement(&mut families, points, vec![runs(1), runs(2), runs(3)]);
+        assert_eq!(touched, [0, 1]);
+        let elements: Vec<f64> = families[0].bases.iter().map(|b| b.point[0].1[0]).collect();
+        assert_eq!(elements, [2.0, 4.0, 3.0, 6.0]);
+        assert_eq!(families[0].bases[3].runs.len(), 2);
+        assert_eq!(families[1].bases[1].point, [(EffectKind::BrakeStop, vec![8.0e3, 5.0])]);
+    }
+
+    #[test]
+    fn pairs_only_when_the_best_single_falls_short() {
+        let short = candidate("a", PAIR_TRIGGER_SHRINK - 0.01, 0.5);
+        let enough = candidate("a", PAIR_TRIGGER_SHRINK, 0.5);
+        let other = candidate("b", 0.0, 1.0);
+        assert!(wants_pairs(&[short.clone(), other.clone()]));
+        assert!(!wants_pairs(&[enough, other]));
+        assert!(!wants_pairs(&[short]));
+        assert!(!wants_pairs(&[]));
+    }
+
+    #[test]
+    fn top_singles_are_the_best_three_single_effects() {
+        let families = [
+            grid_family(EffectKind::RopeDiscretization, &[2.0]),
+            linear_family(EffectKind::DeadTime, 1),
+            grid_family(EffectKind::BrakeStop, &[4.0e3]),
+            linear_family(EffectKind::EncoderError, 2),
+        ];
+        let ranked = [
+            candidate("dead_time", 0.1, 0.1),
+            candidate("dead_time + brake_stop", 0.1, 0.2),
+            candidate("encoder_error", 0.1, 0.3),
+            candidate("rope_discretization", 0.1, 0.4),
+        ];
+        assert_eq!(top_singles(&ranked, &families), [1, 3]);
+    }
+
+    #[test]
+    fn grid_pairs_combine_the_best_two_points_of_each() {
+        let f = grid_family(EffectKind::RopeDiscretization, &[1.0, 2.0, 4.0, 8.0]);
+        let scores = [3.0, 1.0, 2.0, 1.5];
+        let best = best_two_bases(&f, |k| scores[k]);
+        assert_eq!(best.iter().map(|p| p[0].1[0]).collect::<Vec<_>>(), [2.0, 8.0]);
+        let a = |x: f64| vec![(EffectKind::RopeDiscretization, vec![x])];
+        let b = |x: f64| vec![(EffectKind::BrakeStop, vec![x, 5.0])];
+        let combos = grid_combos(&[a(2.0), a(8.0)], &[b(1.0e3), b(1.0e4)]);
+        assert_eq!(combos.len(), 4);
+        assert_eq!(combos[1], [a(2.0)[0].clone(), b(1.0e4)[0].clone()]);
+        assert_eq!(combos[2], [a(8.0)[0].clone(), b(1.0e3)[0].clone()]);
+    }
+
+    #[test]
+    fn pair_families_take_bases_and_probes_from_their_members() {
+        let grid = grid_family(EffectKind::RopeDiscretization, &[2.0, 4.0]);
+        let lin_a = linear_family(EffectKind::DeadTime, 1);
+        let lin_b = linear_family(EffectKind::EncoderError, 2);
+        let nominal = runs(7);
+        // Linear first, grid second: the grid's bases, the linear's probes.
+        let f = pair_family(&lin_a, &grid, None, &[], &nominal);
+        assert_eq!(f.kinds, [EffectKind::DeadTime, EffectKind::RopeDiscretization]);
+        assert_eq!(f.bases.iter().map(|b| b.runs.len()).collect::<Vec<_>>(), [10, 11]);
+        assert_eq!(f.coefficient_count(), 1);
+        // Two linear effects: the nominal base, both probes sets in order.
+        let f = pair_family(&lin_a, &lin_b, None, &[], &nominal);
+        assert_eq!(f.bases.len(), 1);
+        assert_eq!(f.bases[0].runs.len(), 7);
+        assert_eq!(
+            f.linear.iter().map(|l| l.kind).collect::<Vec<_>>(),
+            [EffectKind::DeadTime, EffectKind::EncoderError]
+        );
+        assert_eq!(f.coefficient_count(), 3);
+        assert_eq!(f.fitted_parameters(), 3);
+        // Grid x grid: the combinations with their own runs, from `first_model` on.
+        let combos =
+            vec![vec![(EffectKind::RopeDiscretization, vec![2.0])], vec![(EffectKind::RopeDiscretization, vec![4.0])]];
+        let pair_runs: Vec<Runs> = (0..5).map(|m| runs(30 + m)).collect();
+        let f =
+            pair_family(&grid, &grid, Some(GridPair { first_model: 3, combos: combos.clone() }), &pair_runs, &nominal);
+        assert_eq!(
+            f.bases.iter().map(|b| (b.point.clone(), b.runs.len())).collect::<Vec<_>>(),
+            [(combos[0].clone(), 33), (combos[1].clone(), 34)]
+        );
+        assert!(f.linear.is_empty());
+    }
+
+    #[test]
+    fn a_pair_is_kept_only_clearly_below_its_better_member() {
+        let ranked = [candidate("a", 0.1, 1.0), candidate("b", 0.1, 0.5), candidate("c", 0.1, 0.1)];
+        // The better member of (a, b) leaves 0.5 dB: the pair must leave < 0.4 dB.
+        assert!(keeps_pair(&ranked, ["a", "b"], &candidate("a + b", 0.0, 0.39)));
+        assert!(!keeps_pair(&ranked, ["a", "b"], &candidate("a + b", 0.0, 0.4)));
+        assert!(!keeps_pair(&ranked, ["b", "c"], &candidate("b + c", 0.0, 0.39)));
+    }
+
+    #[test]
+    fn jackknife_error_of_the_fold_values() {
+        // Mean 2, deviations +-1: sqrt(1/2 * 2) = 1.
+        assert!((jackknife_error(&[1.0, 3.0]) - 1.0).abs() < 1e-15);
+        // Mean 2, squares 1 + 0 + 1: sqrt(2/3 * 2).
+        assert!((jackknife_error(&[1.0, 2.0, 3.0]) - (4.0f64 / 3.0).sqrt()).abs() < 1e-15);
+        assert!(jackknife_error(&[5.0]).is_nan());
+        assert!(jackknife_error(&[]).is_nan());
+    }
+
+    #[test]
+    fn fitted_parameter_list_skips_the_fixed_parameters() {
+        let params = vec![(EffectKind::DeadTime, vec![2.0e-6, 0.3])];
+        let folds =
+            vec![vec![(EffectKind::DeadTime, vec![1.0e-6, 0.3])], vec![(EffectKind::DeadTime, vec![3.0e-6, 0.3])]];
+        let list = fitted_parameter_list(&params, &folds);
+        assert_eq!(list.len(), 1);
+        assert_eq!((list[0].effect, list[0].name, list[0].unit), ("dead_time", "dead_time_s", "s"));
+        assert_eq!(list[0].value, 2.0e-6);
+        assert!((list[0].uncertainty - 1.0e-6).abs() < 1e-18);
+    }
 }

@@ -8,9 +8,12 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Context, Result};
 
+use super::attribute::Candidate;
+use super::calibrate::Calibration;
+use super::locate::Location;
 use super::measure::CellGap;
 use super::signals::Phase;
-use super::{DriveModel, GapReport, Verdict};
+use super::{DriveModel, GapReport, RecordingGap, Verdict};
 use dsp::Spectrogram;
 use plots::spectrogram_plot;
 
@@ -144,13 +147,26 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
 /// The report in words.
 pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# Sim-to-real gap: {}\n", r.dataset);
-    let verdict = match r.verdict {
+    overview(&mut s, r);
+    explaining_effect(&mut s, r);
+    location_section(&mut s, &r.location);
+    calibration_section(&mut s, &r.calibration);
+    ranking_section(&mut s, &r.ranking);
+    recordings_section(&mut s, &r.recordings);
+    let _ = writeln!(s, "\n## Gap measure\n\n{}\n", r.gap_measure);
+    plots_section(&mut s, plots);
+    s
+}
+
+/// The verdict in words: `explained_by` names the explaining effect,
+/// `refused` tells that no effect was fitted.
+fn verdict_text(verdict: Verdict, explained_by: Option<&str>, refused: bool) -> String {
+    match verdict {
         Verdict::Nominal => {
             "**nominal**: the calibrated nominal model explains the data to the noise level".to_string()
         }
-        Verdict::Explained => format!("**explained** by `{}`", r.explained_by.as_deref().unwrap_or("?")),
-        Verdict::Unexplained if r.attribution_refused.is_some() => {
+        Verdict::Explained => format!("**explained** by `{}`", explained_by.unwrap_or("?")),
+        Verdict::Unexplained if refused => {
             "**unexplained**: the calibrated nominal model misses the data beyond noise and tolerance, and no effect \
              was fitted (see Attribution)"
                 .to_string()
@@ -158,16 +174,28 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
         Verdict::Unexplained => {
             "**unexplained**: no effect of the library (nor a pair) shrinks the held-out gap enough".to_string()
         }
-    };
-    let _ = writeln!(s, "Verdict: {verdict}.\n");
-    let drive = match r.drive.drive {
+    }
+}
+
+/// The drive model in words.
+fn drive_text(drive: DriveModel) -> &'static str {
+    match drive {
         DriveModel::Project => "the project's drive core (closed loop, every channel compared)",
         DriveModel::Foreign => {
             "another drive (the nominal mechanics driven by the measured torque, accelerations compared)"
         }
-    };
-    let _ = writeln!(s, "The rig's drive: {drive}; {}.\n", r.drive.reason);
-    speed_loops(&mut s, &r.rig_speed_loops);
+    }
+}
+
+/// Section: the title, the verdict, the rig's drive (with its speed loops),
+/// why no effect was fitted, the recordings left out and the nominal
+/// model's gap.
+fn overview(s: &mut String, r: &GapReport) {
+    let _ = writeln!(s, "# Sim-to-real gap: {}\n", r.dataset);
+    let verdict = verdict_text(r.verdict, r.explained_by.as_deref(), r.attribution_refused.is_some());
+    let _ = writeln!(s, "Verdict: {verdict}.\n");
+    let _ = writeln!(s, "The rig's drive: {}; {}.\n", drive_text(r.drive.drive), r.drive.reason);
+    speed_loops(s, &r.rig_speed_loops);
     if let Some(why) = &r.attribution_refused {
         let _ = writeln!(s, "Attribution: {why}.\n");
     }
@@ -183,6 +211,11 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
         r.simulations,
         r.runtime_s
     );
+}
+
+/// Section (when `explained`): how much the best candidate shrinks the
+/// held-out gap, and its fitted parameters.
+fn explaining_effect(s: &mut String, r: &GapReport) {
     if let (Verdict::Explained, Some(best)) = (r.verdict, r.ranking.first()) {
         let _ = writeln!(
             s,
@@ -198,7 +231,11 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
         }
         s.push('\n');
     }
-    let l = &r.location;
+}
+
+/// Section `Where the gap lies`: the subsystem, the tables per channel and
+/// per phase, the strongest cells and the natural frequencies.
+fn location_section(s: &mut String, l: &Location) {
     let _ = writeln!(s, "## Where the gap lies\n");
     let _ = writeln!(
         s,
@@ -236,8 +273,11 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
     for f in &l.natural_frequencies {
         let _ = writeln!(s, "| {} | {} | {:.1} | {:.1} |", f.recording, f.phase.name(), f.measured_hz, f.model_hz);
     }
+}
+
+/// Section `Calibration (step 1)`: the calibrated values against the rig's.
+fn calibration_section(s: &mut String, c: &Calibration) {
     let _ = writeln!(s, "\n## Calibration (step 1)\n");
-    let c = &r.calibration;
     let _ = writeln!(
         s,
         "EA {:.4e} N (rig {:.4e}), guide damping {:.1} kg/s (rig {:.1}), sheave damping {:.3} N m s/rad (rig {:.3}); \
@@ -252,12 +292,16 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
         c.travels.len(),
         if c.skipped.is_empty() { String::new() } else { format!(" Skipped: {}.", c.skipped.join("; ")) }
     );
+}
+
+/// Section `Ranking (step 4)`: one table row per candidate, best first.
+fn ranking_section(s: &mut String, ranking: &[Candidate]) {
     let _ = writeln!(s, "## Ranking (step 4)\n");
     let _ = writeln!(
         s,
         "| rank | effect | parameters | training before/after (dB) | held-out before/after (dB) | shrink | score (dB) |\n|---|---|---|---|---|---|---|"
     );
-    for (i, c) in r.ranking.iter().enumerate() {
+    for (i, c) in ranking.iter().enumerate() {
         let params: Vec<String> =
             c.parameters.iter().map(|p| format!("{}={:.3e}+-{:.1e}", p.name, p.value, p.uncertainty)).collect();
         let _ = writeln!(
@@ -274,8 +318,13 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
             c.score_db
         );
     }
+}
+
+/// Section `Recordings`: one table row per recording (`-` where a figure
+/// does not apply).
+fn recordings_section(s: &mut String, recordings: &[RecordingGap]) {
     let _ = writeln!(s, "\n## Recordings\n\n| recording | kind | gap (dB) | noise (dB) | excess nominal (dB) | closed loop / replay acc. < 80 Hz (dB) | excess explained (dB) |\n|---|---|---|---|---|---|---|");
-    for g in &r.recordings {
+    for g in recordings {
         let _ = writeln!(
             s,
             "| {} | {} | {:.2} | {:.2} | {:.2} | {} | {} |",
@@ -291,14 +340,16 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
             g.explained_excess_db.map_or("-".to_string(), |v| format!("{v:.2}"))
         );
     }
-    let _ = writeln!(s, "\n## Gap measure\n\n{}\n", r.gap_measure);
+}
+
+/// Section `Plots` (when there are any): every `(title, file)` as an image.
+fn plots_section(s: &mut String, plots: &[(String, String)]) {
     if !plots.is_empty() {
         let _ = writeln!(s, "## Plots\n");
         for (title, file) in plots {
             let _ = writeln!(s, "{title}:\n\n![{title}]({file})\n");
         }
     }
-    s
 }
 
 /// The table of the rig drive's speed loop as each travel shows it.
@@ -337,4 +388,97 @@ fn speed_loops(s: &mut String, loops: &[super::RigSpeedLoop]) {
         }
     }
     let _ = writeln!(s);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::attribute::FittedParameter;
+    use crate::measure::GapValue;
+    use plant::effects::Effects;
+
+    #[test]
+    fn verdict_text_per_verdict() {
+        assert!(verdict_text(Verdict::Nominal, Some("x"), true).starts_with("**nominal**"));
+        assert_eq!(verdict_text(Verdict::Explained, Some("dead_time"), false), "**explained** by `dead_time`");
+        assert_eq!(verdict_text(Verdict::Explained, None, false), "**explained** by `?`");
+        assert!(verdict_text(Verdict::Unexplained, None, true).ends_with("no effect was fitted (see Attribution)"));
+        assert!(verdict_text(Verdict::Unexplained, None, false).contains("nor a pair"));
+    }
+
+    #[test]
+    fn calibration_section_against_the_rig() {
+        let c = Calibration {
+            rope_ea_n: 1.2345e6,
+            guide_damping_kg_per_s: 150.04,
+            sheave_damping_nms_per_rad: 2.9996,
+            reference_tension_n: None,
+            decays: Vec::new(),
+            travels: vec![("a".to_string(), 3.0), ("b".to_string(), 3.1)],
+            skipped: vec!["x: short".to_string(), "y: flat".to_string()],
+            nominal: (1.0e6, 148.0, 3.0),
+        };
+        let mut s = String::new();
+        calibration_section(&mut s, &c);
+        assert_eq!(
+            s,
+            "\n## Calibration (step 1)\n\nEA 1.2345e6 N (rig 1.0000e6), guide damping 150.0 kg/s (rig 148.0), sheave \
+             damping 3.000 N m s/rad (rig 3.000); 0 decays, 2 travels used. Skipped: x: short; y: flat.\n\n"
+        );
+    }
+
+    #[test]
+    fn ranking_section_one_row_per_candidate() {
+        let c = Candidate {
+            name: "a + b".to_string(),
+            parameters: vec![
+                FittedParameter { effect: "a", name: "p", unit: "s", value: 0.00125, uncertainty: 2.5e-4 },
+                FittedParameter { effect: "b", name: "q", unit: "N", value: 40.0, uncertainty: f64::NAN },
+            ],
+            fitted_parameters: 2,
+            training_gap_before_db: 1.0,
+            training_gap_after_db: 0.5,
+            held_out_gap_before_db: 1.2,
+            held_out_gap_after_db: 0.3,
+            held_out_shrink: 0.75,
+            score_db: 0.336,
+            effects: Effects::none(),
+        };
+        let mut s = String::new();
+        ranking_section(&mut s, &[c.clone(), c]);
+        let rows: Vec<&str> = s.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| rank")).collect();
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[0], "| 1 | a + b | p=1.250e-3+-2.5e-4, q=4.000e1+-NaN | 1.00/0.50 | 1.20/0.30 | 75 % | 0.34 |");
+        assert!(rows[1].starts_with("| 2 | a + b |"));
+    }
+
+    #[test]
+    fn recordings_section_dashes_what_does_not_apply() {
+        let g = |closed, replay, explained| RecordingGap {
+            recording: "r".to_string(),
+            kind: "travel",
+            nominal: GapValue { gap_db: 1.0, noise_db: 0.25, beyond_db: 0.5 },
+            nominal_excess_db: 0.5,
+            closed_loop_acceleration_excess_db: closed,
+            replay_acceleration_excess_db: replay,
+            explained: None,
+            explained_excess_db: explained,
+        };
+        let mut s = String::new();
+        recordings_section(&mut s, &[g(Some(2.0), Some(0.5), Some(0.25)), g(Some(2.0), None, None)]);
+        let rows: Vec<&str> = s.lines().filter(|l| l.starts_with("| r |")).collect();
+        assert_eq!(
+            rows,
+            ["| r | travel | 1.00 | 0.25 | 0.50 | 2.00 / 0.50 | 0.25 |", "| r | travel | 1.00 | 0.25 | 0.50 | - | - |"]
+        );
+    }
+
+    #[test]
+    fn plots_section_only_with_plots() {
+        let mut s = String::new();
+        plots_section(&mut s, &[]);
+        assert!(s.is_empty());
+        plots_section(&mut s, &[("map".to_string(), "m.png".to_string())]);
+        assert_eq!(s, "## Plots\n\nmap:\n\n![map](m.png)\n\n");
+    }
 }
