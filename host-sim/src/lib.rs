@@ -15,6 +15,7 @@ pub mod compensation;
 pub mod diagnosis;
 pub mod faults;
 pub mod foreign;
+pub mod output;
 pub mod pil;
 pub mod plant;
 pub mod plots;
