@@ -654,12 +654,18 @@ const META_FIELDS: [&str; 11] = [
 ];
 
 /// Whether `key` looks like a misspelling of `name`: the same but for case,
-/// `-`/`_` and surrounding spaces, or at most two edits (insertions,
-/// deletions, substitutions) apart.
+/// `-`/`_` and surrounding spaces, or a unit suffix (`_hz`), or at most two
+/// edits (insertions, deletions, substitutions) apart.
 fn is_near_miss(key: &str, name: &str) -> bool {
     let normal = |s: &str| s.trim().to_ascii_lowercase().replace('-', "_");
     let (a, b) = (normal(key), normal(name));
     if a == b {
+        return true;
+    }
+    // The unit left off, or one too many (`sample_rate` for `sample_rate_hz`).
+    let unit_suffix =
+        |long: &str, short: &str| long.strip_prefix(short).is_some_and(|rest| rest.starts_with('_') && rest.len() <= 4);
+    if unit_suffix(&a, &b) || unit_suffix(&b, &a) {
         return true;
     }
     let (a, b): (Vec<char>, Vec<char>) = (a.chars().collect(), b.chars().collect());
