@@ -444,3 +444,88 @@ fn errors_name_the_file_to_give_and_print_an_os_error_once() {
         assert!(err.contains(needle), "{args:?}: {err}");
     }
 }
+
+// ---------------------------------------------------------------------------
+// Estimates refused by the analysis itself: a mode at the band edge, a
+// negative damping, a torque sign that contradicts the travel.
+
+fn decay_spec() -> host_sim::plant::free_decay::FreeDecaySpec {
+    host_sim::plant::free_decay::FreeDecaySpec {
+        mass_kg: 33.0,
+        rope_length_m: 2.5,
+        rope_ea_n: 1.0e6,
+        rope_mass_per_length_kg_per_m: 0.095,
+        damping_kg_per_s: 148.0,
+        initial_acceleration_mps2: 2.0,
+        elements: 40,
+    }
+}
+
+#[test]
+fn a_mode_at_the_top_of_the_search_band_and_a_growing_oscillation_are_refused() {
+    use host_sim::analysis::identify::identify_free_decay;
+    use host_sim::analysis::AnalysisError;
+    use host_sim::plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay};
+    let (fs, spec) = (4096.0, decay_spec());
+    let acc = simulate_free_decay(&spec, fs, 3.0).unwrap();
+    let f1 = eqn9_first_frequency_hz(1.0e6, 0.095, 2.5, 33.0);
+    let identify = |acc: &[f64], top: f64| identify_free_decay(acc, fs, 33.0, 2.5, 0.095, 9.81, top);
+    // The band's top just above the mode: the line found lies at the edge.
+    match identify(&acc, 1.01 * f1) {
+        Err(AnalysisError::ModeAtBandEdge { frequency_hz, band_top_hz }) => {
+            assert!(frequency_hz > 0.97 * band_top_hz, "{frequency_hz} {band_top_hz}")
+        }
+        other => panic!("band top {:.2} Hz: {other:?}", 1.01 * f1),
+    }
+    let id = identify(&acc, 200.0).unwrap();
+    assert!((id.first_frequency_hz / f1 - 1.0).abs() < 0.01 && id.damping_ratio > 0.0, "{id:?}");
+    // After a first large swing the oscillation grows: not a free decay.
+    let growing: Vec<f64> = (0..(3.0 * fs) as usize)
+        .map(|k| {
+            let t = k as f64 / fs;
+            let amplitude = if t < 0.1 { 2.0 } else { 0.5 * (1.0 + 0.5 * t) };
+            amplitude * (std::f64::consts::TAU * f1 * t).sin()
+        })
+        .collect();
+    match identify(&growing, 200.0) {
+        Err(AnalysisError::NotDecaying { decrement }) => assert!(decrement <= 0.0),
+        other => panic!("a growing oscillation: {other:?}"),
+    }
+}
+
+#[test]
+fn the_torque_sign_is_resolved_by_the_travel_and_refused_when_the_currents_contradict_it() {
+    use host_sim::analysis::travel_signals::travel_torque;
+    use host_sim::closed_loop::{simulate_travel, SimOptions, TravelSpec};
+    use host_sim::recording::{I_A, I_B, I_C};
+    let rig = host_sim::config::RigConfig::embedded_default().unwrap();
+    let spec = TravelSpec { m_car_kg: 70.5, direction: shared::config::Direction::Up, lw_start_m: 2.0, lw_end_m: 3.6 };
+    let run = simulate_travel(&rig, &spec, &SimOptions::for_rig(&rig), None).unwrap();
+    let recording = run.to_recording(&spec, rig.mechanics.m_cw_kg, "half turn".to_string());
+    let right = travel_torque(&rig, &recording, "up").unwrap();
+    let mean = |t: &host_sim::analysis::travel_signals::TravelTorque| {
+        t.torque_nm[t.constant_speed.clone()].iter().sum::<f64>() / t.constant_speed.len() as f64
+    };
+    // Eqn 4: the 70.5 kg car going up against a 33 kg counterweight needs about +24 N m and more.
+    assert!(mean(&right) > 20.0, "{}", mean(&right));
+    // Currents of the opposite sign: `i_d = 0` alone gives the same offset, the torque's sign wrong
+    // (before: -50.1 N m for this car going up). The torque the travel needs turns it half a turn.
+    let mut flipped = recording.clone();
+    for column in flipped.columns.iter_mut().filter(|c| [I_A, I_B, I_C].contains(&c.name.as_str())) {
+        column.values.iter_mut().for_each(|v| *v = -*v);
+    }
+    let resolved = travel_torque(&rig, &flipped, "up").unwrap();
+    assert!((mean(&resolved) - mean(&right)).abs() < 1e-3 * mean(&right).abs(), "{}", mean(&resolved));
+    let turn = (resolved.electrical_offset_rad - right.electrical_offset_rad).rem_euclid(std::f64::consts::TAU);
+    assert!((turn - std::f64::consts::PI).abs() < 1e-6, "offsets differ by {turn} rad");
+    // Currents that neither follow nor oppose the torque the travel needs: refused.
+    let mut unrelated = recording.clone();
+    for (j, column) in unrelated.columns.iter_mut().filter(|c| [I_A, I_B, I_C].contains(&c.name.as_str())).enumerate() {
+        let phase = j as f64 * std::f64::consts::TAU / 3.0;
+        column.values = (0..column.values.len())
+            .map(|k| 10.0 * (std::f64::consts::TAU * 50.0 * k as f64 / 16384.0 - phase).cos())
+            .collect();
+    }
+    let err = travel_torque(&rig, &unrelated, "up").err().expect("unrelated currents are refused").to_string();
+    assert!(err.contains("recording `up`") && err.contains("neither follows nor opposes"), "{err}");
+}
