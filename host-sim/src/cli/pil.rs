@@ -94,6 +94,10 @@ pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
     let out = output_dir(&args.out, args.force)?;
     out.refuse_existing(["pil_steps.csv", "qemu.log"])?;
     let result = run_in(rig, args, m_car, direction, &out);
+    if result.is_err() && !out.path("qemu.log").exists() {
+        // QEMU never ran: nothing to keep.
+        return result;
+    }
     // The QEMU log is published also when the run fails: it tells why.
     let published = out.commit();
     result?;

@@ -109,7 +109,8 @@ pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
     };
     let out = output_dir(&args.out, args.force)?;
     out.refuse_existing(OUTPUTS)?;
-    let report = ride_quality(&vertical, fs, stage)?;
+    let report = ride_quality(&vertical, fs, stage)
+        .with_context(|| format!("`{}`: ride quality (ISO 18738-1)", args.file.display()))?;
     let mut regions = vec![region_report("whole run", &report.whole_run, fs)];
     if let Some(q) = &report.constant_speed {
         regions.push(region_report("constant speed", q, fs));
