@@ -3,7 +3,7 @@
 //! 1. Puts the workspace's `memory.x` on the linker search path and passes
 //!    cortex-m-rt's `link.x` and defmt's `defmt.x` linker scripts to the binary.
 //! 2. Generates `$OUT_DIR/drive_config.rs`: the drive parameters of
-//!    `configs/rig.toml` as a `shared::DriveConfig` constant, through the same
+//!    `configs/rig.toml` as a `drive_core::DriveConfig` constant, through the same
 //!    `rig-config` code the host simulator uses, so firmware and host run the
 //!    controller with identical values; the inverter's dead time
 //!    (`[inverter].dead_time_s`) as `DEAD_TIME_S`; and the operator's travel
@@ -44,7 +44,7 @@ fn link_scripts(workspace_root: &std::path::Path, out_dir: &std::path::Path) {
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }
 
-/// Source of `pub const DRIVE_CONFIG: shared::DriveConfig = ...;` and
+/// Source of `pub const DRIVE_CONFIG: drive_core::DriveConfig = ...;` and
 /// `pub const DEAD_TIME_S: f32 = ...;`.
 fn drive_config(workspace_root: &std::path::Path) -> String {
     let rig_toml = workspace_root.join("configs").join("rig.toml");
@@ -68,7 +68,7 @@ fn drive_config(workspace_root: &std::path::Path) -> String {
     )
 }
 
-/// Source of `pub const OPERATOR_TRAVEL: Option<shared::TravelCommand> = ...;`
+/// Source of `pub const OPERATOR_TRAVEL: Option<drive_core::TravelCommand> = ...;`
 /// from the environment variable `FW_TRAVEL` (see the module doc).
 fn operator_travel() -> String {
     println!("cargo:rerun-if-env-changed=FW_TRAVEL");
@@ -97,10 +97,10 @@ fn operator_travel() -> String {
             let (distance, mass, lw_start) =
                 (number("distance", distance), number("car mass", mass), number("lw at start", lw_start));
             format!(
-                "Some(shared::TravelCommand {{ direction: shared::config::Direction::{direction}, \
+                "Some(drive_core::TravelCommand {{ direction: drive_core::config::Direction::{direction}, \
                  distance_m: {distance:?}, m_car_kg: {mass:?}, lw_start_m: {lw_start:?} }})"
             )
         }
     };
-    format!("{doc}pub const OPERATOR_TRAVEL: Option<shared::TravelCommand> = {value};\n")
+    format!("{doc}pub const OPERATOR_TRAVEL: Option<drive_core::TravelCommand> = {value};\n")
 }

@@ -1,6 +1,6 @@
 //! Build script of the PIL target: its own memory map (QEMU mps2-an386, not
 //! the STM32's), the cortex-m-rt and defmt linker scripts, and the drive
-//! parameters of `configs/rig.toml` as a `shared::DriveConfig` constant
+//! parameters of `configs/rig.toml` as a `drive_core::DriveConfig` constant
 //! (the same `rig-config` code the firmware and the host use).
 
 use std::env;

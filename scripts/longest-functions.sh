@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The N longest functions (default 15) of the library crates' sources
-# (shared/src, rig-config/src, host-sim/src), longest first, one a line:
+# (shared/src, rig-config/src, host-sim/crates/*/src) and of the commands
+# (host-sim/src), longest first, one a line:
 #   path:line name length
 # A function runs from its `fn` line to the closing brace at the same
 # indentation (rustfmt layout), both counted; a one-line body counts 1;
@@ -18,7 +19,7 @@ case "$n" in
 esac
 
 files=()
-while IFS= read -r f; do files+=("$f"); done < <(find shared/src rig-config/src host-sim/src -name '*.rs' 2>/dev/null | sort)
+while IFS= read -r f; do files+=("$f"); done < <(find shared/src rig-config/src host-sim/crates/*/src host-sim/src -name '*.rs' 2>/dev/null | sort)
 [ "${#files[@]}" -gt 0 ] || exit 0
 
 awk '

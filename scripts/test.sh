@@ -59,8 +59,8 @@ cargo fmt --manifest-path pil/Cargo.toml --check
 step "clippy, host"
 cargo clippy --all-targets -- -D warnings
 
-step "clippy, thumbv7em-none-eabihf (shared + firmware, PIL target)"
-cargo clippy -p shared -p firmware --target thumbv7em-none-eabihf -- -D warnings
+step "clippy, thumbv7em-none-eabihf (drive-core + firmware, PIL target)"
+cargo clippy -p drive-core -p firmware --target thumbv7em-none-eabihf -- -D warnings
 cargo clippy --manifest-path pil/Cargo.toml --release --target thumbv7em-none-eabihf -- -D warnings
 
 step "firmware release build"

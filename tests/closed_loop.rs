@@ -2,12 +2,12 @@
 //! balance (Eqn 4, 13), ripple lines in the car acceleration, growth of the
 //! 12th-order line near the first elastic mode, and integrator accuracy.
 
-use host_sim::analysis::amplitude_spectrum;
-use host_sim::closed_loop::{simulate_travel, SimOptions, TravelSpec};
-use host_sim::plant::modes::natural_modes;
-use host_sim::plant::rope::{ChainParams, CAR};
+use closed_loop::{simulate_travel, SimOptions, TravelSpec};
+use drive_core::config::Direction;
+use dsp::amplitude_spectrum;
 use integration_tests::{constant_speed_range, mean, reference_travel, rig, rms};
-use shared::config::Direction;
+use plant::modes::natural_modes;
+use plant::rope::{ChainParams, CAR};
 
 #[test]
 fn mean_shaft_torque_balances_eqn4_and_damping_at_constant_speed() {

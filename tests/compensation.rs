@@ -6,19 +6,19 @@
 
 use std::thread;
 
-use host_sim::closed_loop::{simulate_travel_with, SimOptions, StepLog, TravelSpec};
-use host_sim::compensation::{all_cases, calibrate_table, compensator, run_case, CompareRow, Mismatch};
-use host_sim::plant::modes::natural_modes;
-use host_sim::plant::rope::ChainParams;
+use closed_loop::compensation::{all_cases, calibrate_table, compensator, run_case, CompareRow, Mismatch};
+use closed_loop::{simulate_travel_with, SimOptions, StepLog, TravelSpec};
+use drive_core::config::Direction;
+use drive_core::ripple::complex::Complex;
+use drive_core::ripple::harmonics::HarmonicTable;
+use drive_core::ripple::response::{chain_response, loop_response};
+use drive_core::ripple::{RippleCompensator, Strategy};
+use drive_core::speed_loop::equivalent_inertia_kg_m2;
 use integration_tests::rig;
-use shared::config::Direction;
-use shared::ripple::complex::Complex;
-use shared::ripple::harmonics::HarmonicTable;
-use shared::ripple::response::{chain_response, loop_response};
-use shared::ripple::{RippleCompensator, Strategy};
-use shared::speed_loop::equivalent_inertia_kg_m2;
+use plant::modes::natural_modes;
+use plant::rope::ChainParams;
 
-/// The folded-chain mobility of `shared::ripple::response` peaks at the
+/// The folded-chain mobility of `drive_core::ripple::response` peaks at the
 /// natural frequencies of the host's 5-DOF eigen-solution (Eqn 10).
 #[test]
 fn chain_response_resonances_are_the_natural_frequencies_of_the_5_dof_model() {
@@ -69,7 +69,7 @@ fn closed_loop_response_model_matches_the_simulated_drive() {
     let mut comp = RippleCompensator::new(&drive, &rig.observer_model(), &orders, Strategy::Table);
     comp.set_table(table);
     comp.set_back_off(false);
-    let mut controller = shared::Controller::new(&drive);
+    let mut controller = drive_core::Controller::new(&drive);
     controller.set_compensation(Some(comp));
     let spec = TravelSpec::full_travel(&rig, 70.5, Direction::Up);
     let mut log = StepLog::default();
@@ -109,7 +109,7 @@ fn closed_loop_response_model_matches_the_simulated_drive() {
 
 /// Runs `run_case` for `cases` on two threads.
 fn run_cases(
-    cases: Vec<(usize, host_sim::compensation::Case)>,
+    cases: Vec<(usize, closed_loop::compensation::Case)>,
     strategies: &[Strategy],
     table: HarmonicTable,
 ) -> Vec<CompareRow> {
@@ -138,7 +138,7 @@ fn run_cases(
 /// The best strategy (adaptive harmonics) on the nominal travels `cases`:
 /// the car's 12 x f_mech component at least 20 dB down and its A95 at least
 /// 60 % down.
-fn assert_best_strategy(cases: Vec<(usize, host_sim::compensation::Case)>) {
+fn assert_best_strategy(cases: Vec<(usize, closed_loop::compensation::Case)>) {
     let rows = run_cases(cases, &[Strategy::Off, Strategy::Adaptive], HarmonicTable::default());
     for r in rows.iter().filter(|r| r.strategy == "adaptive") {
         println!(
@@ -157,7 +157,7 @@ fn assert_best_strategy(cases: Vec<(usize, host_sim::compensation::Case)>) {
 }
 
 /// The nominal travels of the rig, with their index in `all_cases`.
-fn nominal_cases() -> Vec<(usize, host_sim::compensation::Case)> {
+fn nominal_cases() -> Vec<(usize, closed_loop::compensation::Case)> {
     all_cases(&rig()).into_iter().enumerate().filter(|(_, c)| c.mismatch == Mismatch::Nominal).collect()
 }
 
@@ -187,7 +187,7 @@ fn the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_ev
 
 /// The mismatch cases of the sweep (three travels each; `host-sim compare`
 /// runs all 8), with their index in `all_cases`.
-fn mismatch_cases() -> Vec<(usize, host_sim::compensation::Case)> {
+fn mismatch_cases() -> Vec<(usize, closed_loop::compensation::Case)> {
     all_cases(&rig())
         .into_iter()
         .enumerate()
@@ -201,7 +201,7 @@ fn mismatch_cases() -> Vec<(usize, host_sim::compensation::Case)> {
 
 /// Every strategy on the mismatch cases `cases`: never more than 1 dB worse
 /// than no compensation on the car's 12x line or its A95.
-fn assert_no_strategy_worse(cases: Vec<(usize, host_sim::compensation::Case)>) {
+fn assert_no_strategy_worse(cases: Vec<(usize, closed_loop::compensation::Case)>) {
     let rig = rig();
     let table = calibrate_table(&rig).unwrap();
     let strategies = Strategy::ALL;
@@ -257,9 +257,9 @@ fn a_table_that_only_adds_vibration_backs_off() {
         r.amplitude_nm = 0.0;
     }
     let nominal = integration_tests::rig();
-    let table = host_sim::compensation::rig_ripple_table(&nominal).negated();
+    let table = closed_loop::compensation::rig_ripple_table(&nominal).negated();
     let spec = TravelSpec::full_travel(&rig, 70.5, Direction::Up);
-    let (_, after) = host_sim::compensation::travel_with_compensator(
+    let (_, after) = closed_loop::compensation::travel_with_compensator(
         &rig,
         Mismatch::Nominal,
         &spec,

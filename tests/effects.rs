@@ -8,18 +8,18 @@
 
 use std::f64::consts::{PI, TAU};
 
-use host_sim::analysis::amplitude_spectrum;
-use host_sim::closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
-use host_sim::config::RigConfig;
-use host_sim::plant::effects::{
+use closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
+use drive_core::config::Direction;
+use dsp::amplitude_spectrum;
+use integration_tests::{constant_speed_range, mean, rig};
+use plant::effects::{
     CarFrameMode, CoulombGuideFriction, CurrentSensorError, DeadTime, DivertingPulley, EffectKind, Effects,
     EncoderError, RopeDiscretization, SheaveEccentricity,
 };
-use host_sim::plant::free_decay::eqn9_first_frequency_hz;
-use host_sim::plant::line::Lumped;
-use host_sim::plant::{Plant, PlantInputs};
-use integration_tests::{constant_speed_range, mean, rig};
-use shared::config::Direction;
+use plant::free_decay::eqn9_first_frequency_hz;
+use plant::line::Lumped;
+use plant::{Plant, PlantInputs};
+use rig_config::RigConfig;
 
 /// Eigenfrequencies (Hz, ascending) of the undamped line on the nodes
 /// `first..=last` of `lumped` (springs to nodes outside the range hold them
@@ -436,8 +436,7 @@ fn encoder_error_shows_in_the_recorded_angle() {
 #[test]
 fn brake_stop_rings_at_the_stop() {
     let rig = rig();
-    let brake =
-        host_sim::plant::effects::BrakeStop { clamp_stiffness_nm_per_rad: 3.0e4, clamp_damping_nms_per_rad: 5.0 };
+    let brake = plant::effects::BrakeStop { clamp_stiffness_nm_per_rad: 3.0e4, clamp_damping_nms_per_rad: 5.0 };
     let spec = TravelSpec { m_car_kg: 70.5, direction: Direction::Up, lw_start_m: 3.0, lw_end_m: 3.6 };
     let run_with = |effects: Effects| {
         let options = SimOptions { effects, tail_s: 1.0, ..SimOptions::for_rig(&rig) };
@@ -462,7 +461,7 @@ fn brake_stop_rings_at_the_stop() {
     // Statically the clamp takes the whole out-of-balance torque: the sheave
     // settles `tau_ob / k` back (the ropes return to their static forces).
     let settle = |run: &TravelRun| run.lw_m[off(run) + (0.9 * fs) as usize] - run.lw_m[off(run) - 1];
-    let chain = host_sim::plant::rope::ChainParams::from_rig(&rig, 70.5);
+    let chain = plant::rope::ChainParams::from_rig(&rig, 70.5);
     let r = rig.mechanics.sheave_radius_m;
     let expected = -r * chain.out_of_balance_torque_nm(clamped.lw_m[off(&clamped)]) / brake.clamp_stiffness_nm_per_rad;
     println!(

@@ -8,15 +8,15 @@
 //! `cargo test -p integration-tests --test integration faults:: -- --nocapture`
 //! prints the measured figures.
 
-use host_sim::closed_loop::{simulate_travel_with, DriveController, SimError, SimOptions, TravelSpec};
-use host_sim::faults::run::{run_case_with, FaultCase, FaultOutcome};
-use host_sim::faults::{parse_fault, FaultSpec};
+use closed_loop::faults::run::{run_case_with, FaultCase, FaultOutcome};
+use closed_loop::faults::{parse_fault, FaultSpec};
+use closed_loop::{simulate_travel_with, DriveController, SimError, SimOptions, TravelSpec};
+use drive_core::config::Direction;
+use drive_core::controller::CommandError;
+use drive_core::supervisor::{Fault, MonitorLevels, BACK_EMF_TAU_S, CURRENT_SUM_TAU_S};
+use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 use integration_tests::rig;
 use proptest::prelude::*;
-use shared::config::Direction;
-use shared::controller::CommandError;
-use shared::supervisor::{Fault, MonitorLevels, BACK_EMF_TAU_S, CURRENT_SUM_TAU_S};
-use shared::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 
 /// Current-loop period of the rig, s.
 const TS: f64 = 1.0 / 16_000.0;

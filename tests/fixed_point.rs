@@ -25,11 +25,11 @@
 //! speed). Beyond that speed range the loop is checked only for what must
 //! hold everywhere: no wrap, voltages on their limits, compares in range.
 
+use drive_core::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
+use drive_core::fixed::{q16, Q16};
+use drive_core::park_clarke::Abc;
+use drive_core::DriveConfig;
 use proptest::prelude::*;
-use shared::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
-use shared::fixed::{q16, Q16};
-use shared::park_clarke::Abc;
-use shared::DriveConfig;
 
 const VOLTAGE_BOUND_V: f64 = 0.25;
 

@@ -1,4 +1,4 @@
-//! The sim-to-real gap diagnosis (`host_sim::diagnosis`) on data whose truth
+//! The sim-to-real gap diagnosis (the `diagnosis` crate) on data whose truth
 //! the test knows and the tool does not:
 //!
 //! - blind test: for every effect of the library, datasets from the full
@@ -18,18 +18,18 @@
 //! test (`cargo test --release -p integration-tests -- --ignored
 //! blind_every_effect_is_named_and_removes_the_held_out_gap --nocapture`).
 
-use host_sim::closed_loop::{simulate_travel_faulted, FaultHook, SimOptions, StepAction, TravelSpec};
-use host_sim::config::RigConfig;
-use host_sim::diagnosis::signals::{Channel, Phase, Subsystem};
-use host_sim::diagnosis::{diagnose, GapOptions, GapReport, Verdict};
-use host_sim::plant::effects::{EffectKind, Effects};
-use host_sim::plant::Plant;
-use host_sim::recording::{Recording, ACC_CAR, ACC_CW, I_A, I_B, I_C, KNOWN_COLUMNS};
-use host_sim::synthetic::{add_noise, make_dataset, DatasetSpec};
+use closed_loop::synthetic::{add_noise, make_dataset, DatasetSpec};
+use closed_loop::{simulate_travel_faulted, FaultHook, SimOptions, StepAction, TravelSpec};
+use diagnosis::signals::{Channel, Phase, Subsystem};
+use diagnosis::{diagnose, GapOptions, GapReport, Verdict};
+use drive_core::config::Direction;
+use drive_core::SensorFrame;
+use plant::effects::{EffectKind, Effects};
+use plant::Plant;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use shared::config::Direction;
-use shared::SensorFrame;
+use recording::{Recording, ACC_CAR, ACC_CW, I_A, I_B, I_C, KNOWN_COLUMNS};
+use rig_config::RigConfig;
 
 const ACC_NOISE_MPS2: f64 = 0.01;
 const CURRENT_NOISE_A: f64 = 0.02;
@@ -252,7 +252,7 @@ impl FaultHook for RailJoints {
     fn sensors(&mut self, _t_s: f64, frame: SensorFrame, _plant: &Plant) -> StepAction {
         StepAction::Run(frame)
     }
-    fn after_step(&mut self, _t_s: f64, _plant: &Plant, _output: &shared::ControlOutput) {}
+    fn after_step(&mut self, _t_s: f64, _plant: &Plant, _output: &drive_core::ControlOutput) {}
     fn keep_running_after_trip_s(&self) -> Option<f64> {
         None
     }
@@ -273,7 +273,7 @@ fn an_effect_outside_the_library_is_unexplained_and_located() {
                 SimOptions { max_step_s: s.max_step_s, sample_rate_hz: s.sample_rate_hz, ..SimOptions::for_rig(&rig) };
             // 0.4 m/s over a 4 mm step: the pulse lasts 10 ms.
             let mut joints = RailJoints { spacing_m: 0.8, force_n: 150.0, width_m: 0.004 };
-            let mut controller = shared::Controller::new(&rig.drive_config());
+            let mut controller = drive_core::Controller::new(&rig.drive_config());
             let run = simulate_travel_faulted(&rig, &travel, &options, &mut controller, Some(&mut joints), None, None)
                 .expect("the travel with rail joints runs");
             let mut recording = run.to_recording(&travel, rig.mechanics.m_cw_kg, "rail joints".to_string());

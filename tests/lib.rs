@@ -3,9 +3,9 @@
 
 use std::sync::OnceLock;
 
-use host_sim::closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
-use host_sim::config::RigConfig;
-use shared::config::Direction;
+use closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
+use drive_core::config::Direction;
+use rig_config::RigConfig;
 
 /// The embedded reference rig.
 pub fn rig() -> RigConfig {

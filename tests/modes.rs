@@ -2,9 +2,9 @@
 //! det(K - w^2 M) found by scanning and bisection with a hand-written
 //! Gaussian elimination, against the eigen-solver used by `host-sim modes`.
 
-use host_sim::plant::modes::natural_modes;
-use host_sim::plant::rope::ChainParams;
 use integration_tests::rig;
+use plant::modes::natural_modes;
+use plant::rope::ChainParams;
 
 /// det(A) by Gaussian elimination with partial pivoting.
 fn determinant(mut a: [[f64; 5]; 5]) -> f64 {

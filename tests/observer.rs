@@ -1,4 +1,4 @@
-//! The reduced 5-DOF observer (`shared::observer`) against the plant: for
+//! The reduced 5-DOF observer (`drive_core::observer`) against the plant: for
 //! every nominal travel (4 car masses x up/down, full travel, the
 //! plant with its torque ripple and quantised sensors) the closed loop runs
 //! with the drive core, and the observer is fed offline at the speed-loop
@@ -10,15 +10,15 @@
 //! ignored tests, run with `cargo test --release -p integration-tests --
 //! --ignored NAME`.
 
-use host_sim::analysis::highpass_zero_phase;
-use host_sim::closed_loop::{simulate_travel_with, SimOptions, StepLog, TravelRun, TravelSpec};
-use host_sim::config::RigConfig;
-use host_sim::plant::modes::natural_modes;
-use host_sim::plant::rope::ChainParams;
+use closed_loop::{simulate_travel_with, SimOptions, StepLog, TravelRun, TravelSpec};
+use drive_core::config::Direction;
+use drive_core::observer::{ChainObserver, ObserverTuning};
+use drive_core::{Controller, DriveState};
+use dsp::highpass_zero_phase;
 use integration_tests::{rig, rms};
-use shared::config::Direction;
-use shared::observer::{ChainObserver, ObserverTuning};
-use shared::{Controller, DriveState};
+use plant::modes::natural_modes;
+use plant::rope::ChainParams;
+use rig_config::RigConfig;
 
 /// Evaluation band, Hz (1-80 Hz).
 const BAND_HZ: (f64, f64) = (1.0, 80.0);

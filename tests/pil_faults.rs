@@ -7,14 +7,14 @@
 
 use std::time::Instant;
 
-use host_sim::closed_loop::TravelSpec;
-use host_sim::faults::parse_fault;
-use host_sim::faults::run::{run_case_with, FaultCase, FaultOutcome};
-use host_sim::pil::{PilOptions, PilTarget};
+use closed_loop::faults::parse_fault;
+use closed_loop::faults::run::{run_case_with, FaultCase, FaultOutcome};
+use closed_loop::pil::{PilOptions, PilTarget};
+use closed_loop::TravelSpec;
+use drive_core::config::Direction;
+use drive_core::supervisor::Fault;
+use drive_core::{Controller, DriveState};
 use integration_tests::rig;
-use shared::config::Direction;
-use shared::supervisor::Fault;
-use shared::{Controller, DriveState};
 
 const TS: f64 = 1.0 / 16_000.0;
 /// Simulated time after the trip: enough to see the safe state held.

@@ -56,7 +56,7 @@
 //!   16 kHz PWM that is usable, but B1 must not be pressed while the bridge
 //!   is powered, and its solder bridge should be opened.
 //! - TIM4 is a 16-bit timer: `encoder.rs` extends its count to the `u32` of
-//!   `shared::SensorFrame` in software (unambiguous, since the shaft moves
+//!   `drive_core::SensorFrame` in software (unambiguous, since the shaft moves
 //!   far less than 2^15 counts in one PWM period).
 //! - The timer of the Embassy time driver is TIM15 (Cargo feature
 //!   `time-driver-tim15`), so it never takes TIM1 or TIM4.

@@ -1,4 +1,4 @@
-//! The control interrupt: one `shared::Controller::step` per PWM period, in
+//! The control interrupt: one `drive_core::Controller::step` per PWM period, in
 //! ADC2's end-of-injected-sequence interrupt (`ADC1_2`, the highest priority),
 //! and the state it shares with the telemetry task.
 //!
@@ -33,13 +33,13 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::DWT;
 use critical_section::{CriticalSection, Mutex};
+use drive_core::controller::{CommandError, Telemetry};
+use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
+use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use heapless::Deque;
-use shared::controller::{CommandError, Telemetry};
-use shared::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
-use shared::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 
 use crate::adc::{self, Incomplete, Samples};
 use crate::encoder::{self, Extender};

@@ -46,7 +46,7 @@ pub fn raw_count() -> u16 {
 }
 
 /// Extends the 16-bit counter to the free-running `u32` count of
-/// `shared::SensorFrame` (wrapping modulo 2^32): adds the signed 16-bit
+/// `drive_core::SensorFrame` (wrapping modulo 2^32): adds the signed 16-bit
 /// difference of each reading. Exact as long as the counter moves less than
 /// 2^15 counts between readings (at most a few counts per PWM period here).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

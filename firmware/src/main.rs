@@ -12,7 +12,7 @@
 //!   time stamps; PC8: brake (low = applied); IWDG (`watchdog.rs`).
 //!
 //! The control interrupt (`control.rs`, highest priority) runs
-//! `shared::Controller::step` once per PWM period with the measured values;
+//! `drive_core::Controller::step` once per PWM period with the measured values;
 //! the speed loop, the profile and the speed observer run inside it. One
 //! Embassy task (`telemetry.rs`) logs what the interrupt queues, feeds the
 //! watchdog while the interrupt is alive and submits commands.
@@ -20,7 +20,7 @@
 //! Start-up: clocks, then the peripherals with the inverter off (MOE = 0,
 //! brake applied), then the control interrupt, which waits 10 ms for the
 //! analog front end to settle and calibrates the current-sensor offsets over
-//! 64 ms (`shared::current_offset`) with the PWM outputs DISABLED: with every
+//! 64 ms (`drive_core::current_offset`) with the PWM outputs DISABLED: with every
 //! switch off no phase current can flow, so the measured codes are the true
 //! zero, whereas at 50 % duty the zero holds only for a standing machine and
 //! matched legs, and the bridge would be switching before its current
@@ -62,9 +62,9 @@ mod watchdog;
 
 use defmt::{error, info};
 use defmt_rtt as _;
+use drive_core::Controller;
 use embassy_executor::Spawner;
 use embassy_stm32::time::Hertz;
-use shared::Controller;
 
 include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
 

@@ -9,11 +9,11 @@
 //! `DEFMT_LOG=debug`.
 
 use defmt::{debug, error, info, warn};
+use drive_core::controller::CommandError;
+use drive_core::current_offset::OffsetError;
+use drive_core::supervisor::Fault;
+use drive_core::{DriveState, TravelCommand};
 use embassy_time::{Duration, Instant, Ticker};
-use shared::controller::CommandError;
-use shared::current_offset::OffsetError;
-use shared::supervisor::Fault;
-use shared::{DriveState, TravelCommand};
 
 use crate::control::{self, Command, Event, FirmwareFault, Record, Refusal};
 use crate::watchdog::Watchdog;
@@ -177,7 +177,7 @@ fn log_fault(fault: FirmwareFault) {
                  {=str} until restart",
                 phase_name(phase),
                 peak_to_peak_codes,
-                shared::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_peak_to_peak_codes,
+                drive_core::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_peak_to_peak_codes,
                 SAFE
             ),
             OffsetError::OffsetOutOfRange { phase, zero_current_code } => error!(
@@ -185,7 +185,7 @@ fn log_fault(fault: FirmwareFault) {
                  codes from mid-scale {=u16}: {=str} until restart",
                 phase_name(phase),
                 zero_current_code,
-                shared::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_offset_codes,
+                drive_core::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_offset_codes,
                 DRIVE_CONFIG.adc_zero_code(),
                 SAFE
             ),
@@ -204,8 +204,8 @@ fn phase_name(phase: u8) -> &'static str {
 
 fn direction_name(travel: TravelCommand) -> &'static str {
     match travel.direction {
-        shared::config::Direction::Up => "up",
-        shared::config::Direction::Down => "down",
+        drive_core::config::Direction::Up => "up",
+        drive_core::config::Direction::Down => "down",
     }
 }
 

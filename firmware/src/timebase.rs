@@ -1,6 +1,6 @@
 //! Microsecond time stamps of the control interrupt: TIM2, a 32-bit timer,
 //! free-running at 1 MHz (PSC = 169 at 170 MHz, ARR = 0xFFFF_FFFF), so its
-//! CNT is the `time_us` of `shared::SensorFrame` directly, wrapping modulo
+//! CNT is the `time_us` of `drive_core::SensorFrame` directly, wrapping modulo
 //! 2^32 like the controller expects.
 
 use embassy_stm32::pac;

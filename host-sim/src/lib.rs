@@ -1,26 +1,16 @@
-//! Host simulator of the elevator: the nominal plant of the seed paper (5-DOF
-//! ropes, car, counterweight and sheave; PMSM; averaged inverter; sensors)
-//! closed around the drive core of `shared`, and the analysis of what it
-//! records.
+//! The `host-sim` commands: the command-line front end of the elevator
+//! simulator and its tools (`host-sim --help` lists the commands).
 //!
-//! Data flows one way: config -> plant <-> controller -> recording ->
-//! analysis. The plant never knows which controller drives it.
+//! The work is done by the library crates under `host-sim/crates/`, along
+//! the one-way data flow config -> plant <-> controller -> recording ->
+//! analysis -> diagnosis: `rig-config` (the rig), `plant`, `closed-loop`
+//! (the drive core of `drive-core` around the plant, faults, foreign rigs,
+//! datasets, compensation, PIL), `recording`, `dsp` (signal processing),
+//! `diagnosis` (identification and the gap diagnosis) and `plots`. This crate
+//! only parses flags, calls them and writes their results ([`cli`], one
+//! module per command).
 
 #![warn(missing_docs)]
 
-pub mod analysis;
 pub mod cli;
-pub mod closed_loop;
-pub mod compensation;
-pub mod diagnosis;
-pub mod faults;
-pub mod foreign;
 pub mod output;
-pub mod pil;
-pub mod plant;
-pub mod plots;
-pub mod recording;
-pub mod synthetic;
-
-/// The rig description (re-exported from `rig-config`).
-pub use rig_config as config;

@@ -8,7 +8,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
-use host_sim::recording::{read_evimp, read_recording, ReadError, MAX_LINE_BYTES, MAX_META_BYTES};
+use recording::{read_evimp, read_recording, ReadError, MAX_LINE_BYTES, MAX_META_BYTES};
 
 fn host_sim() -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_host-sim"));
@@ -449,8 +449,8 @@ fn errors_name_the_file_to_give_and_print_an_os_error_once() {
 // Estimates refused by the analysis itself: a mode at the band edge, a
 // negative damping, a torque sign that contradicts the travel.
 
-fn decay_spec() -> host_sim::plant::free_decay::FreeDecaySpec {
-    host_sim::plant::free_decay::FreeDecaySpec {
+fn decay_spec() -> plant::free_decay::FreeDecaySpec {
+    plant::free_decay::FreeDecaySpec {
         mass_kg: 33.0,
         rope_length_m: 2.5,
         rope_ea_n: 1.0e6,
@@ -463,9 +463,9 @@ fn decay_spec() -> host_sim::plant::free_decay::FreeDecaySpec {
 
 #[test]
 fn a_mode_at_the_top_of_the_search_band_and_a_growing_oscillation_are_refused() {
-    use host_sim::analysis::identify::identify_free_decay;
-    use host_sim::analysis::AnalysisError;
-    use host_sim::plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay};
+    use diagnosis::identify::identify_free_decay;
+    use dsp::AnalysisError;
+    use plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay};
     let (fs, spec) = (4096.0, decay_spec());
     let acc = simulate_free_decay(&spec, fs, 3.0).unwrap();
     let f1 = eqn9_first_frequency_hz(1.0e6, 0.095, 2.5, 33.0);
@@ -495,15 +495,16 @@ fn a_mode_at_the_top_of_the_search_band_and_a_growing_oscillation_are_refused() 
 
 #[test]
 fn the_torque_sign_is_resolved_by_the_travel_and_refused_when_the_currents_contradict_it() {
-    use host_sim::analysis::travel_signals::travel_torque;
-    use host_sim::closed_loop::{simulate_travel, SimOptions, TravelSpec};
-    use host_sim::recording::{I_A, I_B, I_C};
-    let rig = host_sim::config::RigConfig::embedded_default().unwrap();
-    let spec = TravelSpec { m_car_kg: 70.5, direction: shared::config::Direction::Up, lw_start_m: 2.0, lw_end_m: 3.6 };
+    use closed_loop::{simulate_travel, SimOptions, TravelSpec};
+    use diagnosis::travel_signals::travel_torque;
+    use recording::{I_A, I_B, I_C};
+    let rig = rig_config::RigConfig::embedded_default().unwrap();
+    let spec =
+        TravelSpec { m_car_kg: 70.5, direction: drive_core::config::Direction::Up, lw_start_m: 2.0, lw_end_m: 3.6 };
     let run = simulate_travel(&rig, &spec, &SimOptions::for_rig(&rig), None).unwrap();
     let recording = run.to_recording(&spec, rig.mechanics.m_cw_kg, "half turn".to_string());
     let right = travel_torque(&rig, &recording, "up").unwrap();
-    let mean = |t: &host_sim::analysis::travel_signals::TravelTorque| {
+    let mean = |t: &diagnosis::travel_signals::TravelTorque| {
         t.torque_nm[t.constant_speed.clone()].iter().sum::<f64>() / t.constant_speed.len() as f64
     };
     // Eqn 4: the 70.5 kg car going up against a 33 kg counterweight needs about +24 N m and more.

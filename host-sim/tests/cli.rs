@@ -166,7 +166,7 @@ fn analyze_recovers_the_ripple_lines_frequency_within_1_percent_and_amplitude_wi
         .filter(|l| [1, 6, 12, 36, 72].contains(&l["mechanical_order"].as_u64().unwrap()))
         .collect();
     assert_eq!(lines.len(), 5);
-    let rig = host_sim::config::RigConfig::embedded_default().unwrap();
+    let rig = rig_config::RigConfig::embedded_default().unwrap();
     for line in lines {
         let expected = line["expected_frequency_hz"].as_f64().unwrap();
         let found = line["frequency_hz"].as_f64().unwrap();

@@ -5,13 +5,13 @@
 
 use std::sync::OnceLock;
 
-use host_sim::closed_loop::{SimOptions, TravelRun, TravelSpec};
-use host_sim::config::RigConfig;
-use host_sim::foreign::{simulate_commercial_travel, Acquisition, ForeignDrive, ForeignRig};
-use host_sim::recording::{Recording, RecordingKind, ACC_CAR, ANGLE, I_A, I_B, I_C, REF_SPEED, SPEED, TIME_S};
-use host_sim::synthetic::{make_foreign_dataset, DatasetSpec};
+use closed_loop::foreign::{simulate_commercial_travel, Acquisition, ForeignDrive, ForeignRig};
+use closed_loop::synthetic::{make_foreign_dataset, DatasetSpec};
+use closed_loop::{SimOptions, TravelRun, TravelSpec};
+use drive_core::config::Direction;
 use rand::SeedableRng;
-use shared::config::Direction;
+use recording::{Recording, RecordingKind, ACC_CAR, ANGLE, I_A, I_B, I_C, REF_SPEED, SPEED, TIME_S};
+use rig_config::RigConfig;
 
 fn rig() -> RigConfig {
     RigConfig::embedded_default().expect("embedded rig")
@@ -149,9 +149,9 @@ fn recordings_load_and_their_time_column_is_uniform_at_the_acquisitions_rate() {
         for k in 1..t.len() {
             assert!(((t[k] - t[k - 1]) - period).abs() < 1e-9 * period, "{stem}: step {k}");
         }
-        host_sim::recording::write_recording(dir.path(), stem, r).unwrap();
+        recording::write_recording(dir.path(), stem, r).unwrap();
     }
-    let read = host_sim::recording::read_dataset(dir.path(), rig().mechanics.rope_total_length_m).unwrap();
+    let read = recording::read_dataset(dir.path(), rig().mechanics.rope_total_length_m).unwrap();
     assert_eq!(read.len(), dataset().1.len());
     // The travel is as long on the acquisition's clock as its clock error
     // makes it: its motion starts at the pre-trigger time.
@@ -161,7 +161,7 @@ fn recordings_load_and_their_time_column_is_uniform_at_the_acquisitions_rate() {
     let expected = acq.pre_trigger_s * (1.0 + acq.clock_offset_ppm * 1e-6) * acq.sample_rate_hz;
     // The drive's first reference comes one speed-loop period after it
     // enters its travel state; then the anti-alias filter's delay.
-    let late = host_sim::foreign::commercial_drive::SPEED_LOOP_PERIOD_S * acq.sample_rate_hz + 10.0;
+    let late = closed_loop::foreign::commercial_drive::SPEED_LOOP_PERIOD_S * acq.sample_rate_hz + 10.0;
     let after = first as f64 - expected;
     assert!(after > -2.0 && after < late, "motion at sample {first}, pre-trigger at {expected}");
 }
@@ -321,7 +321,7 @@ fn machine_torque_of_the_heavy_car_going_up_lifts_it_under_the_dq0_convention() 
     let cruise: Vec<usize> =
         (0..reference.len()).filter(|&k| (reference[k] - drive.rated_speed_mps).abs() < 1e-4).collect();
     let stage = cruise[cruise.len() / 4]..cruise[3 * cruise.len() / 4];
-    let torque = host_sim::analysis::machine_torque_nm(
+    let torque = dsp::machine_torque_nm(
         column(up, I_A),
         column(up, I_B),
         column(up, I_C),

@@ -8,10 +8,10 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use host_sim::config::RigConfig;
-use host_sim::recording::evimp::EVIMP_BOUNDS;
-use host_sim::recording::{read_evimp, read_meta, RecordingKind, MAX_MASS_KG, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ};
 use proptest::prelude::*;
+use recording::evimp::EVIMP_BOUNDS;
+use recording::{read_evimp, read_meta, RecordingKind, MAX_MASS_KG, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ};
+use rig_config::RigConfig;
 
 /// Cases per target: enough to cover the strategies' shapes, small enough
 /// for every CI run.
@@ -116,7 +116,7 @@ fn check_meta(path: &Path) {
             for lw in [lw_start_m, lw_end_m] {
                 assert!(lw > 0.0 && lw < ROPE_TOTAL_M, "{meta:?}");
             }
-            let up = direction == host_sim::recording::CarDirection::Up;
+            let up = direction == recording::CarDirection::Up;
             assert_eq!(up, lw_end_m > lw_start_m, "{meta:?}");
             assert_ne!(lw_end_m, lw_start_m);
         }

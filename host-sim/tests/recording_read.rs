@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Instant, SystemTime};
 
-use host_sim::config::RigConfig;
-use host_sim::recording::{
+use proptest::prelude::*;
+use recording::{
     read_dataset, read_evimp, read_recording, write_recording, CarDirection, Column, ReadError, Recording,
     RecordingKind, RecordingMeta, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, I_A, I_B, I_C, REF_SPEED, SPEED, TIME_S,
 };
-use proptest::prelude::*;
+use rig_config::RigConfig;
 
 /// Total rope length of the default rig, m (8.6).
 fn rope_total() -> f64 {
@@ -52,7 +52,7 @@ fn tricky(i: usize, col: usize) -> f64 {
 /// that stresses the text round trip. Unknown columns keep every value.
 fn tricky_in(name: &str, i: usize, col: usize) -> f64 {
     let v = tricky(i, col);
-    match host_sim::recording::column_bound(name) {
+    match recording::column_bound(name) {
         Some((bound, _)) if v.abs() > bound => v * (bound / f64::MAX),
         _ => v,
     }

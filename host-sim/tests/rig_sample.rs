@@ -14,12 +14,12 @@
 
 use std::path::PathBuf;
 
-use host_sim::analysis::identify_dataset::identify_dataset;
-use host_sim::config::RigConfig;
-use host_sim::diagnosis::calibrate::DECAY_MAX_FREQUENCY_HZ;
-use host_sim::diagnosis::{diagnose, DriveModel, GapOptions};
-use host_sim::recording::read::read_dataset;
-use host_sim::recording::{Recording, RecordingKind, I_A, I_B, I_C};
+use diagnosis::calibrate::DECAY_MAX_FREQUENCY_HZ;
+use diagnosis::identify_dataset::identify_dataset;
+use diagnosis::{diagnose, DriveModel, GapOptions};
+use recording::read::read_dataset;
+use recording::{Recording, RecordingKind, I_A, I_B, I_C};
+use rig_config::RigConfig;
 
 fn rig() -> RigConfig {
     RigConfig::embedded_default().expect("the embedded rig loads")

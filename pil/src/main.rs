@@ -7,7 +7,7 @@
 //! telemetry and the cost of the step in SysTick ticks (processor clock, 25 MHz on this machine; under
 //! `qemu -icount shift=N` each instruction advances time by 2^N ns, so the
 //! host converts ticks to instructions). Travel and reset commands are
-//! acknowledged with [`Message::Ack`]. The frame codec is `shared::frame`,
+//! acknowledged with [`Message::Ack`]. The frame codec is `drive_core::frame`,
 //! the same code the host uses.
 //!
 //! Logging: defmt over semihosting (feature `semihosting`, the default) or
@@ -21,8 +21,8 @@ mod uart;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
-use shared::frame::{command_result_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
-use shared::Controller;
+use drive_core::frame::{command_result_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
+use drive_core::Controller;
 
 #[cfg(feature = "rtt")]
 use defmt_rtt as _;

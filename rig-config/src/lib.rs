@@ -12,8 +12,8 @@
 
 use std::path::Path;
 
+use drive_core::DriveConfig;
 use serde::Deserialize;
-use shared::DriveConfig;
 
 /// The embedded default rig file (`configs/rig.toml`).
 pub const EMBEDDED_RIG_TOML: &str = include_str!("../../configs/rig.toml");
@@ -478,7 +478,7 @@ impl RigConfig {
         counts.floor().clamp(1.0, u16::MAX as f64) as u16
     }
 
-    /// Rust source of `pub const DRIVE_CONFIG: shared::DriveConfig = ...;`
+    /// Rust source of `pub const DRIVE_CONFIG: drive_core::DriveConfig = ...;`
     /// for the firmware build scripts, so that every binary runs the
     /// controller with the values the host uses. `origin` names the rig file
     /// in the generated comment.
@@ -490,22 +490,22 @@ impl RigConfig {
         format!(
             "// @generated from {origin} by rig-config. Do not edit.\n\
              /// Drive parameters of the rig, generated at build time from `{origin}`.\n\
-             pub const DRIVE_CONFIG: shared::DriveConfig = shared::{:?};\n",
+             pub const DRIVE_CONFIG: drive_core::DriveConfig = drive_core::{:?};\n",
             self.drive_config()
         )
     }
 
-    /// Rust source of `pub const CHAIN_MODEL: shared::observer::ChainModel =
+    /// Rust source of `pub const CHAIN_MODEL: drive_core::observer::ChainModel =
     /// ...;` ([`RigConfig::observer_model`]) for build scripts, like
     /// [`RigConfig::drive_config_source`].
     pub fn chain_model_source(&self, origin: &str) -> String {
         format!(
             "// @generated from {origin} by rig-config. Do not edit.\n\
              /// The drive's model of the rope chain, generated at build time from `{origin}`.\n\
-             pub const CHAIN_MODEL: shared::observer::{:?};\n",
+             pub const CHAIN_MODEL: drive_core::observer::{:?};\n",
             self.observer_model()
         )
-        .replacen("ChainModel {", "ChainModel = shared::observer::ChainModel {", 1)
+        .replacen("ChainModel {", "ChainModel = drive_core::observer::ChainModel {", 1)
     }
 
     /// The drive-core parameters of this rig.
@@ -551,17 +551,17 @@ impl RigConfig {
         }
     }
 
-    /// The chain model of the reduced 5-DOF observer (`shared::observer`):
+    /// The chain model of the reduced 5-DOF observer (`drive_core::observer`):
     /// the `[mechanics]` values in `f32` and the mechanical orders of the
-    /// first `shared::observer::model::MAX_HARMONICS` `[[ripple]]` components
+    /// first `drive_core::observer::model::MAX_HARMONICS` `[[ripple]]` components
     /// (only the orders: the observer estimates amplitudes and phases).
-    pub fn observer_model(&self) -> shared::observer::ChainModel {
+    pub fn observer_model(&self) -> drive_core::observer::ChainModel {
         let m = &self.mechanics;
-        let mut ripple_orders = [0u16; shared::observer::model::MAX_HARMONICS];
+        let mut ripple_orders = [0u16; drive_core::observer::model::MAX_HARMONICS];
         for (slot, ripple) in ripple_orders.iter_mut().zip(&self.ripple) {
             *slot = ripple.mechanical_order.min(u16::MAX as u32) as u16;
         }
-        shared::observer::ChainModel {
+        drive_core::observer::ChainModel {
             m_cw_kg: m.m_cw_kg as f32,
             rope_total_length_m: m.rope_total_length_m as f32,
             rope_ea_n: m.rope_ea_n as f32,
@@ -690,7 +690,10 @@ mod tests {
     fn generated_source_is_a_struct_literal_of_every_field() {
         let rig = RigConfig::embedded_default().unwrap();
         let source = rig.drive_config_source("configs/rig.toml");
-        assert!(source.contains("pub const DRIVE_CONFIG: shared::DriveConfig = shared::DriveConfig {"), "{source}");
+        assert!(
+            source.contains("pub const DRIVE_CONFIG: drive_core::DriveConfig = drive_core::DriveConfig {"),
+            "{source}"
+        );
         assert!(source.contains("pole_pairs: 6,") && source.contains("pwm_period_counts: 5312,"), "{source}");
         assert!(!source.contains("NaN") && !source.contains("inf"), "{source}");
     }

@@ -20,7 +20,7 @@ use crate::profile::{ProfileError, SCurve};
 use crate::ripple::harmonics::HarmonicTable;
 use crate::ripple::{LearningInput, RippleCompensator, Strategy};
 use crate::speed_estimator::SpeedEstimator;
-use crate::speed_loop::{equivalent_inertia_kg_m2, out_of_balance_torque_nm, SpeedLoop};
+use crate::speed_loop::{equivalent_inertia_kg_m2, out_of_balance_torque_nm, SpeedLoop, POSITION_GAIN_PER_S};
 use crate::supervisor::{Fault, MonitorLimits, MonitorSample, Supervisor, SupervisorLimits};
 use crate::trig::Angle;
 
@@ -32,8 +32,6 @@ pub const BRAKE_LIFT_S: f32 = 0.15;
 pub const HOLD_S: f32 = 0.3;
 /// Time allowed for the brake to set before the PWM is switched off, s.
 pub const BRAKE_SET_S: f32 = 0.2;
-/// Position-loop gain on the car position error, 1/s.
-pub const POSITION_GAIN_PER_S: f32 = 2.0;
 
 /// A [`Q16`] as `f32`: one integer conversion and a multiplication by a
 /// power of two (rounded to nearest like any `i32 -> f32` conversion).

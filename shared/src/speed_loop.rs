@@ -10,6 +10,12 @@ use crate::config::DriveConfig;
 use crate::fixed::{mul, q16, Q16};
 use crate::pi::{Pi, PiGains};
 
+/// Position-loop gain on the car position error, 1/s: the controller adds
+/// `POSITION_GAIN_PER_S * (position_ref - position)` (m/s) to the profile's
+/// speed before the speed loop; the ripple compensation's loop response
+/// (`ripple::response`) models the same outer loop.
+pub const POSITION_GAIN_PER_S: f32 = 2.0;
+
 /// Eqn 4: out-of-balance torque that holds the car, N m (positive lifts the car).
 pub fn out_of_balance_torque_nm(config: &DriveConfig, m_car_kg: f32, lw_m: f32) -> f32 {
     let lc_m = config.rope_total_length_m - lw_m;

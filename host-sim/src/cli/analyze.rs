@@ -13,14 +13,14 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::{check_count, check_open_range, output_dir, travel_torque, TravelTorque};
-use crate::analysis::travel_signals::counterweight_side_length_m;
-use crate::analysis::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Spectrogram};
-use crate::config::RigConfig;
-use crate::plant::modes::natural_modes;
-use crate::plant::rope::{ChainParams, DOF};
-use crate::plots::{line_plot, spectrogram_plot, Series};
-use crate::recording::{read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
+use super::{check_count, check_open_range, output_dir};
+use diagnosis::travel_signals::{counterweight_side_length_m, travel_torque, TravelTorque};
+use dsp::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Spectrogram};
+use plant::modes::natural_modes;
+use plant::rope::{ChainParams, DOF};
+use plots::{line_plot, spectrogram_plot, Series};
+use recording::{read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
+use rig_config::RigConfig;
 
 /// Options of `analyze`.
 #[derive(Debug, Args)]

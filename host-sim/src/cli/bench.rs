@@ -3,11 +3,11 @@
 use std::time::Instant;
 
 use clap::Args;
-use shared::config::Direction;
+use drive_core::config::Direction;
 
 use super::default_car_mass_kg;
-use crate::closed_loop::{simulate_travel, SimOptions, TravelSpec};
-use crate::config::RigConfig;
+use closed_loop::{simulate_travel, SimOptions, TravelSpec};
+use rig_config::RigConfig;
 
 /// Options of `bench`.
 #[derive(Debug, Args)]

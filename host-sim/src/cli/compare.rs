@@ -8,15 +8,15 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use clap::Args;
+use drive_core::ripple::harmonics::HarmonicTable;
+use drive_core::ripple::Strategy;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
-use shared::ripple::harmonics::HarmonicTable;
-use shared::ripple::Strategy;
 
 use super::output_dir;
-use crate::compensation::{all_cases, calibrate_table, run_case, CompareRow};
-use crate::config::RigConfig;
-use crate::plots::{line_plot, Series};
+use closed_loop::compensation::{all_cases, calibrate_table, run_case, CompareRow};
+use plots::{line_plot, Series};
+use rig_config::RigConfig;
 
 /// Options of `compare`.
 #[derive(Debug, Args)]
@@ -87,7 +87,7 @@ pub fn run(rig: &RigConfig, args: &CompareArgs) -> anyhow::Result<()> {
     let cases: Vec<(usize, _)> = all_cases(rig)
         .into_iter()
         .enumerate()
-        .filter(|(_, c)| !args.nominal_only || c.mismatch == crate::compensation::Mismatch::Nominal)
+        .filter(|(_, c)| !args.nominal_only || c.mismatch == closed_loop::compensation::Mismatch::Nominal)
         .filter(|(i, _)| shard.is_none_or(|(k, n)| i % n + 1 == k))
         .collect();
     let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(cases.len() as u64) };

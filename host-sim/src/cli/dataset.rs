@@ -10,11 +10,11 @@ use clap::{Args, ValueEnum};
 use rand::SeedableRng;
 
 use super::output_dir;
-use crate::config::RigConfig;
-use crate::foreign::{Acquisition, ForeignDrive, ForeignRig};
-use crate::plant::effects::Effects;
-use crate::recording::write_recording;
-use crate::synthetic::{dataset_stems, make_dataset, make_foreign_dataset, DatasetSpec};
+use closed_loop::foreign::{Acquisition, ForeignDrive, ForeignRig};
+use closed_loop::synthetic::{dataset_stems, make_dataset, make_foreign_dataset, DatasetSpec};
+use plant::effects::Effects;
+use recording::write_recording;
+use rig_config::RigConfig;
 
 /// Default RMS accelerometer noise of the project's acquisition, m/s^2.
 const DEFAULT_ACC_NOISE_MPS2: f64 = 0.01;
@@ -24,7 +24,7 @@ const DEFAULT_CURRENT_NOISE_A: f64 = 0.02;
 /// Which drive runs the rig.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum DriveArg {
-    /// The project's drive core (`shared::Controller`).
+    /// The project's drive core (`drive_core::Controller`).
     Project,
     /// A generic commercial drive (`host_sim::foreign::commercial_drive`).
     Commercial,
@@ -116,7 +116,7 @@ pub struct DatasetArgs {
 fn foreign_rig(args: &DatasetArgs) -> anyhow::Result<Option<ForeignRig>> {
     let from_file = match &args.foreign_file {
         Some(path) => {
-            let text = crate::config::read_text_file(path, crate::config::MAX_TEXT_FILE_BYTES)
+            let text = rig_config::read_text_file(path, rig_config::MAX_TEXT_FILE_BYTES)
                 .with_context(|| format!("cannot read the foreign-rig file {}", path.display()))?;
             Some(ForeignRig::from_toml_str(&text, &path.display().to_string())?)
         }

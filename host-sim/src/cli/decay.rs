@@ -6,11 +6,11 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::{check_count, check_open_range, output_dir};
-use crate::config::RigConfig;
-use crate::plant::effects::Effects;
-use crate::plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay_with, FreeDecaySpec, MAX_ELEMENTS};
-use crate::recording::write::write_recording;
-use crate::recording::{Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
+use plant::effects::Effects;
+use plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay_with, FreeDecaySpec, MAX_ELEMENTS};
+use recording::write::write_recording;
+use recording::{Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
+use rig_config::RigConfig;
 
 /// Options of `decay`.
 #[derive(Debug, Args)]

@@ -11,15 +11,15 @@ use std::time::Instant as WallClock;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
+use drive_core::config::Direction;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
-use shared::config::Direction;
 
 use super::{check_open_range, default_car_mass_kg, output_dir};
-use crate::closed_loop::TravelSpec;
-use crate::config::RigConfig;
-use crate::faults::run::{default_matrix, run_case_with, FaultCase, FaultOutcome};
-use crate::faults::{parse_fault, parse_fault_toml, FaultSpec};
+use closed_loop::faults::run::{default_matrix, run_case_with, FaultCase, FaultOutcome};
+use closed_loop::faults::{parse_fault, parse_fault_toml, FaultSpec};
+use closed_loop::TravelSpec;
+use rig_config::RigConfig;
 
 /// Directions to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -55,7 +55,7 @@ pub struct FaultsArgs {
     #[arg(long, value_enum, default_value_t = Directions::Both)]
     pub direction: Directions,
     /// Simulated time after a trip, s.
-    #[arg(long = "after-trip", value_name = "S", default_value_t = crate::faults::run::AFTER_TRIP_S, allow_negative_numbers = true)]
+    #[arg(long = "after-trip", value_name = "S", default_value_t = closed_loop::faults::run::AFTER_TRIP_S, allow_negative_numbers = true)]
     pub after_trip_s: f64,
     /// Output directory (`faults.csv`, `faults.md`, `faults.json`).
     #[arg(long, value_name = "DIR", default_value = "out/faults")]
@@ -76,7 +76,7 @@ pub fn cases(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<Vec<FaultCase
     let mut given: Vec<FaultSpec> =
         args.faults.iter().map(|text| parse_fault(text)).collect::<Result<_, _>>().map_err(anyhow::Error::from)?;
     if let Some(path) = &args.faults_file {
-        let text = crate::config::read_text_file(path, crate::config::MAX_TEXT_FILE_BYTES)
+        let text = rig_config::read_text_file(path, rig_config::MAX_TEXT_FILE_BYTES)
             .with_context(|| format!("cannot read {}", path.display()))?;
         given.extend(parse_fault_toml(&text).with_context(|| format!("{}", path.display()))?);
     }
@@ -110,7 +110,7 @@ pub fn run(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<()> {
     let outcomes: Vec<FaultOutcome> = cases
         .par_iter()
         .map(|case| {
-            let mut controller = shared::Controller::new(&rig.drive_config());
+            let mut controller = drive_core::Controller::new(&rig.drive_config());
             let outcome = run_case_with(rig, case, &mut controller, args.after_trip_s);
             bar.inc(1);
             outcome
@@ -309,7 +309,7 @@ mod tests {
         // 15 kinds (+ the disconnected sensor both ways) x 3 instants x 2
         // directions, the brake at the start only.
         assert_eq!(cases.len(), (15 * 3 + 1) * 2);
-        for name in &crate::faults::KIND_NAMES[..15] {
+        for name in &closed_loop::faults::KIND_NAMES[..15] {
             assert!(cases.iter().any(|c| c.faults[0].kind.name() == *name), "{name}");
         }
     }

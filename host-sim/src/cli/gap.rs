@@ -6,14 +6,14 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::output_dir;
-use crate::analysis::{decimate, stft_spectrogram};
-use crate::config::RigConfig;
-use crate::diagnosis::signals::decimation_factor;
-use crate::diagnosis::simulate::{model_step_s, simulate_recording};
-use crate::diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
-use crate::plant::effects::{EffectKind, Effects};
-use crate::plots::spectrogram_plot;
-use crate::recording::{read_dataset, ACC_CAR};
+use diagnosis::signals::decimation_factor;
+use diagnosis::simulate::{model_step_s, simulate_recording};
+use diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
+use dsp::{decimate, stft_spectrogram};
+use plant::effects::{EffectKind, Effects};
+use plots::spectrogram_plot;
+use recording::{read_dataset, ACC_CAR};
+use rig_config::RigConfig;
 
 /// Arguments of `gap`.
 #[derive(Debug, Args)]
@@ -36,10 +36,10 @@ pub struct GapArgs {
     pub effects: Vec<String>,
     /// Largest mean excess gap (dB) of the calibrated nominal model still
     /// called `nominal`.
-    #[arg(long, value_name = "DB", default_value_t = crate::diagnosis::NOMINAL_EXCESS_DB, allow_negative_numbers = true)]
+    #[arg(long, value_name = "DB", default_value_t = diagnosis::NOMINAL_EXCESS_DB, allow_negative_numbers = true)]
     pub nominal_excess_db: f64,
     /// Smallest held-out shrink of the gap (0-1) for `explained`.
-    #[arg(long, value_name = "FRACTION", default_value_t = crate::diagnosis::EXPLAINED_SHRINK, allow_negative_numbers = true)]
+    #[arg(long, value_name = "FRACTION", default_value_t = diagnosis::EXPLAINED_SHRINK, allow_negative_numbers = true)]
     pub explained_shrink: f64,
 }
 
@@ -54,7 +54,7 @@ pub enum DriveArg {
     Foreign,
 }
 
-impl From<DriveArg> for crate::diagnosis::DriveAssumption {
+impl From<DriveArg> for diagnosis::DriveAssumption {
     fn from(d: DriveArg) -> Self {
         match d {
             DriveArg::Auto => Self::Auto,
@@ -164,6 +164,27 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         report.location.band
     );
     outln!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
+    for l in &report.rig_speed_loops {
+        match (&l.controller, &l.refused) {
+            (Some(c), _) => outln!(
+                "  {}: the rig drive's speed loop Kp {:.2} N m s/rad, Ki {:.1} N m/rad, estimate {:.1} ms late \
+                 and {:.1} ms lag ({:.1} % of the torque's 4-40 Hz vibration)",
+                l.recording,
+                c.kp_nms_per_rad,
+                c.ki_nm_per_rad,
+                1e3 * c.estimate_delay_s,
+                1e3 * c.estimate_lag_s,
+                100.0 * c.dynamic_fit
+            ),
+            (None, reason) => {
+                outln!(
+                    "  {}: the rig drive's speed loop not identified: {}",
+                    l.recording,
+                    reason.as_deref().unwrap_or("-")
+                )
+            }
+        }
+    }
     if let Some(why) = &report.attribution_refused {
         outln!("attribution: {why}");
     }

@@ -11,11 +11,11 @@ use clap::Args;
 use serde::Serialize;
 
 use super::output_dir;
-use crate::analysis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
-use crate::config::RigConfig;
-use crate::plots::{line_plot, Series};
-use crate::recording::read::read_dataset;
-use crate::recording::{Recording, RecordingKind};
+use diagnosis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
+use plots::{line_plot, Series};
+use recording::read::read_dataset;
+use recording::{Recording, RecordingKind};
+use rig_config::RigConfig;
 
 /// Options of `identify`.
 #[derive(Debug, Args)]
@@ -68,7 +68,7 @@ fn refuse_empty_results(
         let predicted = decays
             .iter()
             .map(|&(stem, mass, length)| {
-                let f1 = crate::plant::free_decay::eqn9_first_frequency_hz(
+                let f1 = plant::free_decay::eqn9_first_frequency_hz(
                     m.rope_ea_n,
                     m.rope_mass_per_length_kg_per_m,
                     length,

@@ -33,8 +33,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
-use crate::config::RigConfig;
-use crate::recording::Recording;
+use recording::Recording;
+use rig_config::RigConfig;
 
 /// Elevator drive simulator: the nominal 5-DOF plant of Arrasate et al.
 /// closed around the fixed-point drive core that also runs on the STM32G474.
@@ -184,8 +184,6 @@ pub fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::R
         .with_context(|| format!("recording `{stem}`: column `{name}` missing"))
 }
 
-pub use crate::analysis::travel_signals::{travel_torque, TravelTorque};
-
 /// Creates the output directory.
 pub fn create_out_dir(dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))
@@ -224,8 +222,8 @@ pub enum StrategyArg {
 
 impl StrategyArg {
     /// The strategy.
-    pub fn strategy(self) -> shared::ripple::Strategy {
-        use shared::ripple::Strategy;
+    pub fn strategy(self) -> drive_core::ripple::Strategy {
+        use drive_core::ripple::Strategy;
         match self {
             StrategyArg::Off => Strategy::Off,
             StrategyArg::Table => Strategy::Table,
@@ -248,7 +246,7 @@ mod tests {
     #[test]
     fn an_os_error_quoted_by_its_context_is_printed_once() {
         let os = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file or directory (os error 2)");
-        let config = crate::config::ConfigError::Io { path: "/x.toml".into(), source: os };
+        let config = rig_config::ConfigError::Io { path: "/x.toml".into(), source: os };
         let message = error_message(&anyhow::Error::new(config));
         assert_eq!(message, "/x.toml: cannot read: No such file or directory (os error 2)");
         // A cause the message does not quote is kept.

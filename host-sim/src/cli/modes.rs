@@ -7,10 +7,10 @@ use anyhow::Context;
 use clap::Args;
 
 use super::{check_open_range, default_car_mass_kg, output_dir, sweep_points};
-use crate::config::RigConfig;
-use crate::plant::modes::natural_modes;
-use crate::plant::rope::{ChainParams, COORDINATE_NAMES, DOF};
-use crate::plots::{line_plot, Series};
+use plant::modes::natural_modes;
+use plant::rope::{ChainParams, COORDINATE_NAMES, DOF};
+use plots::{line_plot, Series};
+use rig_config::RigConfig;
 
 /// Options of `modes`.
 #[derive(Debug, Args)]

@@ -8,17 +8,17 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
+use drive_core::config::Direction;
+use drive_core::frame::StepReport;
 use indicatif::{ProgressBar, ProgressStyle};
-use shared::config::Direction;
-use shared::frame::StepReport;
 
 use super::travel::DirectionArg;
 use super::StrategyArg;
 use super::{check_open_range, default_car_mass_kg, output_dir};
-use crate::closed_loop::{simulate_travel_with, SimOptions, TravelSpec};
-use crate::compensation::rig_ripple_table;
-use crate::config::RigConfig;
-use crate::pil::{default_elf_path, PilOptions, PilTarget};
+use closed_loop::compensation::rig_ripple_table;
+use closed_loop::pil::{default_elf_path, PilOptions, PilTarget};
+use closed_loop::{simulate_travel_with, SimOptions, TravelSpec};
+use rig_config::RigConfig;
 
 /// Options of `pil`.
 #[derive(Debug, Args)]

@@ -12,10 +12,10 @@ use clap::Args;
 use serde::Serialize;
 
 use super::output_dir;
-use crate::analysis::{constant_speed_stage, ride_quality, wk_weighting, RideQuality};
-use crate::config::RigConfig;
-use crate::plots::{line_plot, Series};
-use crate::recording::{read_evimp, read_recording, RecordingKind, ACC_CAR, SPEED};
+use dsp::{constant_speed_stage, ride_quality, wk_weighting, RideQuality};
+use plots::{line_plot, Series};
+use recording::{read_evimp, read_recording, RecordingKind, ACC_CAR, SPEED};
+use rig_config::RigConfig;
 
 /// Options of `ride-quality`.
 #[derive(Debug, Args)]
@@ -151,8 +151,7 @@ pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
         )?;
     }
     csv.flush()?;
-    let weighted: Vec<f64> =
-        wk_weighting(&vertical, fs)?.iter().map(|a| a / crate::analysis::ride_quality::MPS2_PER_MG).collect();
+    let weighted: Vec<f64> = wk_weighting(&vertical, fs)?.iter().map(|a| a / dsp::ride_quality::MPS2_PER_MG).collect();
     let time: Vec<f64> = (0..weighted.len()).map(|i| i as f64 / fs).collect();
     let png = out.path(OUTPUTS[2]);
     line_plot(

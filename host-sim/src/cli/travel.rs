@@ -4,21 +4,21 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::{Args, ValueEnum};
+use drive_core::config::Direction;
+use drive_core::ripple::Strategy;
+use drive_core::Controller;
 use indicatif::{ProgressBar, ProgressStyle};
-use shared::config::Direction;
-use shared::ripple::Strategy;
-use shared::Controller;
 
 use super::{check_open_range, default_car_mass_kg, output_dir};
-use crate::analysis::{highpass_zero_phase, stft_spectrogram};
-use crate::closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
-use crate::compensation::{compensator, rig_ripple_table};
-use crate::config::RigConfig;
-use crate::plant::effects::Effects;
-use crate::plant::modes::natural_modes;
-use crate::plant::rope::{ChainParams, DOF};
-use crate::plots::{line_plot, spectrogram_plot, Series};
-use crate::recording::write::write_recording;
+use closed_loop::compensation::{compensator, rig_ripple_table};
+use closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
+use dsp::{highpass_zero_phase, stft_spectrogram};
+use plant::effects::Effects;
+use plant::modes::natural_modes;
+use plant::rope::{ChainParams, DOF};
+use plots::{line_plot, spectrogram_plot, Series};
+use recording::write::write_recording;
+use rig_config::RigConfig;
 
 /// Car direction on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

@@ -11,7 +11,7 @@
 //! Typical use at the speed tick, with the brake lifted:
 //!
 //! ```
-//! use shared::observer::{ChainModel, ChainObserver, ObserverTuning};
+//! use drive_core::observer::{ChainModel, ChainObserver, ObserverTuning};
 //! let model = ChainModel {
 //!     m_cw_kg: 33.0, rope_total_length_m: 8.6, rope_ea_n: 1.0e6, rope_mass_per_length_kg_per_m: 0.095,
 //!     sheave_inertia_kg_m2: 0.3385, sheave_radius_m: 0.065, c_cw_kg_per_s: 148.0, c_car_kg_per_s: 148.0,

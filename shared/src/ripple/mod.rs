@@ -352,14 +352,34 @@ impl RippleCompensator {
         if self.strategy == Strategy::Off || n == 0 {
             return;
         }
+        self.update_lead(input.speed_radps);
+        self.refresh_response(input, n);
+        let tick = self.tick_learning(input, n);
+        for k in 0..n {
+            let applied = self.fade_applied(k, input);
+            if !tick.learns || self.backed_off[k] {
+                continue;
+            }
+            self.learn_harmonic(k, input, &tick, applied);
+        }
         let c = &self.config;
-        // Lead for the current loop's lag (1 / wc) and 1.5 PWM periods of sampling and update.
-        let lead_s = 1.0 / (core::f32::consts::TAU * c.current_loop_bandwidth_hz) + 1.5 / c.current_loop_hz;
-        let lead_turns = input.speed_radps * lead_s * (1.0 / core::f32::consts::TAU);
-        self.lead = (lead_turns * 4_294_967_296.0) as i32 as u32;
+        self.current =
+            HarmonicCurrent::from_table(&self.applied, c.torque_constant_nm_per_a(), &[false; MAX_HARMONICS]);
+    }
 
-        // Refresh one harmonic's model response per tick (round robin), on
-        // the observer's EA where there is one.
+    /// The angle lead of the 16 kHz path at `speed_radps` (rad/s): the
+    /// current loop's lag (1 / wc) and 1.5 PWM periods of sampling and update.
+    fn update_lead(&mut self, speed_radps: f32) {
+        let c = &self.config;
+        let lead_s = 1.0 / (core::f32::consts::TAU * c.current_loop_bandwidth_hz) + 1.5 / c.current_loop_hz;
+        let lead_turns = speed_radps * lead_s * (1.0 / core::f32::consts::TAU);
+        self.lead = (lead_turns * 4_294_967_296.0) as i32 as u32;
+    }
+
+    /// Refreshes one of the `n` harmonics' model response per tick (round
+    /// robin), on the observer's EA where there is one.
+    fn refresh_response(&mut self, input: &LearningInput, n: usize) {
+        let c = &self.config;
         let mut chain = self.chain;
         if let Some(ea) = input.rope_ea_n.filter(|ea| ea.is_finite() && *ea > 0.0) {
             chain.rope_ea_n = ea;
@@ -372,7 +392,11 @@ impl RippleCompensator {
             _ => response.speed_error_per_torque,
         };
         self.ticks = self.ticks.wrapping_add(1);
+    }
 
+    /// What this tick learns from, the same for all `n` harmonics.
+    fn tick_learning(&self, input: &LearningInput, n: usize) -> TickLearning {
+        let c = &self.config;
         let learning_speed = LEARNING_SPEED_FRACTION * c.rated_shaft_speed_radps();
         let fast_enough = input.speed_radps > learning_speed || input.speed_radps < -learning_speed;
         let (error, floor) = match (self.strategy, input.car_acceleration_mps2) {
@@ -384,96 +408,122 @@ impl RippleCompensator {
         let refreshed_all = self.ticks >= n as u32;
         let speed_abs = if input.speed_radps < 0.0 { -input.speed_radps } else { input.speed_radps };
         let cycles_per_tick = speed_abs * (1.0 / core::f32::consts::TAU) / c.speed_loop_hz;
-        for k in 0..n {
-            // Applied coefficient for this tick, faded in at the start and
-            // out on back-off: a step in a harmonic current is a step in the
-            // current loop's voltage, which the back-EMF check would see.
-            let base = match self.strategy {
-                Strategy::Table => limit(self.table.torque_nm[k], self.limit_nm[k]),
-                Strategy::Adaptive | Strategy::CarObserver => self.adaptive.torque_nm[k],
-                Strategy::Learning => self.learning.torque_at(k, input.position_counts, c.encoder_counts_per_rev),
-                Strategy::Off => Complex::ZERO,
-            };
-            let fade_step = 1.0 / (FADE_S * c.speed_loop_hz);
-            self.fade[k] = if self.backed_off[k] {
-                if self.fade[k] > fade_step {
-                    self.fade[k] - fade_step
-                } else {
-                    0.0
-                }
-            } else {
-                (self.fade[k] + fade_step).min(1.0)
-            };
-            let applied = base.scale(self.fade[k]);
-            self.applied.torque_nm[k] = applied;
-            if !fast_enough || !refreshed_all || !have_error || self.backed_off[k] {
-                continue;
-            }
-            let (s, co) = sin_cos(input.shaft_angle.wrapping_mul(self.applied.orders[k] as u32));
-            let demodulated = Complex::new(co.to_num::<f32>(), -s.to_num::<f32>()).scale(2.0 * error);
-            if !demodulated.is_finite() {
-                continue;
-            }
-            // Averages span at least LMS_CYCLES (learning) and AVERAGING_CYCLES (back-off) periods of the order.
-            let cycles = cycles_per_tick * self.applied.orders[k] as f32;
-            let step = LMS_STEP.min(cycles * (1.0 / LMS_CYCLES));
-            // Strategy 4 learns four times slower: its error is an estimate with a loop of its own.
-            let step = if self.strategy == Strategy::CarObserver { 0.25 * step } else { step };
-            let averaging = RESIDUAL_AVERAGING.min(cycles * (1.0 / AVERAGING_CYCLES));
-            self.demodulated[k] = self.demodulated[k] + (demodulated - self.demodulated[k]).scale(averaging);
-            let g = self.response[k];
-            // An order the error hardly responds to is not learned at all:
-            // whatever it would learn would be the bias of the model there.
-            // Strategy 4 learns only orders the car answers at least `floor` to,
-            // below CAR_OBSERVER_MAX_HZ: above, the observer's car estimate
-            // follows its own ripple states, and learning from it closes a
-            // loop that runs away (36th order, EA x0.8, 33 kg).
-            let car = self.strategy == Strategy::CarObserver;
-            let fraction = if car { 1.0 } else { UNOBSERVABLE_FRACTION };
-            let too_fast = car && cycles * c.speed_loop_hz > CAR_OBSERVER_MAX_HZ;
-            if too_fast || g.norm_sqr() < fraction * fraction * floor * floor {
-                continue;
-            }
-            // Regularised inverse: a response below the floor learns slower instead of amplifying noise.
-            let shrunk = g.conj() * demodulated.scale(1.0 / (g.norm_sqr() + floor * floor));
-            match self.strategy {
-                Strategy::Adaptive | Strategy::CarObserver => {
-                    let next = self.adaptive.torque_nm[k] - shrunk.scale(step);
-                    // A coefficient that runs into its limit is not converging: back off.
-                    if next.norm_sqr() > self.limit_nm[k] * self.limit_nm[k] && self.back_off_enabled {
-                        self.backed_off[k] = true;
-                        continue;
-                    }
-                    self.adaptive.torque_nm[k] = limit(next, self.limit_nm[k]);
-                }
-                Strategy::Learning => self.learning.accumulate(
-                    k,
-                    input.position_counts,
-                    c.encoder_counts_per_rev,
-                    g.conj() * demodulated,
-                    g.norm_sqr(),
-                ),
-                _ => {}
-            }
-            // Worse than without? |T + U| against |T| = |R - U|, R the unbiased residual.
-            let residual = self.demodulated[k] / g;
-            self.residual_nm[k] = residual;
-            let with = residual.norm_sqr();
-            let without = (residual - applied).norm_sqr();
-            // Judged only where the response is strong enough for the estimate to mean something.
-            let judged = g.norm_sqr() >= floor * floor;
-            if self.back_off_enabled && judged && applied != Complex::ZERO && with > BACK_OFF_RATIO_SQ * without {
-                self.worse_ticks[k] = self.worse_ticks[k].saturating_add(1);
-                if self.worse_ticks[k] >= BACK_OFF_TICKS {
-                    self.backed_off[k] = true;
-                }
-            } else {
-                self.worse_ticks[k] = self.worse_ticks[k].saturating_sub(1);
-            }
-        }
-        self.current =
-            HarmonicCurrent::from_table(&self.applied, c.torque_constant_nm_per_a(), &[false; MAX_HARMONICS]);
+        TickLearning { learns: fast_enough && refreshed_all && have_error, error, floor, cycles_per_tick }
     }
+
+    /// Harmonic `k`'s applied coefficient for this tick, N m, faded in at
+    /// the start and out on back-off: a step in a harmonic current is a step
+    /// in the current loop's voltage, which the back-EMF check would see.
+    fn fade_applied(&mut self, k: usize, input: &LearningInput) -> Complex {
+        let c = &self.config;
+        let base = match self.strategy {
+            Strategy::Table => limit(self.table.torque_nm[k], self.limit_nm[k]),
+            Strategy::Adaptive | Strategy::CarObserver => self.adaptive.torque_nm[k],
+            Strategy::Learning => self.learning.torque_at(k, input.position_counts, c.encoder_counts_per_rev),
+            Strategy::Off => Complex::ZERO,
+        };
+        let fade_step = 1.0 / (FADE_S * c.speed_loop_hz);
+        self.fade[k] = if self.backed_off[k] {
+            if self.fade[k] > fade_step {
+                self.fade[k] - fade_step
+            } else {
+                0.0
+            }
+        } else {
+            (self.fade[k] + fade_step).min(1.0)
+        };
+        let applied = base.scale(self.fade[k]);
+        self.applied.torque_nm[k] = applied;
+        applied
+    }
+
+    /// Harmonic `k` learns from this tick's error (`tick`), the coefficient
+    /// `applied` (N m) in force; then the back-off judges it.
+    fn learn_harmonic(&mut self, k: usize, input: &LearningInput, tick: &TickLearning, applied: Complex) {
+        let c = &self.config;
+        let (error, floor) = (tick.error, tick.floor);
+        let (s, co) = sin_cos(input.shaft_angle.wrapping_mul(self.applied.orders[k] as u32));
+        let demodulated = Complex::new(co.to_num::<f32>(), -s.to_num::<f32>()).scale(2.0 * error);
+        if !demodulated.is_finite() {
+            return;
+        }
+        // Averages span at least LMS_CYCLES (learning) and AVERAGING_CYCLES (back-off) periods of the order.
+        let cycles = tick.cycles_per_tick * self.applied.orders[k] as f32;
+        let step = LMS_STEP.min(cycles * (1.0 / LMS_CYCLES));
+        // Strategy 4 learns four times slower: its error is an estimate with a loop of its own.
+        let step = if self.strategy == Strategy::CarObserver { 0.25 * step } else { step };
+        let averaging = RESIDUAL_AVERAGING.min(cycles * (1.0 / AVERAGING_CYCLES));
+        self.demodulated[k] = self.demodulated[k] + (demodulated - self.demodulated[k]).scale(averaging);
+        let g = self.response[k];
+        // An order the error hardly responds to is not learned at all:
+        // whatever it would learn would be the bias of the model there.
+        // Strategy 4 learns only orders the car answers at least `floor` to,
+        // below CAR_OBSERVER_MAX_HZ: above, the observer's car estimate
+        // follows its own ripple states, and learning from it closes a
+        // loop that runs away (36th order, EA x0.8, 33 kg).
+        let car = self.strategy == Strategy::CarObserver;
+        let fraction = if car { 1.0 } else { UNOBSERVABLE_FRACTION };
+        let too_fast = car && cycles * c.speed_loop_hz > CAR_OBSERVER_MAX_HZ;
+        if too_fast || g.norm_sqr() < fraction * fraction * floor * floor {
+            return;
+        }
+        // Regularised inverse: a response below the floor learns slower instead of amplifying noise.
+        let shrunk = g.conj() * demodulated.scale(1.0 / (g.norm_sqr() + floor * floor));
+        match self.strategy {
+            Strategy::Adaptive | Strategy::CarObserver => {
+                let next = self.adaptive.torque_nm[k] - shrunk.scale(step);
+                // A coefficient that runs into its limit is not converging: back off.
+                if next.norm_sqr() > self.limit_nm[k] * self.limit_nm[k] && self.back_off_enabled {
+                    self.backed_off[k] = true;
+                    return;
+                }
+                self.adaptive.torque_nm[k] = limit(next, self.limit_nm[k]);
+            }
+            Strategy::Learning => self.learning.accumulate(
+                k,
+                input.position_counts,
+                c.encoder_counts_per_rev,
+                g.conj() * demodulated,
+                g.norm_sqr(),
+            ),
+            _ => {}
+        }
+        self.judge_back_off(k, g, floor, applied);
+    }
+
+    /// Worse than without? Harmonic `k` (loop response `g`, response floor
+    /// `floor`) with the coefficient `applied` (N m) in force: `|T + U|`
+    /// against `|T| = |R - U|`, `R` the unbiased residual; backed off after
+    /// [`BACK_OFF_TICKS`] ticks more worse than better.
+    fn judge_back_off(&mut self, k: usize, g: Complex, floor: f32, applied: Complex) {
+        let residual = self.demodulated[k] / g;
+        self.residual_nm[k] = residual;
+        let with = residual.norm_sqr();
+        let without = (residual - applied).norm_sqr();
+        // Judged only where the response is strong enough for the estimate to mean something.
+        let judged = g.norm_sqr() >= floor * floor;
+        if self.back_off_enabled && judged && applied != Complex::ZERO && with > BACK_OFF_RATIO_SQ * without {
+            self.worse_ticks[k] = self.worse_ticks[k].saturating_add(1);
+            if self.worse_ticks[k] >= BACK_OFF_TICKS {
+                self.backed_off[k] = true;
+            }
+        } else {
+            self.worse_ticks[k] = self.worse_ticks[k].saturating_sub(1);
+        }
+    }
+}
+
+/// What one speed-loop tick learns from, the same for every harmonic.
+struct TickLearning {
+    /// Fast enough, every response refreshed, and an error to learn from.
+    learns: bool,
+    /// The error the harmonics learn from: speed error, rad/s, or the
+    /// observer's car acceleration, m/s^2 (strategy 4).
+    error: f32,
+    /// Response below which an order learns slower, in the error's unit per N m.
+    floor: f32,
+    /// Shaft revolutions per speed-loop tick.
+    cycles_per_tick: f32,
 }
 
 #[cfg(test)]

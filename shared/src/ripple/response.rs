@@ -12,9 +12,8 @@
 
 use super::complex::Complex;
 use crate::config::DriveConfig;
-use crate::controller::POSITION_GAIN_PER_S;
 use crate::observer::ChainModel;
-use crate::speed_loop::speed_pi_gains;
+use crate::speed_loop::{speed_pi_gains, POSITION_GAIN_PER_S};
 
 /// Dynamic stiffness `(-w^2 m + j w c)` of a mass `m_kg` with viscous damping
 /// `c_kg_per_s` to ground, N/m.

@@ -1,0 +1,351 @@
+//! The link to the processor-in-the-loop target: the drive core compiled for
+//! the Cortex-M4F (`pil/`) running in QEMU's `mps2-an386`, one frame per PWM
+//! period over the emulated UART (a TCP socket on 127.0.0.1 that QEMU
+//! connects to). Frames are `drive_core::frame`, the code the target uses too.
+//!
+//! QEMU runs with `-icount shift=N`: every instruction advances the virtual
+//! clock by 2^N ns, and the target times each step with SysTick on the
+//! 25 MHz processor clock of the machine, so a step's instructions are its
+//! ticks times `40 ns / 2^N ns`.
+//!
+//! Every step is checked as it happens: a host build of the same controller
+//! (the shadow) takes the same inputs, and the target's outputs and
+//! telemetry digest must equal the shadow's bit for bit, or the run stops at
+//! that step with both printed. The telemetry the closed loop records is the
+//! shadow's, which the digest has shown to be the target's.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use drive_core::frame::{
+    command_result_from_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME,
+};
+use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame, TravelCommand};
+
+use crate::{corrupted_frame, DriveController, SimError};
+
+/// Processor clock of the MPS2 board in QEMU, which SysTick counts, Hz.
+pub const MPS2_SYSCLK_HZ: f64 = 25.0e6;
+
+/// Where the PIL target's ELF is built (`cargo build --release --target
+/// thumbv7em-none-eabihf` in `pil/`, which `scripts/test.sh` does).
+pub fn default_elf_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../pil/target/thumbv7em-none-eabihf/release/pil")
+}
+
+/// How to start the target.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PilOptions {
+    /// The target's ELF.
+    pub elf: PathBuf,
+    /// The QEMU executable.
+    pub qemu: PathBuf,
+    /// `-icount shift`: 2^shift ns of virtual time per instruction.
+    pub icount_shift: u32,
+    /// Longest wait for QEMU to connect or for one reply.
+    pub timeout: Duration,
+    /// File for QEMU's standard output and error (the defmt semihosting
+    /// stream and any emulator message); none discards them.
+    pub log: Option<PathBuf>,
+}
+
+impl Default for PilOptions {
+    fn default() -> Self {
+        Self {
+            elf: default_elf_path(),
+            qemu: PathBuf::from("qemu-system-arm"),
+            icount_shift: 5,
+            timeout: Duration::from_secs(20),
+            log: None,
+        }
+    }
+}
+
+/// Why the link failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PilError {
+    /// The ELF is not there.
+    #[error("PIL target {0} not found: build it with `cargo build --release --target thumbv7em-none-eabihf` in pil/ (scripts/test.sh does)")]
+    ElfMissing(PathBuf),
+    /// QEMU could not be started.
+    #[error("cannot start {qemu}: {source} (install it with `apt-get install -y qemu-system-arm`)")]
+    QemuMissing {
+        /// The executable tried.
+        qemu: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Socket or file error.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: &'static str,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// No connection or reply in time.
+    #[error("no {0} from the PIL target within the timeout (QEMU log has details if --log was given)")]
+    Timeout(&'static str),
+    /// A frame failed its checks.
+    #[error("bad frame from the PIL target: {0:?}")]
+    Frame(drive_core::frame::FrameError),
+    /// A valid frame of the wrong kind.
+    #[error("unexpected reply from the PIL target: {0:?}")]
+    Unexpected(Message),
+}
+
+impl From<PilError> for SimError {
+    fn from(error: PilError) -> Self {
+        SimError::Link(error.to_string())
+    }
+}
+
+/// The running target.
+pub struct PilTarget {
+    qemu: Child,
+    stream: TcpStream,
+    decoder: Decoder,
+    timeout: Duration,
+    icount_shift: u32,
+    reports: Vec<StepReport>,
+    shadow: Controller,
+}
+
+impl PilTarget {
+    /// Starts QEMU with the target and waits for its UART to connect; the
+    /// target is built for `drive` (the rig's parameters), which the host
+    /// shadow uses too.
+    pub fn launch(options: &PilOptions, drive: &DriveConfig) -> Result<Self, PilError> {
+        if !options.elf.is_file() {
+            return Err(PilError::ElfMissing(options.elf.clone()));
+        }
+        let listener =
+            TcpListener::bind("127.0.0.1:0").map_err(|source| PilError::Io { context: "bind 127.0.0.1", source })?;
+        let port = listener.local_addr().map_err(|source| PilError::Io { context: "local address", source })?.port();
+        let (stdout, stderr) = match &options.log {
+            Some(path) => {
+                let file =
+                    std::fs::File::create(path).map_err(|source| PilError::Io { context: "QEMU log", source })?;
+                let copy = file.try_clone().map_err(|source| PilError::Io { context: "QEMU log", source })?;
+                (Stdio::from(file), Stdio::from(copy))
+            }
+            None => (Stdio::null(), Stdio::null()),
+        };
+        let qemu = Command::new(&options.qemu)
+            .args(["-M", "mps2-an386", "-nographic", "-monitor", "none", "-chardev"])
+            .arg(format!("socket,id=uart0,host=127.0.0.1,port={port},nodelay=on"))
+            .args(["-serial", "chardev:uart0"])
+            .args(["-icount", &format!("shift={}", options.icount_shift)])
+            .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+            .arg(&options.elf)
+            .stdin(Stdio::null())
+            .stdout(stdout)
+            .stderr(stderr)
+            .spawn()
+            .map_err(|source| PilError::QemuMissing { qemu: options.qemu.clone(), source })?;
+        let mut target = PilTargetStarting { qemu: Some(qemu) };
+        listener.set_nonblocking(true).map_err(|source| PilError::Io { context: "listen", source })?;
+        let started = Instant::now();
+        let stream = loop {
+            match listener.accept() {
+                Ok((stream, _)) => break stream,
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                    if started.elapsed() > options.timeout {
+                        return Err(PilError::Timeout("UART connection"));
+                    }
+                    if let Some(Ok(Some(status))) = target.qemu.as_mut().map(|q| q.try_wait()) {
+                        return Err(PilError::Io {
+                            context: "QEMU exited before connecting",
+                            source: std::io::Error::other(status.to_string()),
+                        });
+                    }
+                    std::thread::sleep(Duration::from_millis(5));
+                }
+                Err(source) => return Err(PilError::Io { context: "accept", source }),
+            }
+        };
+        stream.set_nonblocking(false).map_err(|source| PilError::Io { context: "socket", source })?;
+        stream.set_nodelay(true).map_err(|source| PilError::Io { context: "socket", source })?;
+        stream.set_read_timeout(Some(options.timeout)).map_err(|source| PilError::Io { context: "socket", source })?;
+        Ok(Self {
+            qemu: target.qemu.take().expect("set above"),
+            stream,
+            decoder: Decoder::new(),
+            timeout: options.timeout,
+            icount_shift: options.icount_shift,
+            reports: Vec::new(),
+            shadow: Controller::new(drive),
+        })
+    }
+
+    /// Instructions per SysTick tick: `(1 / 25 MHz) / 2^shift ns`.
+    pub fn instructions_per_tick(&self) -> f64 {
+        1.0e9 / MPS2_SYSCLK_HZ / f64::from(1u32 << self.icount_shift)
+    }
+
+    /// The target's report of every step so far.
+    pub fn reports(&self) -> &[StepReport] {
+        &self.reports
+    }
+
+    /// Sends one message and waits for the reply.
+    pub fn exchange(&mut self, message: &Message) -> Result<Message, PilError> {
+        let mut frame = [0u8; MAX_FRAME];
+        let n = encode(message, &mut frame);
+        self.exchange_bytes(&frame[..n])
+    }
+
+    /// Sends raw bytes (a frame, possibly corrupted) and waits for the reply.
+    pub fn exchange_bytes(&mut self, frame: &[u8]) -> Result<Message, PilError> {
+        self.stream.write_all(frame).map_err(|source| PilError::Io { context: "send", source })?;
+        let started = Instant::now();
+        let mut buffer = [0u8; 256];
+        loop {
+            let count = match self.stream.read(&mut buffer) {
+                Ok(0) => {
+                    return Err(PilError::Io {
+                        context: "receive",
+                        source: std::io::Error::other("QEMU closed the connection"),
+                    })
+                }
+                Ok(count) => count,
+                Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                    return Err(PilError::Timeout("reply"))
+                }
+                Err(source) => return Err(PilError::Io { context: "receive", source }),
+            };
+            // One reply per request: a frame never arrives unasked, so the
+            // reply is complete when the decoder yields.
+            let mut reply = None;
+            for (i, &byte) in buffer[..count].iter().enumerate() {
+                if let Some(result) = self.decoder.push(byte) {
+                    if i + 1 != count {
+                        return Err(PilError::Unexpected(result.map_err(PilError::Frame)?));
+                    }
+                    reply = Some(result.map_err(PilError::Frame)?);
+                }
+            }
+            if let Some(reply) = reply {
+                return Ok(reply);
+            }
+            if started.elapsed() > self.timeout {
+                return Err(PilError::Timeout("reply"));
+            }
+        }
+    }
+}
+
+impl DriveController for PilTarget {
+    fn command_travel(&mut self, command: TravelCommand) -> Result<(), SimError> {
+        let host = self.shadow.command_travel(command);
+        let target = match self.exchange(&Message::Travel(command))? {
+            Message::Ack(code) => command_result_from_code(code),
+            other => return Err(PilError::Unexpected(other).into()),
+        };
+        if host != target {
+            return Err(SimError::Link(format!(
+                "travel command: the target answered {target:?}, the host build {host:?}"
+            )));
+        }
+        target.map_err(SimError::Refused)
+    }
+
+    fn step(&mut self, sensors: &SensorFrame) -> Result<ControlOutput, SimError> {
+        let report = match self.exchange(&Message::Sense(*sensors))? {
+            Message::Output(report) => report,
+            other => return Err(PilError::Unexpected(other).into()),
+        };
+        self.shadow_check(sensors, report)
+    }
+
+    /// Sends the frame with byte `byte_index` XOR `xor`: the target rejects
+    /// it ([`ACK_FRAME_REJECTED`], no step: `None`) or, if the corruption
+    /// still decodes, steps on what it decoded, as the shadow then does.
+    /// The sync bytes (0 and 1) cannot be corrupted here: the target would
+    /// see no frame at all and the host could not tell when to stop waiting.
+    fn step_corrupted(
+        &mut self,
+        sensors: &SensorFrame,
+        byte_index: usize,
+        xor: u8,
+    ) -> Result<Option<ControlOutput>, SimError> {
+        let mut frame = [0u8; MAX_FRAME];
+        let n = encode(&Message::Sense(*sensors), &mut frame);
+        if !(2..n).contains(&byte_index) {
+            return Err(SimError::Link(format!(
+                "frame corruption at byte {byte_index}: the PIL link corrupts bytes 2..{n} (after the sync pair)"
+            )));
+        }
+        frame[byte_index] ^= xor;
+        match self.exchange_bytes(&frame[..n])? {
+            Message::Ack(ACK_FRAME_REJECTED) => Ok(None),
+            Message::Output(report) => {
+                let decoded = corrupted_frame(sensors, byte_index, xor).ok_or_else(|| {
+                    SimError::Link("the target stepped on a frame the host codec rejects".to_string())
+                })?;
+                self.shadow_check(&decoded, report).map(Some)
+            }
+            other => Err(PilError::Unexpected(other).into()),
+        }
+    }
+}
+
+impl PilTarget {
+    /// Installs ripple compensation `strategy` with `table` on the target
+    /// and on the shadow alike ([`Controller::install_compensation`] with
+    /// the drive's chain model `chain`); the table keeps its first
+    /// [`drive_core::frame::COMPENSATION_HARMONICS`] harmonics, as the frame does.
+    pub fn install_compensation(
+        &mut self,
+        strategy: drive_core::ripple::Strategy,
+        table: &drive_core::ripple::harmonics::HarmonicTable,
+        chain: &drive_core::observer::ChainModel,
+    ) -> Result<(), PilError> {
+        let mut sent = *table;
+        sent.len = sent.len.min(drive_core::frame::COMPENSATION_HARMONICS);
+        match self.exchange(&Message::Compensation { strategy, table: sent })? {
+            Message::Ack(0) => {}
+            other => return Err(PilError::Unexpected(other)),
+        }
+        self.shadow.install_compensation(strategy, &sent, chain);
+        Ok(())
+    }
+
+    /// Steps the shadow on `sensors` and checks the target's `report` against it.
+    fn shadow_check(&mut self, sensors: &SensorFrame, report: StepReport) -> Result<ControlOutput, SimError> {
+        let host = self.shadow.step(sensors);
+        if !report.matches(&host) {
+            return Err(SimError::Link(format!(
+                "step {}: the target's output differs from the host build\n  inputs {sensors:?}\n  target {report:?}\n  host   {:?}",
+                self.reports.len(),
+                StepReport::new(&host, report.cost_ticks)
+            )));
+        }
+        self.reports.push(report);
+        Ok(host)
+    }
+}
+
+impl Drop for PilTarget {
+    fn drop(&mut self) {
+        let _ = self.qemu.kill();
+        let _ = self.qemu.wait();
+    }
+}
+
+/// QEMU while the target has not connected yet: killed if launching fails.
+struct PilTargetStarting {
+    qemu: Option<Child>,
+}
+
+impl Drop for PilTargetStarting {
+    fn drop(&mut self) {
+        if let Some(mut qemu) = self.qemu.take() {
+            let _ = qemu.kill();
+            let _ = qemu.wait();
+        }
+    }
+}

@@ -1,0 +1,377 @@
+//! The drive-agnostic counterpart of a travel: the nominal mechanics driven
+//! by what the rig's own drive did. The machine torque from the measured
+//! currents acts on the sheave together with the rig's torque ripple
+//! (angle-locked, paper 3.3); a slow tracking loop on the measured shaft
+//! angle keeps the model's rigid-body motion on the measured one (a torque
+//! integrated open loop drifts), and the sheave is held while the rig
+//! stands still. Nothing of the rig's drive is assumed: its gains, speed
+//! estimate, pre-torque and start and stop sequence are all in the
+//! recording.
+//!
+//! The ripple's phases are not in the rig file. Where the rig's speed loop
+//! rejects a ripple order, the currents carry its mirror image: the order's
+//! phase is then read from the measured torque's angle-locked line.
+
+use std::f64::consts::TAU;
+use std::ops::Range;
+
+use crate::error::{bail, Context, Result};
+
+use super::drive_law::{central_difference, SpeedController};
+use dsp::highpass_zero_phase;
+use plant::mechanics::Chain;
+use plant::ripple::RippleTorque;
+use plant::rope::{CAR, CW, DOF, SHEAVE};
+use plant::{ChainParams, ChainState};
+use rig_config::RigConfig;
+
+/// Bandwidth of the tracking loop on the measured shaft angle, Hz: well
+/// below the chain's first elastic mode (about 8 Hz and up on the reference
+/// rig), so that vibrations come from the torque, not from the tracking;
+/// high enough to hold the slow rigid-body motion, including what the rig's
+/// speed loop does against the first ripple order (about 1 Hz at rated
+/// speed), whose phase the model cannot know.
+pub const TRACKING_BANDWIDTH_HZ: f64 = 2.0;
+/// Damping ratio of the tracking loop.
+pub const TRACKING_DAMPING: f64 = 1.0;
+/// The measured angle is low-passed at this frequency before the tracking
+/// loop uses it, Hz (encoder quantisation would otherwise reach the torque).
+pub const TRACKING_REFERENCE_LOWPASS_HZ: f64 = 5.0;
+/// A ripple order's line in the measured torque counts as the drive's
+/// rejection of it (and gives its phase) when at least this fraction of the
+/// order's amplitude.
+pub const REJECTED_FRACTION: f64 = 0.3;
+
+/// What the torque-driven counterpart assumes where the recording is silent:
+/// the diagnosis runs it as given and with each moved, so that the gap's
+/// tolerance covers what these choices change.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrivenSettings {
+    /// Bandwidth of the tracking loop, Hz.
+    pub tracking_bandwidth_hz: f64,
+    /// Ripple phases read from the measured torque where the drive rejects
+    /// an order ([`ripple_matched_to_the_drive`]); `false`: the rig file's.
+    pub ripple_phases_from_torque: bool,
+    /// Added to every ripple order's phase, rad: the rig file gives no
+    /// phases, so the tolerance is taken over the phase circle.
+    pub ripple_phase_shift_rad: f64,
+    /// The rig drive's speed loop, where identified
+    /// ([`DrivenTravel::controller`]), answers the model's departures from
+    /// the rig's speed estimate: the measured torque plus
+    /// `-Kp de - Ki integral(de)`, `de` the model's estimate minus the
+    /// rig's. A resonance the drive holds down is held down in the model
+    /// too, where the measured torque alone would replay it open loop.
+    /// `false`: the measured torque alone.
+    pub speed_feedback: bool,
+}
+
+impl Default for DrivenSettings {
+    fn default() -> Self {
+        Self {
+            tracking_bandwidth_hz: TRACKING_BANDWIDTH_HZ,
+            ripple_phases_from_torque: true,
+            ripple_phase_shift_rad: 0.0,
+            speed_feedback: false,
+        }
+    }
+}
+
+impl DrivenSettings {
+    /// The settings moved within what the data cannot decide: tracking
+    /// bandwidth halved and doubled, ripple phases from the rig file and
+    /// turned by a quarter, a half and three quarters of a period.
+    pub fn alternatives() -> [Self; 7] {
+        let d = Self::default();
+        let turned = |quarters: f64| Self { ripple_phase_shift_rad: quarters * 0.25 * TAU, ..d };
+        [
+            Self { tracking_bandwidth_hz: 0.5 * d.tracking_bandwidth_hz, ..d },
+            Self { tracking_bandwidth_hz: 2.0 * d.tracking_bandwidth_hz, ..d },
+            Self { ripple_phases_from_torque: false, ..d },
+            turned(1.0),
+            turned(2.0),
+            turned(3.0),
+            Self { speed_feedback: true, ..d },
+        ]
+    }
+}
+
+/// The encoder's resolution as the recorded angle shows it: its smallest
+/// step between samples, rad (a tiny value for a smooth angle).
+pub fn encoder_step_rad(shaft_angle_rad: &[f64]) -> f64 {
+    let step =
+        shaft_angle_rad.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 1e-12).fold(f64::INFINITY, f64::min);
+    if step.is_finite() {
+        step
+    } else {
+        1e-12
+    }
+}
+
+/// Half-width of the window over which the shaft angle must change for the
+/// rig to count as moving, s.
+pub const STANDSTILL_WINDOW_S: f64 = 0.05;
+
+/// The samples in which the shaft turns, from the measured angle (rad) at
+/// `sample_rate_hz`: from the first to the last sample at which the angle
+/// changes over +-[`STANDSTILL_WINDOW_S`] by more than four of its smallest
+/// steps (the encoder's resolution) and at least 1e-4 rad. A drive's speed
+/// estimate lags; the encoder tells when the brake holds.
+pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<usize> {
+    let n = shaft_angle_rad.len();
+    let quantum = encoder_step_rad(shaft_angle_rad);
+    let threshold = (4.0 * quantum).max(1e-4);
+    let w = ((STANDSTILL_WINDOW_S * sample_rate_hz).round() as usize).max(1);
+    let moving =
+        |k: usize| (shaft_angle_rad[(k + w).min(n - 1)] - shaft_angle_rad[k.saturating_sub(w)]).abs() > threshold;
+    let first = (0..n).find(|&k| moving(k));
+    let last = (0..n).rev().find(|&k| moving(k));
+    match (first, last) {
+        (Some(a), Some(b)) => a..b + 1,
+        _ => 0..0,
+    }
+}
+
+/// What the counterpart needs of a travel recording, at one sample rate.
+pub struct DrivenTravel<'a> {
+    /// Car mass, kg.
+    pub m_car_kg: f64,
+    /// Counterweight mass, kg.
+    pub m_cw_kg: f64,
+    /// Counterweight-side rope length at the start, m.
+    pub lw_start_m: f64,
+    /// Machine torque from the measured currents, N m (positive lifts the car).
+    pub torque_nm: &'a [f64],
+    /// Measured shaft angle, rad (positive: car up).
+    pub shaft_angle_rad: &'a [f64],
+    /// The rig drive's own speed estimate, rad/s.
+    pub speed_estimate_radps: &'a [f64],
+    /// The rig drive's speed loop, when identified
+    /// ([`super::drive_law::identify_speed_controller`]).
+    pub controller: Option<SpeedController>,
+    /// Samples in which the rig moves ([`motion_from_angle`]; outside them
+    /// the brake holds the sheave).
+    pub motion: Range<usize>,
+    /// Samples of the constant-speed stage.
+    pub constant_speed: Range<usize>,
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+}
+
+/// The ripple of `rig` with each order's phase read from the measured
+/// torque's angle-locked line over the constant-speed stage where that
+/// line is at least [`REJECTED_FRACTION`] of the order's amplitude (the
+/// rig's speed loop rejects it: the currents carry `-A cos(n theta + phi)`);
+/// the rig file's phase elsewhere.
+pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> RippleTorque {
+    let mut ripple = RippleTorque::from_rig(&rig.ripple);
+    let stage = travel.constant_speed.clone();
+    let n = stage.len() as f64;
+    if n < 2.0 {
+        return ripple;
+    }
+    for h in &mut ripple.harmonics {
+        let (mut re, mut im) = (0.0, 0.0);
+        for k in stage.clone() {
+            let (s, c) = (h.mechanical_order * travel.shaft_angle_rad[k]).sin_cos();
+            re += travel.torque_nm[k] * c;
+            im -= travel.torque_nm[k] * s;
+        }
+        let (re, im) = (2.0 * re / n, 2.0 * im / n);
+        if re.hypot(im) >= REJECTED_FRACTION * h.amplitude_nm {
+            h.phase_rad = (-im).atan2(-re);
+        }
+    }
+    ripple
+}
+
+/// The rig drive's speed estimate of the model's shaft, as the identified
+/// estimate's dead time and lag make it, and the integral of its departure
+/// from the rig's estimate.
+struct ModelEstimate {
+    /// The estimate, rad/s.
+    estimate_radps: f64,
+    /// Integral of (model's estimate - rig's estimate), rad.
+    departure_integral_rad: f64,
+    /// The model's shaft speeds within the dead time, rad/s.
+    speeds: std::collections::VecDeque<f64>,
+    /// Per-sample decay of the estimate's first-order lag.
+    decay: f64,
+}
+
+impl ModelEstimate {
+    fn new(controller: &SpeedController, fs: f64, start_radps: f64) -> Self {
+        let decay = if controller.estimate_lag_s > 0.0 { (-1.0 / (fs * controller.estimate_lag_s)).exp() } else { 0.0 };
+        let dead_samples = (controller.estimate_delay_s * fs).round() as usize;
+        Self {
+            estimate_radps: start_radps,
+            departure_integral_rad: 0.0,
+            speeds: std::collections::VecDeque::from(vec![start_radps; dead_samples + 1]),
+            decay,
+        }
+    }
+
+    /// At standstill: the estimate is the rig's, nothing departs.
+    fn hold(&mut self, rig_estimate_radps: f64) {
+        self.estimate_radps = rig_estimate_radps;
+        self.departure_integral_rad = 0.0;
+        self.speeds.iter_mut().for_each(|v| *v = 0.0);
+    }
+
+    /// One sample of `h` s: the model's shaft speed in, the departure from
+    /// the rig's estimate integrated.
+    fn advance(&mut self, shaft_speed_radps: f64, rig_estimate_radps: f64, h: f64) {
+        self.speeds.push_back(shaft_speed_radps);
+        let speed = self.speeds.pop_front().unwrap_or(0.0);
+        self.departure_integral_rad += (self.estimate_radps - rig_estimate_radps) * h;
+        self.estimate_radps = self.decay * self.estimate_radps + (1.0 - self.decay) * speed;
+    }
+}
+
+/// One classical Runge-Kutta step of `h` s from `state`; `deriv(s, frac)`
+/// is the state's rate at the fraction `frac` of the step.
+fn rk4_step(state: &ChainState, h: f64, deriv: impl Fn(&ChainState, f64) -> ChainState) -> ChainState {
+    let add = |s: &ChainState, d: &ChainState, f: f64| {
+        let mut o = *s;
+        for i in 0..DOF {
+            o.position_m[i] += f * d.position_m[i];
+            o.velocity_mps[i] += f * d.velocity_mps[i];
+        }
+        o
+    };
+    let k1 = deriv(state, 0.0);
+    let k2 = deriv(&add(state, &k1, 0.5 * h), 0.5);
+    let k3 = deriv(&add(state, &k2, 0.5 * h), 0.5);
+    let k4 = deriv(&add(state, &k3, h), 1.0);
+    let mut next = *state;
+    for i in 0..DOF {
+        next.position_m[i] +=
+            h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
+        next.velocity_mps[i] +=
+            h / 6.0 * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
+    }
+    next
+}
+
+/// Car and counterweight accelerations (m/s^2, positive up) of the nominal
+/// chain of `rig` driven by the measured torque of `travel` plus the ripple
+/// (RK4, one step per sample, the torque linear between samples).
+pub fn torque_driven_accelerations(
+    rig: &RigConfig,
+    travel: &DrivenTravel,
+    settings: &DrivenSettings,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
+    if n < 2 {
+        bail!("the travel has {n} samples; expected at least 2");
+    }
+    let fs = travel.sample_rate_hz;
+    let r = rig.mechanics.sheave_radius_m;
+    let reference = tracking_reference_m(&travel.shaft_angle_rad[..n], fs, r)?;
+    let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
+    params.m_cw_kg = travel.m_cw_kg;
+    let chain = Chain::new(params, travel.lw_start_m);
+    let mut ripple = if settings.ripple_phases_from_torque {
+        ripple_matched_to_the_drive(rig, travel)
+    } else {
+        RippleTorque::from_rig(&rig.ripple)
+    };
+    ripple.harmonics.iter_mut().for_each(|h| h.phase_rad += settings.ripple_phase_shift_rad);
+    let gains = |per_kg: f64, bandwidth_hz: f64| {
+        let wb = TAU * bandwidth_hz;
+        (per_kg * wb * wb, per_kg * 2.0 * TRACKING_DAMPING * wb)
+    };
+    // Accelerations per metre and per metre per second of error.
+    let tracking = gains(1.0, settings.tracking_bandwidth_hz);
+    let h = 1.0 / fs;
+    let theta0 = travel.shaft_angle_rad[0];
+    let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
+    // Accelerations at sample k + frac. While the rig moves, the tracking loop
+    // acts on the rigid-body coordinate (the mass-weighted mean of the
+    // chain's displacements) as a force spread in proportion to mass: it
+    // moves the rigid-body mode alone and neither drives nor damps the
+    // elastic modes. At standstill the brake holds the sheave (rigid, as in
+    // the nominal plant).
+    // The rig drive's answer to the model's speed where it departs from
+    // the rig's: `-Kp de - Ki integral(de)`, `de` the model's estimate
+    // minus the rig's.
+    let deriv = |s: &ChainState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64)| {
+        let j = (k + 1).min(n - 1);
+        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k])
+            - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
+            - feedback.ki_nm_per_rad * departure_integral;
+        let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
+        let theta = theta0 + s.position_m[SHEAVE] / r;
+        let shaft = torque + ripple.torque_nm(theta);
+        let a = if travel.motion.contains(&k) {
+            let masses = chain.params.masses_kg(chain.counterweight_side_length_m(s));
+            let total: f64 = masses.iter().sum();
+            let mean = |x: &[f64; DOF]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
+            let (kp, kd) = tracking;
+            let body = kp * (u - mean(&s.position_m)) + kd * (v - mean(&s.velocity_mps));
+            let mut a = chain.acceleration_mps2(s, shaft, false);
+            a.iter_mut().for_each(|a| *a += body);
+            a
+        } else {
+            chain.acceleration_mps2(s, shaft, true)
+        };
+        ChainState { position_m: s.velocity_mps, velocity_mps: a }
+    };
+    let mut state = ChainState::default();
+    let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut estimate = ModelEstimate::new(&feedback, fs, travel.speed_estimate_radps[0]);
+    for k in 0..n {
+        if !travel.motion.contains(&k) {
+            state.velocity_mps[SHEAVE] = 0.0;
+            estimate.hold(travel.speed_estimate_radps[k]);
+        }
+        let e = (estimate.estimate_radps, estimate.departure_integral_rad);
+        let a = deriv(&state, k, 0.0, e).velocity_mps;
+        car.push(a[CAR]);
+        cw.push(-a[CW]);
+        if k + 1 == n {
+            break;
+        }
+        state = rk4_step(&state, h, |s, frac| deriv(s, k, frac, e));
+        estimate.advance(state.velocity_mps[SHEAVE] / r, travel.speed_estimate_radps[k], h);
+        if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
+            bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
+        }
+    }
+    Ok((car, cw))
+}
+
+/// The tracking loop's reference: the measured sheave-edge travel (m) from
+/// the start, low-passed at [`TRACKING_REFERENCE_LOWPASS_HZ`], and its rate
+/// (m/s, central differences).
+fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> Result<(Vec<f64>, Vec<f64>)> {
+    let theta0 = shaft_angle_rad[0];
+    let relative: Vec<f64> = shaft_angle_rad.iter().map(|a| (a - theta0) * r).collect();
+    let high = highpass_zero_phase(&relative, fs, TRACKING_REFERENCE_LOWPASS_HZ)
+        .context("low-passing the measured shaft angle")?;
+    let u: Vec<f64> = relative.iter().zip(&high).map(|(a, h)| a - h).collect();
+    let v = central_difference(&u, fs);
+    Ok((u, v))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_motion_is_where_the_encoder_turns() {
+        // At rest 1 s, turning at 2 rad/s for 2 s, at rest 1 s; an encoder of
+        // 16384 counts per revolution.
+        let fs = 1000.0;
+        let q = TAU / 16384.0;
+        let angle: Vec<f64> = (0..4000)
+            .map(|k| {
+                let t = (k as f64 / fs - 1.0).clamp(0.0, 2.0);
+                ((2.0 * t) / q).floor() * q
+            })
+            .collect();
+        let m = motion_from_angle(&angle, fs);
+        // Within the window (50 ms) and the four-count threshold of the edges.
+        assert!(m.start >= 945 && m.start <= 1005, "{m:?}");
+        assert!(m.end >= 2995 && m.end <= 3055, "{m:?}");
+    }
+}

@@ -1,0 +1,928 @@
+//! The sim-to-real gap diagnosis (`host-sim gap`): where a dataset departs
+//! from the nominal model, which unmodelled effect of the library
+//! (`plant::effects`) explains it, and how much of the gap it removes on
+//! recordings held out from its fit.
+//!
+//! 1. [`calibrate`]: EA, guide and sheave damping identified from the data.
+//! 2. [`simulate`] (closed loop) and [`replay`] (measured shaft motion into
+//!    the mechanics) of every recording with the calibrated nominal model.
+//! 3. [`measure`]: the gap in cells of channel x travel phase x band,
+//!    located along the signal chain, in time and in frequency ([`locate`]).
+//! 4. [`attribute`]: every effect fitted and cross-validated.
+//! 5. The verdict: `nominal`, `explained` or `unexplained` ([`report`]).
+//!
+//! The paper's identification, which the calibration uses and `host-sim
+//! identify` reports, is here too, because it needs the plant model:
+//! [`identify`] (Eqn 9, 11-13), [`identify_dataset`] (over a dataset) and
+//! [`travel_signals`] (shaft angle, rope length, torque balance of a travel).
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate is the last step: it reads recordings
+//! (`recording`), analyses them (`dsp`) and simulates their counterparts on
+//! the plant in closed loop (`plant`, `closed-loop`); nothing upstream
+//! depends on it.
+
+#![warn(missing_docs)]
+
+pub mod acquisition;
+pub mod attribute;
+pub mod calibrate;
+pub mod drive_law;
+pub mod driven;
+pub mod error;
+pub mod identify;
+pub mod identify_dataset;
+pub mod locate;
+pub mod measure;
+pub mod replay;
+pub mod report;
+pub mod signals;
+pub mod simulate;
+pub mod spectra;
+pub mod travel_signals;
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+pub use error::DiagnosisError;
+
+use crate::error::{bail, Result};
+use crate::identify_dataset::LeftOut;
+use attribute::{attribute, Candidate, Lab, Target};
+use calibrate::{calibrate, Calibration};
+use locate::{locate, Location};
+use measure::{cell_gaps, gap_of_cells, CellGap, GapValue};
+use plant::effects::{EffectKind, Effects};
+use plant::free_decay::eqn9_first_frequency_hz;
+use recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
+use rig_config::RigConfig;
+use signals::{chain_signals, decimation_factor, ChainSignals};
+use simulate::{model_step_s, simulate_counterpart};
+use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
+
+/// Largest nominal excess gap (dB, mean over the recordings) that the
+/// verdict still calls `nominal`.
+pub const NOMINAL_EXCESS_DB: f64 = 0.15;
+/// Smallest held-out shrink of the gap for `explained`.
+pub const EXPLAINED_SHRINK: f64 = 0.7;
+
+/// The verdict.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// The nominal model explains the data to the noise level.
+    Nominal,
+    /// An effect of the library (or a pair) explains the gap.
+    Explained,
+    /// No candidate shrinks the held-out gap enough.
+    Unexplained,
+}
+
+/// Largest RMS gap (dB) of the torque at standstill (start and stop cells)
+/// between the recording and the project's drive in closed loop for which
+/// the rig is taken to run the project's drive.
+pub const DRIVE_MISMATCH_DB: f64 = 6.0;
+
+/// On a rig that is not the project's, a free decay's gap is taken up to
+/// this multiple of its first natural frequency (Eqn 9): the decay tests the
+/// first mode (Eqn 9, 11); the rope's own modes above it ring as the test's
+/// release and the rope's make excite them, which the nominal model does not
+/// claim to know.
+pub const DECAY_TOP_MODE_FACTOR: f64 = 4.0;
+
+/// On a rig that is not the project's, band cells are compared up to this
+/// fraction of the recording's sample rate: its data acquisition's
+/// anti-alias filter may already act above (the measurement format does not
+/// promise a flat response up to Nyquist).
+pub const FOREIGN_TOP_FRACTION: f64 = 0.2;
+/// ... and up to this frequency, Hz: the torque from currents sampled by
+/// the data acquisition stands for the shaft's only below the current
+/// loop's bandwidth (a few hundred Hz on a commercial drive); above it the
+/// inverter's switching ripple, aliased, drives the torque-driven model
+/// where the rig's shaft never saw it. The car frame's first mode (235 Hz)
+/// stays inside.
+pub const FOREIGN_TOP_HZ: f64 = 500.0;
+
+/// What the diagnosis may assume about the rig's drive.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DriveAssumption {
+    /// Decide from the data ([`DRIVE_MISMATCH_DB`]).
+    #[default]
+    Auto,
+    /// The rig runs the project's drive core.
+    Project,
+    /// The rig runs another drive.
+    Foreign,
+}
+
+/// The drive model of the travels' counterparts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DriveModel {
+    /// The project's drive core in closed loop with the plant: every
+    /// channel (torque, speed, accelerations) compared, the replay beside it.
+    Project,
+    /// Another drive: the mechanics driven by the measured torque
+    /// ([`driven`]); the accelerations compared.
+    Foreign,
+}
+
+/// The drive model used and why.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DriveFinding {
+    /// The model.
+    pub drive: DriveModel,
+    /// Why, in words.
+    pub reason: String,
+}
+
+/// The rig drive's speed loop as one travel shows it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RigSpeedLoop {
+    /// The travel.
+    pub recording: String,
+    /// The identified controller, when the data show a PI on the speed
+    /// estimate.
+    pub controller: Option<drive_law::SpeedController>,
+    /// Why not, otherwise.
+    pub refused: Option<String>,
+}
+
+/// Settings of a diagnosis.
+#[derive(Clone, Debug)]
+pub struct GapOptions {
+    /// What to assume about the rig's drive.
+    pub drive: DriveAssumption,
+    /// The effects to try (default: the whole library).
+    pub effects: Vec<EffectKind>,
+    /// See [`NOMINAL_EXCESS_DB`].
+    pub nominal_excess_db: f64,
+    /// See [`EXPLAINED_SHRINK`].
+    pub explained_shrink: f64,
+}
+
+impl Default for GapOptions {
+    fn default() -> Self {
+        Self {
+            drive: DriveAssumption::Auto,
+            effects: EffectKind::ALL.to_vec(),
+            nominal_excess_db: NOMINAL_EXCESS_DB,
+            explained_shrink: EXPLAINED_SHRINK,
+        }
+    }
+}
+
+/// One recording's gap.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RecordingGap {
+    /// Recording.
+    pub recording: String,
+    /// Kind: `travel` or `free_decay`.
+    pub kind: &'static str,
+    /// Against the calibrated nominal model, closed loop.
+    pub nominal: GapValue,
+    /// Excess gap of the nominal model, dB.
+    pub nominal_excess_db: f64,
+    /// Excess gap of the accelerations below 80 Hz, closed loop, dB.
+    pub closed_loop_acceleration_excess_db: Option<f64>,
+    /// The same for the replay (measured shaft motion into the mechanics), dB.
+    pub replay_acceleration_excess_db: Option<f64>,
+    /// Against the explaining model (when the verdict is `explained`).
+    pub explained: Option<GapValue>,
+    /// Excess gap with the explaining model, dB.
+    pub explained_excess_db: Option<f64>,
+}
+
+/// What `gap` found.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct GapReport {
+    /// The dataset.
+    pub dataset: String,
+    /// The verdict.
+    pub verdict: Verdict,
+    /// The drive the travels' model assumes, and why.
+    pub drive: DriveFinding,
+    /// The rig drive's speed loop identified from each travel under another
+    /// drive ([`drive_law`]).
+    pub rig_speed_loops: Vec<RigSpeedLoop>,
+    /// Recordings not diagnosed, with the reason (the calibration's own
+    /// left-out recordings are in [`Calibration::skipped`]).
+    pub left_out: Vec<LeftOut>,
+    /// Why no effect was fitted, when the data cannot support the fit.
+    pub attribution_refused: Option<String>,
+    /// The explaining effect (or pair) when `explained`.
+    pub explained_by: Option<String>,
+    /// The gap measure, in words, with its unit.
+    pub gap_measure: String,
+    /// Mean excess gap of the calibrated nominal model over the recordings, dB.
+    pub nominal_excess_db: f64,
+    /// Mean noise gap of the recordings, dB.
+    pub noise_gap_db: f64,
+    /// Step 1.
+    pub calibration: Calibration,
+    /// Where the gap lies (nominal model).
+    pub location: Location,
+    /// Every effect (and pair) tried, best first.
+    pub ranking: Vec<Candidate>,
+    /// Per recording.
+    pub recordings: Vec<RecordingGap>,
+    /// Bands, `[lo, hi)` Hz, as the cell band indices use them.
+    pub bands_hz: Vec<(f64, f64)>,
+    /// Car-acceleration cells of the nominal model (the gap map before).
+    pub map_before: Vec<CellGap>,
+    /// The same with the explaining model (after).
+    pub map_after: Vec<CellGap>,
+    /// Wall-clock time of the diagnosis, s.
+    pub runtime_s: f64,
+    /// Simulations run.
+    pub simulations: usize,
+}
+
+/// Text of the gap measure for reports.
+pub const GAP_MEASURE: &str = "RMS over cells (channel x travel phase x third-octave band, 1 Hz - 1 kHz, each channel \
+weighted alike) of d = 10 log10(P_measured / (P_model + N)), P the mean power density of the cell and N the \
+measured noise density, in dB; the excess gap sqrt(gap^2 - noise^2) removes the scatter the measurement's own \
+noise causes (noise = RMS of 4.34/sqrt(K) sqrt(N(2S+N))/(S+N) dB over the cells). Phase-free: a vibration \
+need not match in phase.";
+
+fn light_copy(recording: &Recording) -> Recording {
+    let columns = match recording.meta.kind {
+        RecordingKind::FreeDecay { .. } => {
+            recording.columns.iter().filter(|c| c.name == ACC_CAR || c.name == TIME_S).cloned().collect()
+        }
+        RecordingKind::Travel { .. } => Vec::<Column>::new(),
+    };
+    Recording { meta: recording.meta.clone(), columns }
+}
+
+/// Time (s) at which the speed first reaches half its largest magnitude,
+/// interpolated between samples.
+fn half_speed_time_s(signals: &ChainSignals) -> Option<f64> {
+    let speed = signals.channel(signals::Channel::Speed)?;
+    let top = speed.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let half = 0.5 * top;
+    let k = speed.iter().position(|v| v.abs() >= half)?;
+    if k == 0 || top <= 0.0 {
+        return Some(0.0);
+    }
+    let (a, b) = (speed[k - 1].abs(), speed[k].abs());
+    let frac = if b > a { (half - a) / (b - a) } else { 0.0 };
+    Some((k as f64 - 1.0 + frac) / signals.sample_rate_hz)
+}
+
+/// Gives the model's run the measured phases, shifted by the time offset
+/// between the two runs (where the speed first reaches half its peak), and
+/// trims both so that every phase covers the same stretch of the travel in
+/// each: a phase's mean power then compares like with like.
+fn align_phases(measured: &mut ChainSignals, model: &mut ChainSignals) {
+    let offset_s = match (half_speed_time_s(measured), half_speed_time_s(model)) {
+        (Some(m), Some(s)) => m - s,
+        _ => 0.0,
+    };
+    let (fm, fs) = (measured.sample_rate_hz, model.sample_rate_hz);
+    let (len_m, len_s) = (measured.len(), model.len());
+    let mut model_phases = Vec::new();
+    for (phase, range) in measured.phases.iter_mut() {
+        let t0 = range.start as f64 / fm - offset_s;
+        let t1 = range.end as f64 / fm - offset_s;
+        // Clip to the model's run, then back to the measured one.
+        let c0 = t0.max(0.0);
+        let c1 = t1.min(len_s as f64 / fs);
+        if c1 <= c0 {
+            *range = range.start..range.start;
+            model_phases.push((*phase, 0..0));
+            continue;
+        }
+        let m0 = (((c0 + offset_s) * fm).round() as usize).min(len_m);
+        let m1 = (((c1 + offset_s) * fm).round() as usize).clamp(m0, len_m);
+        *range = m0..m1;
+        let n = ((m1 - m0) as f64 / fm * fs).round() as usize;
+        let s0 = ((c0 * fs).round() as usize).min(len_s);
+        model_phases.push((*phase, s0..(s0 + n).min(len_s)));
+    }
+    model.phases = model_phases;
+}
+
+/// One recording made ready for the gap: its measured chain signals and the
+/// nominal model's counterpart with its two perturbations.
+struct Prepared {
+    stem: String,
+    measured: ChainSignals,
+    nominal: ChainSignals,
+    perturbed: Vec<ChainSignals>,
+    /// The torque-driven model's response to the current probes' noise in
+    /// the measured torque (another draw of it), where the model is driven.
+    noise_response: Option<ChainSignals>,
+    /// The rig drive's speed loop as identified, or why not, where the
+    /// model is driven.
+    speed_loop: Option<Result<drive_law::SpeedController, String>>,
+    /// Simulations run: the nominal model, its perturbations, the
+    /// counterpart's alternatives and the noise response.
+    simulations: usize,
+}
+
+/// `signal` plus white Gaussian noise of one-sided density `density`
+/// (unit^2/Hz) at `sample_rate_hz`, seeded from `stem` (reproducible).
+fn with_white_noise(signal: &[f64], density: f64, sample_rate_hz: f64, stem: &str) -> Vec<f64> {
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+    let sigma = (density * 0.5 * sample_rate_hz).sqrt();
+    let Ok(normal) = rand_distr::Normal::new(0.0, sigma) else { return signal.to_vec() };
+    let seed = stem.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    signal.iter().map(|v| v + normal.sample(&mut rng)).collect()
+}
+
+/// `a - b`, channel by channel (same channels, lengths and phases).
+fn difference(a: &ChainSignals, b: &ChainSignals) -> ChainSignals {
+    let mut out = a.clone();
+    for ((_, x), (_, y)) in out.channels.iter_mut().zip(&b.channels) {
+        x.iter_mut().zip(y).for_each(|(x, y)| *x -= y);
+    }
+    out
+}
+
+/// The measured chain signals of every recording and, for the decision on
+/// the drive, the closed loop's nominal run of each (an error where it
+/// cannot run, e.g. the project's drive trips on the recording).
+fn measure_and_run_closed_loop(
+    rig: &RigConfig,
+    model: &RigConfig,
+    dataset: &[(String, Recording)],
+    left_out: &mut Vec<LeftOut>,
+) -> Vec<(usize, ChainSignals, Result<ChainSignals>)> {
+    let runs: Vec<Result<(ChainSignals, Result<ChainSignals>)>> = dataset
+        .par_iter()
+        .map(|(stem, recording)| {
+            let factor = decimation_factor(recording.meta.sample_rate_hz);
+            let measured = chain_signals(rig, recording, stem, factor, true)?;
+            let closed = simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
+            Ok((measured, closed))
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (i, run) in runs.into_iter().enumerate() {
+        match run {
+            Ok((measured, closed)) => out.push((i, measured, closed)),
+            Err(e) => left_out.push(LeftOut { recording: dataset[i].0.clone(), reason: format!("{e:#}") }),
+        }
+    }
+    out
+}
+
+/// RMS (dB) over the torque channel's start and stop cells of how far the
+/// closed loop's torque lies from the measured: the drive's own start and
+/// stop sequence (brake timing, pre-torque, torque ramps), which any other
+/// drive does its own way.
+fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> f64 {
+    let (mut measured, mut closed) = (measured.clone(), closed.clone());
+    align_phases(&mut measured, &mut closed);
+    let seg = Segmentation::of(&measured);
+    let bands = Bands::new(measured.sample_rate_hz, seg.segment_len);
+    let m = cell_powers(&[(&ChainSpectra::compute(&measured, &seg, &bands), 1.0)], &bands);
+    let c = cell_powers(&[(&ChainSpectra::compute(&closed, &Segmentation::of(&closed), &bands), 1.0)], &bands);
+    let cells = cell_gaps(&m, &measured.noise_density, &Vec::new(), &c);
+    let d: Vec<f64> = cells
+        .iter()
+        .filter(|c| {
+            c.channel == signals::Channel::Torque && matches!(c.phase, signals::Phase::Start | signals::Phase::Stop)
+        })
+        .map(|c| c.d_db * c.d_db)
+        .collect();
+    if d.is_empty() {
+        0.0
+    } else {
+        (d.iter().sum::<f64>() / d.len() as f64).sqrt()
+    }
+}
+
+/// Which drive the travels' model assumes, and why.
+fn decide_drive(
+    option: DriveAssumption,
+    dataset: &[(String, Recording)],
+    runs: &[(usize, ChainSignals, Result<ChainSignals>)],
+) -> DriveFinding {
+    let travels = runs.iter().filter(|(i, ..)| matches!(dataset[*i].1.meta.kind, RecordingKind::Travel { .. }));
+    match option {
+        DriveAssumption::Project => {
+            return DriveFinding { drive: DriveModel::Project, reason: "set by --drive project".into() }
+        }
+        DriveAssumption::Foreign => {
+            return DriveFinding { drive: DriveModel::Foreign, reason: "set by --drive foreign".into() }
+        }
+        DriveAssumption::Auto => {}
+    }
+    for (i, measured, closed) in travels {
+        let stem = &dataset[*i].0;
+        let reason = match closed {
+            Err(e) => format!("the project's drive cannot run travel `{stem}` ({e:#})"),
+            Ok(closed) => {
+                let d = start_stop_torque_gap_db(measured, closed);
+                if d <= DRIVE_MISMATCH_DB {
+                    continue;
+                }
+                format!(
+                    "the torque of travel `{stem}` at standstill (start and stop) lies {d:.1} dB (RMS) from the \
+                     project's drive (more than {DRIVE_MISMATCH_DB} dB): another start and stop sequence"
+                )
+            }
+        };
+        return DriveFinding { drive: DriveModel::Foreign, reason };
+    }
+    DriveFinding {
+        drive: DriveModel::Project,
+        reason: format!(
+            "the project's drive reproduces every travel's torque at standstill within {DRIVE_MISMATCH_DB} dB"
+        ),
+    }
+}
+
+/// The model's counterpart of a measured recording, with its two
+/// perturbations: the closed loop (the project's drive) or, for travels
+/// under another drive, the torque-driven mechanics ([`driven`]); the
+/// measured signals reduced to the channels the counterpart has.
+fn counterpart(
+    models: [&RigConfig; 3],
+    drive: DriveModel,
+    stem: &str,
+    recording: &Recording,
+    mut measured: ChainSignals,
+    closed: Result<ChainSignals>,
+) -> Result<Prepared> {
+    let driven = matches!(recording.meta.kind, RecordingKind::Travel { .. }) && drive == DriveModel::Foreign;
+    let torque = measured.channel(signals::Channel::Torque).map(<[f64]>::to_vec).unwrap_or_default();
+    let speed = measured.channel(signals::Channel::Speed).map(<[f64]>::to_vec).unwrap_or_default();
+    let torque_noise_density =
+        measured.noise_density.iter().find(|(c, _)| *c == signals::Channel::Torque).map_or(0.0, |(_, n)| *n);
+    if driven {
+        measured.channels.retain(|(c, _)| {
+            matches!(c, signals::Channel::CarAcceleration | signals::Channel::CounterweightAcceleration)
+        });
+        measured.noise_density.retain(|(c, _)| measured.channels.iter().any(|(m, _)| m == c));
+    }
+    let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
+    let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
+    let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
+        driven_counterpart(model, recording, &measured, (&torque, &speed, controller), settings)
+    };
+    let run_closed =
+        |model: &RigConfig| simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
+    let (nominal, perturbed) = if driven {
+        let settings = driven::DrivenSettings::default();
+        let mut perturbed = vec![run_driven(models[1], &settings)?, run_driven(models[2], &settings)?];
+        for alternative in driven::DrivenSettings::alternatives() {
+            perturbed.push(run_driven(models[0], &alternative)?);
+        }
+        (run_driven(models[0], &settings)?, perturbed)
+    } else {
+        (closed?, vec![run_closed(models[1])?, run_closed(models[2])?])
+    };
+    let noise_response = if driven {
+        let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
+        let run = driven_counterpart(
+            models[0],
+            recording,
+            &measured,
+            (&noisy, &speed, controller),
+            &driven::DrivenSettings::default(),
+        )?;
+        Some(difference(&run, &nominal))
+    } else {
+        None
+    };
+    let simulations = 1 + perturbed.len() + usize::from(noise_response.is_some());
+    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop, simulations })
+}
+
+/// The rig drive's speed controller identified from the travel
+/// `recording` ([`drive_law`]): its measured chain signals, torque and
+/// speed estimate, and the speed reference when recorded; the reason when
+/// the data do not show a PI on the speed estimate.
+fn rig_speed_controller(
+    model: &RigConfig,
+    recording: &Recording,
+    measured: &ChainSignals,
+    torque: &[f64],
+    speed: &[f64],
+) -> Result<drive_law::SpeedController, String> {
+    let factor = (recording.meta.sample_rate_hz / measured.sample_rate_hz).round().max(1.0) as usize;
+    let r = model.mechanics.sheave_radius_m;
+    let reference: Option<Vec<f64>> = recording
+        .column(recording::REF_SPEED)
+        .map(|c| c.values.iter().step_by(factor).map(|v| v / r).take(torque.len()).collect());
+    let constant_speed = measured
+        .phases
+        .iter()
+        .find(|(p, _)| *p == signals::Phase::Constant)
+        .ok_or("the travel has no constant-speed stage")?
+        .1
+        .clone();
+    let data = drive_law::ControllerData {
+        torque_nm: torque,
+        shaft_angle_rad: &measured.angle_rad,
+        speed_estimate_radps: speed,
+        reference_radps: reference.as_deref().filter(|r| r.len() == torque.len()),
+        motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
+        constant_speed,
+        sample_rate_hz: measured.sample_rate_hz,
+    };
+    drive_law::identify_speed_controller(&data).map_err(|e| format!("{e:#}"))
+}
+
+/// The torque-driven counterpart of the travel `recording` whose measured
+/// chain signals (with the torque and the angle) are `measured`.
+fn driven_counterpart(
+    model: &RigConfig,
+    recording: &Recording,
+    measured: &ChainSignals,
+    (torque, speed, controller): (&[f64], &[f64], Option<drive_law::SpeedController>),
+    settings: &driven::DrivenSettings,
+) -> Result<ChainSignals> {
+    let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+        bail!("not a travel");
+    };
+    let phase = |p: signals::Phase| measured.phases.iter().find(|(q, _)| *q == p).map(|(_, r)| r.clone());
+    let Some(constant) = phase(signals::Phase::Constant) else {
+        bail!("the travel has no constant-speed stage");
+    };
+    let travel = driven::DrivenTravel {
+        m_car_kg,
+        m_cw_kg,
+        lw_start_m,
+        torque_nm: torque,
+        shaft_angle_rad: &measured.angle_rad,
+        speed_estimate_radps: speed,
+        controller,
+        motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
+        constant_speed: constant,
+        sample_rate_hz: measured.sample_rate_hz,
+    };
+    let (car, cw) = driven::torque_driven_accelerations(model, &travel, settings)?;
+    // The rig's accelerometers high-pass what they record; the model's
+    // accelerations go through the same, its corner found from the data.
+    let fs = measured.sample_rate_hz;
+    let measured_car = measured.channel(signals::Channel::CarAcceleration).unwrap_or(&[]);
+    let corner_hz = acquisition::identify_highpass_hz(measured_car, &car, fs)?;
+    let (car, cw) =
+        (acquisition::first_order_highpass(&car, fs, corner_hz), acquisition::first_order_highpass(&cw, fs, corner_hz));
+    let mut channels = vec![(signals::Channel::CarAcceleration, car)];
+    if measured.channel(signals::Channel::CounterweightAcceleration).is_some() {
+        channels.push((signals::Channel::CounterweightAcceleration, cw));
+    }
+    Ok(ChainSignals {
+        sample_rate_hz: measured.sample_rate_hz,
+        channels,
+        phases: measured.phases.clone(),
+        noise_density: Vec::new(),
+        angle_rad: measured.angle_rad.clone(),
+    })
+}
+
+/// The measured cells of a recording from a rig with another drive, made
+/// comparable with the model: what that rig does not tell is taken out, and
+/// the torque-driven model's response to the torque's measurement noise
+/// (`noise_response`) is added, as the model gets the sensors' noise.
+fn foreign_rig_cells(
+    measured_cells: &mut spectra::CellPowers,
+    recording: &Recording,
+    bands: &Bands,
+    model: &RigConfig,
+    noise_response: Option<&ChainSignals>,
+) {
+    // At standstill, before and after the motion, another drive lifts and
+    // sets its brake against its own pre-torque and holding torque when it
+    // likes; the recording does not say when. Those transients are the
+    // drive's, not a gap of the mechanics: not compared. Its data
+    // acquisition's anti-alias filter may start at a fifth of the sample
+    // rate, and its torque stands for the shaft's only below the current
+    // loop's bandwidth: bands above are not compared.
+    if let Some(response) = noise_response {
+        let top_hz = (FOREIGN_TOP_FRACTION * recording.meta.sample_rate_hz).min(FOREIGN_TOP_HZ);
+        measured_cells.cells.retain(|((_, phase, band), _)| {
+            !matches!(phase, signals::Phase::Start | signals::Phase::Stop)
+                && (bands.is_line(*band) || bands.edges_hz[*band].1 <= top_hz)
+        });
+        let spectra = ChainSpectra::compute(response, &Segmentation::of(response), bands);
+        let extra = cell_powers(&[(&spectra, 1.0)], bands);
+        for (key, power) in measured_cells.cells.iter_mut() {
+            power.0 += extra.get(*key).map_or(0.0, |e| e.0);
+        }
+    }
+    if let RecordingKind::FreeDecay { mass_kg, rope_length_m } = recording.meta.kind {
+        let m = &model.mechanics;
+        let f1 = eqn9_first_frequency_hz(m.rope_ea_n, m.rope_mass_per_length_kg_per_m, rope_length_m, mass_kg);
+        measured_cells.cells.retain(|((_, _, band), _)| bands.edges_hz[*band].1 <= DECAY_TOP_MODE_FACTOR * f1);
+    }
+}
+
+/// What the diagnosis compares, per recording kept: the targets of the
+/// attribution, the measured signals, and where they came from.
+struct Compared {
+    /// One per recording kept.
+    targets: Vec<Target>,
+    /// The measured chain signals of each target.
+    measured: Vec<ChainSignals>,
+    /// Index of each target's recording in the dataset.
+    used: Vec<usize>,
+    /// The analysis bands (one sample rate for the dataset).
+    bands: Bands,
+    /// The rig drive's speed loop per travel under another drive.
+    rig_speed_loops: Vec<RigSpeedLoop>,
+    /// Simulations run for the nominal model, its perturbations and the
+    /// counterpart's alternatives.
+    simulations: usize,
+}
+
+/// One recording's comparison target from its prepared counterpart: the
+/// measured and simulated cells on the analysis bands, the tolerances from
+/// the perturbed runs; `bands_so_far` are the dataset's bands when an
+/// earlier recording set them. The reason in words when it cannot be
+/// compared.
+fn target_of(
+    prepared: Prepared,
+    recording: &Recording,
+    bands_so_far: Option<&Bands>,
+    drive: DriveModel,
+    model: &RigConfig,
+) -> std::result::Result<(Target, ChainSignals, Bands), String> {
+    let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, .. } = prepared;
+    let measured_for_perturbed = measured.clone();
+    align_phases(&mut measured, &mut nominal);
+    for p in perturbed.iter_mut() {
+        align_phases(&mut measured_for_perturbed.clone(), p);
+    }
+    let seg_measured = Segmentation::of(&measured);
+    let seg_model = Segmentation::of(&nominal);
+    let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len);
+    if bands_so_far.is_some_and(|b| b.edges_hz != bands.edges_hz) {
+        return Err(format!(
+            "its sample rate ({} Hz) gives other analysis bands than the dataset's first recording; \
+             expected one sample rate for the whole dataset",
+            recording.meta.sample_rate_hz
+        ));
+    }
+    let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
+    let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
+    let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
+    if drive == DriveModel::Foreign {
+        foreign_rig_cells(&mut measured_cells, recording, &bands, model, noise_response.as_ref());
+    }
+    let nominal_cells = cell_powers(&[(&nominal_spectra, 1.0)], &bands);
+    let perturbed_cells: Vec<_> = perturbed
+        .iter()
+        .map(|p| cell_powers(&[(&ChainSpectra::compute(p, &Segmentation::of(p), &bands), 1.0)], &bands))
+        .collect();
+    let tolerances = measure::tolerances(&measured_cells, &measured.noise_density, &nominal_cells, &perturbed_cells);
+    let group = match recording.meta.kind {
+        RecordingKind::Travel { m_car_kg, .. } => format!("{m_car_kg:.1} kg"),
+        RecordingKind::FreeDecay { mass_kg, .. } => format!("{mass_kg:.1} kg"),
+    };
+    let target = Target {
+        stem,
+        group,
+        recording: light_copy(recording),
+        measured: measured_cells,
+        noise: measured.noise_density.clone(),
+        tolerances,
+        segmentation: seg_model,
+        nominal: nominal_spectra,
+    };
+    Ok((target, measured, bands))
+}
+
+/// The comparison targets of every prepared recording; what cannot be
+/// compared goes to `left_out` with its reason.
+fn compared(
+    dataset: &[(String, Recording)],
+    prepared: Vec<(usize, Result<Prepared>)>,
+    drive: DriveModel,
+    model: &RigConfig,
+    left_out: &mut Vec<LeftOut>,
+) -> Option<Compared> {
+    let (mut targets, mut measured_all, mut used, mut rig_speed_loops) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut bands_all: Option<Bands> = None;
+    let mut simulations = 0;
+    for (i, prepared) in prepared {
+        let (stem, recording) = &dataset[i];
+        let prepared = match prepared {
+            Ok(p) => p,
+            Err(e) => {
+                left_out.push(LeftOut { recording: stem.clone(), reason: format!("{e:#}") });
+                continue;
+            }
+        };
+        simulations += prepared.simulations;
+        if let Some(found) = &prepared.speed_loop {
+            let (controller, refused) = match found {
+                Ok(c) => (Some(*c), None),
+                Err(reason) => (None, Some(reason.clone())),
+            };
+            rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused });
+        }
+        match target_of(prepared, recording, bands_all.as_ref(), drive, model) {
+            Ok((target, measured, bands)) => {
+                targets.push(target);
+                measured_all.push(measured);
+                used.push(i);
+                bands_all = Some(bands);
+            }
+            Err(reason) => left_out.push(LeftOut { recording: stem.clone(), reason }),
+        }
+    }
+    let bands = bands_all?;
+    Some(Compared { targets, measured: measured_all, used, bands, rig_speed_loops, simulations })
+}
+
+/// The nominal model's cells of every target and each recording's gap
+/// (with the project's drive, the replay's too).
+fn nominal_gaps(
+    model: &RigConfig,
+    dataset: &[(String, Recording)],
+    c: &Compared,
+    drive: DriveModel,
+) -> (Vec<Vec<CellGap>>, Vec<RecordingGap>) {
+    let bands = &c.bands;
+    let nominal_cells: Vec<Vec<CellGap>> = c
+        .targets
+        .iter()
+        .map(|t| cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&t.nominal, 1.0)], bands)))
+        .collect();
+    let replays: Vec<Option<Vec<CellGap>>> = c
+        .used
+        .par_iter()
+        .zip(c.measured.par_iter())
+        .zip(c.targets.par_iter())
+        .map(|((&i, measured), target)| {
+            let (stem, recording) = &dataset[i];
+            let project = drive == DriveModel::Project;
+            project.then(|| replay::replay_cells(model, recording, stem, measured, target, bands).ok()).flatten()
+        })
+        .collect();
+    let low_acc = |c: &&CellGap| {
+        c.channel.subsystem() == signals::Subsystem::Mechanical
+            && !bands.is_line(c.band)
+            && bands.edges_hz[c.band].1 <= 80.0
+    };
+    let recordings = c
+        .targets
+        .iter()
+        .zip(&nominal_cells)
+        .zip(&replays)
+        .map(|((t, cells), replay)| {
+            let nominal = gap_of_cells(cells.iter());
+            let travel = matches!(t.recording.meta.kind, RecordingKind::Travel { .. });
+            RecordingGap {
+                recording: t.stem.clone(),
+                kind: if travel { "travel" } else { "free_decay" },
+                nominal,
+                nominal_excess_db: nominal.excess_db(),
+                closed_loop_acceleration_excess_db: travel
+                    .then(|| gap_of_cells(cells.iter().filter(low_acc)).excess_db()),
+                replay_acceleration_excess_db: replay
+                    .as_ref()
+                    .map(|r| gap_of_cells(r.iter().filter(low_acc)).excess_db()),
+                explained: None,
+                explained_excess_db: None,
+            }
+        })
+        .collect();
+    (nominal_cells, recordings)
+}
+
+/// The explaining model (`effects`) on every target: each recording's gap
+/// after, and the car-acceleration cells of the map after.
+fn gap_after(model: &RigConfig, effects: &Effects, c: &Compared, recordings: &mut [RecordingGap]) -> Vec<CellGap> {
+    let bands = &c.bands;
+    let after: Vec<Option<Vec<CellGap>>> = c
+        .targets
+        .par_iter()
+        .map(|t| {
+            let s = simulate_counterpart(model, effects, &t.recording, &t.stem, model_step_s(model)).ok()?;
+            let spectra = ChainSpectra::compute(&s, &t.segmentation, bands);
+            Some(cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&spectra, 1.0)], bands)))
+        })
+        .collect();
+    for (r, cells) in recordings.iter_mut().zip(&after) {
+        if let Some(cells) = cells {
+            let g = gap_of_cells(cells.iter());
+            r.explained = Some(g);
+            r.explained_excess_db = Some(g.excess_db());
+        }
+    }
+    after.into_iter().flatten().flatten().filter(|c| c.channel == signals::Channel::CarAcceleration).collect()
+}
+
+/// The verdict from the nominal model's excess gap and the best candidate.
+fn verdict_of(is_nominal: bool, best: Option<&Candidate>, options: &GapOptions) -> Verdict {
+    if is_nominal {
+        Verdict::Nominal
+    } else if best.is_some_and(|b| b.held_out_shrink >= options.explained_shrink) {
+        Verdict::Explained
+    } else {
+        Verdict::Unexplained
+    }
+}
+
+/// Runs the diagnosis of `dataset` (named `name`) on `rig`; `progress`
+/// gets (step, runs done, runs planned). A recording that cannot be
+/// measured or simulated is left out with the reason; the verdict is given
+/// on the rest.
+pub fn diagnose(
+    rig: &RigConfig,
+    name: &str,
+    dataset: &[(String, Recording)],
+    options: &GapOptions,
+    progress: &(dyn Fn(&str, usize, usize) + Sync),
+) -> Result<GapReport> {
+    let started = Instant::now();
+    if dataset.is_empty() {
+        bail!("dataset {name}: no recordings");
+    }
+    progress("calibrating", 0, 1);
+    let (model, calibration) = calibrate(rig, dataset);
+    let perturbed_models = [calibration.perturbed(&model, 1.0), calibration.perturbed(&model, -1.0)];
+    let mut left_out = Vec::new();
+
+    progress("nominal model", 0, dataset.len());
+    let runs = measure_and_run_closed_loop(rig, &model, dataset, &mut left_out);
+    let drive = decide_drive(options.drive, dataset, &runs);
+    let prepared: Vec<(usize, Result<Prepared>)> = runs
+        .into_par_iter()
+        .map(|(i, measured, closed)| {
+            let (stem, recording) = &dataset[i];
+            let models = [&model, &perturbed_models[0], &perturbed_models[1]];
+            (i, counterpart(models, drive.drive, stem, recording, measured, closed))
+        })
+        .collect();
+    let Some(mut compared) = compared(dataset, prepared, drive.drive, &model, &mut left_out) else {
+        let reasons: Vec<String> = left_out.iter().map(|l| format!("`{}`: {}", l.recording, l.reason)).collect();
+        bail!("dataset {name}: no recording could be diagnosed: {}", reasons.join("; "));
+    };
+    progress("nominal model", dataset.len(), dataset.len());
+    let (nominal_cells, mut recordings) = nominal_gaps(&model, dataset, &compared, drive.drive);
+    let n = recordings.len() as f64;
+    let nominal_excess_db = recordings.iter().map(|r| r.nominal_excess_db).sum::<f64>() / n;
+    let noise_gap_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;
+    let location = locate(&nominal_cells, &recordings, &compared.bands, &compared.targets, &compared.measured);
+
+    // Attribution.
+    let planned = std::sync::atomic::AtomicUsize::new(0);
+    let report_progress = |done: usize, total: usize| {
+        planned.store(total, std::sync::atomic::Ordering::Relaxed);
+        progress("fitting effects", done, total);
+    };
+    let lab = Lab {
+        rig: &model,
+        targets: &compared.targets,
+        bands: &compared.bands,
+        reference_tension_n: calibration.reference_tension_n,
+        progress: &report_progress,
+    };
+    let is_nominal = nominal_excess_db <= options.nominal_excess_db;
+    let attribution_refused = (drive.drive == DriveModel::Foreign && !is_nominal).then(|| {
+        "the library's effects are fitted with the project's drive in the loop, and the rig's drive is another: \
+         the effect is not attributed (the location above still holds)"
+            .to_string()
+    });
+    let ranking = if options.effects.is_empty() || drive.drive == DriveModel::Foreign {
+        Vec::new()
+    } else {
+        attribute(&lab, &options.effects)
+    };
+    let best = ranking.first();
+    let verdict = verdict_of(is_nominal, best, options);
+    let mut simulations =
+        compared.simulations + planned.load(std::sync::atomic::Ordering::Relaxed) * compared.targets.len();
+    let explained_by = (verdict == Verdict::Explained).then(|| best.map(|b| b.name.clone())).flatten();
+    let mut map_after = Vec::new();
+    if let (Verdict::Explained, Some(best)) = (verdict, best) {
+        progress(&format!("checking {}", best.effects.summary()), 0, compared.targets.len());
+        map_after = gap_after(&model, &best.effects, &compared, &mut recordings);
+        simulations += compared.targets.len();
+    }
+    let map_before =
+        nominal_cells.into_iter().flatten().filter(|c| c.channel == signals::Channel::CarAcceleration).collect();
+    Ok(GapReport {
+        dataset: name.to_string(),
+        verdict,
+        drive,
+        rig_speed_loops: std::mem::take(&mut compared.rig_speed_loops),
+        left_out,
+        attribution_refused,
+        explained_by,
+        gap_measure: GAP_MEASURE.to_string(),
+        nominal_excess_db,
+        noise_gap_db,
+        calibration,
+        location,
+        ranking,
+        recordings,
+        bands_hz: compared.bands.edges_hz.clone(),
+        map_before,
+        map_after,
+        runtime_s: started.elapsed().as_secs_f64(),
+        simulations,
+    })
+}

@@ -1,0 +1,143 @@
+//! Step 2, second way: replay. The measured shaft motion drives the nominal
+//! mechanical model (the sheave's position is prescribed from the encoder
+//! angle; ropes, car and counterweight respond), which needs no knowledge of
+//! the rig's drive. When the replay matches the accelerations and the closed
+//! loop does not, the gap lies upstream of the sheave (drive or electrical);
+//! when the replay misses them too, it lies in the mechanics.
+
+use dsp::highpass_zero_phase;
+use plant::rope::{CAR, CW, DOF, SHEAVE};
+use plant::{Chain, ChainParams, ChainState};
+use rig_config::RigConfig;
+
+use crate::error::{bail, Result};
+
+/// The prescribed angle is low-passed at this frequency, Hz (encoder
+/// quantisation would otherwise drive the rope masses' modes); it keeps the
+/// ripple orders up to 72 x f_mech.
+pub const REPLAY_LOWPASS_HZ: f64 = 100.0;
+
+/// Car and counterweight accelerations (m/s^2, positive up) of the nominal
+/// chain of `rig` (car `m_car_kg`, counterweight `m_cw_kg`, starting at
+/// `lw_start_m`) when its sheave follows `shaft_angle_rad` (rad, sampled at
+/// `sample_rate_hz`, positive: car up).
+pub fn replay_accelerations(
+    rig: &RigConfig,
+    m_car_kg: f64,
+    m_cw_kg: f64,
+    lw_start_m: f64,
+    shaft_angle_rad: &[f64],
+    sample_rate_hz: f64,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let n = shaft_angle_rad.len();
+    if n < 2 {
+        bail!("replay: the shaft angle has {n} samples; expected at least 2");
+    }
+    let theta0 = shaft_angle_rad[0];
+    let relative: Vec<f64> = shaft_angle_rad.iter().map(|a| a - theta0).collect();
+    let high = highpass_zero_phase(&relative, sample_rate_hz, REPLAY_LOWPASS_HZ)?;
+    let r = rig.mechanics.sheave_radius_m;
+    let sheave: Vec<f64> = relative.iter().zip(&high).map(|(a, h)| (a - h) * r).collect();
+    let mut params = ChainParams::from_rig(rig, m_car_kg);
+    params.m_cw_kg = m_cw_kg;
+    let chain = Chain::new(params, lw_start_m);
+    let h = 1.0 / sample_rate_hz;
+    let mut state = ChainState::default();
+    state.position_m[SHEAVE] = sheave[0];
+    let mut car = Vec::with_capacity(n);
+    let mut cw = Vec::with_capacity(n);
+    let accel_at = |s: &ChainState| chain.acceleration_mps2(s, 0.0, false);
+    for k in 0..n {
+        let a = accel_at(&state);
+        car.push(a[CAR]);
+        cw.push(-a[CW]);
+        if k + 1 == n {
+            break;
+        }
+        let (u0, u1) = (sheave[k], sheave[k + 1]);
+        let v = (u1 - u0) / h;
+        let with_sheave = |s: &ChainState, frac: f64| {
+            let mut s = *s;
+            s.position_m[SHEAVE] = u0 + frac * (u1 - u0);
+            s.velocity_mps[SHEAVE] = v;
+            s
+        };
+        let deriv = |s: &ChainState| -> ChainState {
+            let a = accel_at(s);
+            let mut d = ChainState { position_m: s.velocity_mps, velocity_mps: a };
+            d.position_m[SHEAVE] = 0.0;
+            d.velocity_mps[SHEAVE] = 0.0;
+            d
+        };
+        let add = |s: &ChainState, d: &ChainState, f: f64| {
+            let mut o = *s;
+            for i in 0..DOF {
+                o.position_m[i] += f * d.position_m[i];
+                o.velocity_mps[i] += f * d.velocity_mps[i];
+            }
+            o
+        };
+        let s0 = with_sheave(&state, 0.0);
+        let k1 = deriv(&s0);
+        let k2 = deriv(&with_sheave(&add(&s0, &k1, 0.5 * h), 0.5));
+        let k3 = deriv(&with_sheave(&add(&s0, &k2, 0.5 * h), 0.5));
+        let k4 = deriv(&with_sheave(&add(&s0, &k3, h), 1.0));
+        let mut next = s0;
+        for i in 0..DOF {
+            next.position_m[i] +=
+                h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
+            next.velocity_mps[i] += h / 6.0
+                * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
+        }
+        state = with_sheave(&next, 1.0);
+        if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
+            bail!("replay diverged at t = {:.3} s", k as f64 * h);
+        }
+    }
+    Ok((car, cw))
+}
+
+/// The replay's accelerations of the travel `recording` (`stem`) against
+/// the measured cells of `target`, cell by cell (car and counterweight
+/// channels, the measured phases).
+pub fn replay_cells(
+    rig: &RigConfig,
+    recording: &recording::Recording,
+    stem: &str,
+    measured: &super::signals::ChainSignals,
+    target: &super::attribute::Target,
+    bands: &super::spectra::Bands,
+) -> Result<Vec<super::measure::CellGap>> {
+    use super::signals::{decimation_factor, ChainSignals, Channel};
+    use super::spectra::{cell_powers, ChainSpectra, Segmentation};
+    use recording::{RecordingKind, ANGLE, SPEED};
+    let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+        bail!("`{stem}`: only travels are replayed");
+    };
+    let fs = recording.meta.sample_rate_hz;
+    let speed = recording.column(SPEED).map(|c| c.values.as_slice()).unwrap_or(&[]);
+    let angle = crate::travel_signals::shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
+    let factor = decimation_factor(fs);
+    let angle = if factor > 1 { dsp::decimate(&angle, factor)? } else { angle };
+    let len = measured.len().min(angle.len());
+    let (car, cw) = replay_accelerations(rig, m_car_kg, m_cw_kg, lw_start_m, &angle[..len], measured.sample_rate_hz)?;
+    let mut channels = vec![(Channel::CarAcceleration, car)];
+    if measured.channel(Channel::CounterweightAcceleration).is_some() {
+        channels.push((Channel::CounterweightAcceleration, cw));
+    }
+    let replay = ChainSignals {
+        sample_rate_hz: measured.sample_rate_hz,
+        channels,
+        phases: measured.phases.clone(),
+        noise_density: Vec::new(),
+        angle_rad: measured.angle_rad.clone(),
+    };
+    let seg = Segmentation::of(measured);
+    let spectra = ChainSpectra::compute(&replay, &seg, bands);
+    Ok(super::measure::cell_gaps(
+        &target.measured,
+        &target.noise,
+        &target.tolerances,
+        &cell_powers(&[(&spectra, 1.0)], bands),
+    ))
+}

@@ -1,0 +1,245 @@
+//! The signals the gap is measured on, along the signal chain of the drive:
+//! the machine torque from the phase currents (electrical), the
+//! drive's shaft speed estimate (shaft), the accelerations (mechanical).
+//! Measured and simulated recordings go through the same code: decimated to
+//! the analysis rate, cut into travel phases, with the sensor noise density
+//! estimated from the measured recording's high band.
+
+use std::ops::Range;
+
+use crate::error::{Context, Result};
+
+use crate::travel_signals::travel_torque;
+use dsp::{decimate, travel_phases, welch_psd};
+use recording::{Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
+use rig_config::RigConfig;
+
+/// Lowest sample rate the gap is measured at, Hz: recordings are decimated
+/// by the largest whole factor that keeps at least this rate, so that the
+/// decimation filter is flat up to the top band (1 kHz). Covers the rope
+/// and car-frame modes with room to spare.
+pub const ANALYSIS_RATE_HZ: f64 = 4000.0;
+
+/// One signal of the chain, in signal-chain order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Channel {
+    /// Machine torque from the phase currents (dq0, paper 3.3), N m.
+    Torque,
+    /// The drive's shaft speed estimate, rad/s.
+    Speed,
+    /// Car acceleration, m/s^2.
+    CarAcceleration,
+    /// Counterweight acceleration, m/s^2.
+    CounterweightAcceleration,
+    /// Machine-frame acceleration, m/s^2.
+    MachineAcceleration,
+}
+
+/// Where along the chain a channel sits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Subsystem {
+    /// Inverter, machine, current control: what the currents show.
+    Electrical,
+    /// Speed control and the shaft: what the speed estimate shows.
+    Drive,
+    /// Ropes, car, counterweight: what the accelerometers show.
+    Mechanical,
+}
+
+impl Channel {
+    /// Every channel, in signal-chain order.
+    pub const ALL: [Channel; 5] = [
+        Channel::Torque,
+        Channel::Speed,
+        Channel::CarAcceleration,
+        Channel::CounterweightAcceleration,
+        Channel::MachineAcceleration,
+    ];
+
+    /// Name in reports, with its unit.
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::Torque => "torque_nm",
+            Channel::Speed => "speed_radps",
+            Channel::CarAcceleration => "acc_car_mps2",
+            Channel::CounterweightAcceleration => "acc_cw_mps2",
+            Channel::MachineAcceleration => "acc_machine_mps2",
+        }
+    }
+
+    /// The subsystem the channel observes.
+    pub fn subsystem(self) -> Subsystem {
+        match self {
+            Channel::Torque => Subsystem::Electrical,
+            Channel::Speed => Subsystem::Drive,
+            _ => Subsystem::Mechanical,
+        }
+    }
+}
+
+/// Part of a recording in time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// Standstill before the motion (brake lift, pre-torque).
+    Start,
+    /// Acceleration stage.
+    Acceleration,
+    /// Constant-speed stage.
+    Constant,
+    /// Deceleration stage.
+    Deceleration,
+    /// Standstill after the motion (brake set, the stop).
+    Stop,
+    /// A free decay.
+    Decay,
+}
+
+impl Phase {
+    /// Name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Start => "start",
+            Phase::Acceleration => "acceleration",
+            Phase::Constant => "constant_speed",
+            Phase::Deceleration => "deceleration",
+            Phase::Stop => "stop",
+            Phase::Decay => "decay",
+        }
+    }
+}
+
+/// The chain's signals of one recording at the analysis rate.
+#[derive(Clone, Debug)]
+pub struct ChainSignals {
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// The channels present, each one value per sample in its unit.
+    pub channels: Vec<(Channel, Vec<f64>)>,
+    /// The travel phases (or the decay) as sample ranges.
+    pub phases: Vec<(Phase, Range<usize>)>,
+    /// One-sided noise density of each channel, unit^2/Hz (measured
+    /// recordings; zero for simulations).
+    pub noise_density: Vec<(Channel, f64)>,
+    /// Shaft angle from the encoder, rad, one value per sample (travels;
+    /// empty for decays): the reference of the angle-locked lines.
+    pub angle_rad: Vec<f64>,
+}
+
+impl ChainSignals {
+    /// The samples of `channel`, if present.
+    pub fn channel(&self, channel: Channel) -> Option<&[f64]> {
+        self.channels.iter().find(|(c, _)| *c == channel).map(|(_, v)| v.as_slice())
+    }
+
+    /// Length in samples.
+    pub fn len(&self) -> usize {
+        self.channels.first().map_or(0, |(_, v)| v.len())
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Whole decimation factor from `sample_rate_hz` to at least [`ANALYSIS_RATE_HZ`].
+pub fn decimation_factor(sample_rate_hz: f64) -> usize {
+    ((sample_rate_hz / ANALYSIS_RATE_HZ).floor() as usize).max(1)
+}
+
+/// One-sided noise density (unit^2/Hz) of `signal`: the median Welch PSD
+/// level over the band where the model has no content (above 1.1 kHz, up to
+/// 95 % of Nyquist), or over the top 15 % of the band for recordings sampled
+/// too slowly for that.
+pub fn noise_density(signal: &[f64], sample_rate_hz: f64) -> Result<f64> {
+    let nyquist = 0.5 * sample_rate_hz;
+    let segment = (sample_rate_hz / 4.0).round().max(64.0) as usize;
+    if signal.len() < segment {
+        return Ok(0.0);
+    }
+    let psd = welch_psd(signal, sample_rate_hz, segment, 0.5)?;
+    let lo = if nyquist >= 1400.0 { (0.55 * nyquist).max(1100.0) } else { 0.85 * nyquist };
+    let mut band: Vec<f64> = psd
+        .frequency_hz
+        .iter()
+        .zip(&psd.density)
+        .filter(|(f, _)| **f >= lo && **f <= 0.95 * nyquist)
+        .map(|(_, d)| *d)
+        .collect();
+    if band.is_empty() {
+        return Ok(0.0);
+    }
+    let mid = band.len() / 2;
+    let (_, median, _) = band.select_nth_unstable_by(mid, f64::total_cmp);
+    Ok(*median)
+}
+
+/// The chain signals of `recording` (`stem` names it in errors): currents
+/// turned into the machine torque with the rig's machine, every channel
+/// decimated by `factor`, the phases found on the decimated speed; with
+/// `measured`, the noise density of every channel from its full-rate samples.
+pub fn chain_signals(
+    rig: &RigConfig,
+    recording: &Recording,
+    stem: &str,
+    factor: usize,
+    measured: bool,
+) -> Result<ChainSignals> {
+    let fs = recording.meta.sample_rate_hz;
+    let mut full: Vec<(Channel, Vec<f64>)> = Vec::new();
+    let mut angle = Vec::new();
+    let is_travel = matches!(recording.meta.kind, RecordingKind::Travel { .. });
+    if is_travel {
+        let torque = travel_torque(rig, recording, stem)?;
+        angle = torque.shaft_angle_rad.clone();
+        full.push((Channel::Torque, torque.torque_nm));
+        full.push((Channel::Speed, torque.speed_radps));
+    }
+    for (channel, name) in [
+        (Channel::CarAcceleration, ACC_CAR),
+        (Channel::CounterweightAcceleration, ACC_CW),
+        (Channel::MachineAcceleration, ACC_MACHINE),
+    ] {
+        if let Some(c) = recording.column(name) {
+            full.push((channel, c.values.clone()));
+        }
+    }
+    let mut noise = Vec::new();
+    if measured {
+        for (channel, values) in &full {
+            noise.push((
+                *channel,
+                noise_density(values, fs).with_context(|| format!("`{stem}`: noise of {}", channel.name()))?,
+            ));
+        }
+    }
+    let rate = fs / factor as f64;
+    let mut channels = Vec::new();
+    for (channel, values) in full {
+        let values = if factor > 1 { decimate(&values, factor)? } else { values };
+        channels.push((channel, values));
+    }
+    let len = channels.iter().map(|(_, v)| v.len()).min().unwrap_or(0);
+    for (_, v) in channels.iter_mut() {
+        v.truncate(len);
+    }
+    let mut angle_rad: Vec<f64> = angle.iter().step_by(factor).copied().collect();
+    angle_rad.truncate(len);
+    let phases = if is_travel {
+        let speed = channels.iter().find(|(c, _)| *c == Channel::Speed).map(|(_, v)| v.as_slice()).unwrap_or(&[]);
+        let p = travel_phases(speed, rate).with_context(|| format!("`{stem}`: travel phases"))?;
+        vec![
+            (Phase::Start, p.start),
+            (Phase::Acceleration, p.acceleration),
+            (Phase::Constant, p.constant),
+            (Phase::Deceleration, p.deceleration),
+            (Phase::Stop, p.stop),
+        ]
+    } else {
+        vec![(Phase::Decay, 0..len)]
+    };
+    Ok(ChainSignals { sample_rate_hz: rate, channels, phases, noise_density: noise, angle_rad })
+}

@@ -1,0 +1,589 @@
+//! The nominal plant of the seed paper: the 5-DOF rope chain with car,
+//! counterweight and sheave (`mechanics`, `rope`, `modes`), the PMSM in the dq
+//! frame (`pmsm`) behind an averaged inverter (`inverter`), the angle-locked
+//! torque ripple (`ripple`) and the drive's sensors (`sensors`); with the
+//! library of unmodelled effects (`effects`) switched on through
+//! [`Plant::with_effects`], the chain becomes a longer line of masses and
+//! springs (`line`) and the inverter and sensors get their errors.
+//!
+//! State: positions and velocities of the line's nodes, then `i_d`, `i_q`,
+//! in a fixed array of [`MAX_STATE_LEN`] of which the first
+//! `2 * nodes + 2` are used (12 for the nominal plant, laid out as before:
+//! `u_w, u_1, u_sh, u_2, u_c`, their velocities, `i_d`, `i_q`).
+//!
+//! Sign convention: every mechanical coordinate is positive in the direction
+//! of the rope when the car goes up (counterweight down, sheave edge towards
+//! the counterweight side, car up). Positive shaft torque lifts the car.
+//! The paper's Eqn 3 counts the sheave angle the other way; the equations
+//! are the same with that sign flipped.
+//!
+//! In the data flow config -> plant <-> controller -> recording -> analysis
+//! -> diagnosis this crate is the plant: it reads the rig (`rig-config`) and
+//! never knows which controller drives it. Of the drive core it uses only
+//! the interface type [`drive_core::SensorFrame`], the readings it hands to
+//! whichever controller closes the loop ([`Plant::sensor_frame`]).
+
+#![warn(missing_docs)]
+
+pub mod effects;
+pub mod free_decay;
+pub mod inverter;
+pub mod line;
+pub mod mechanics;
+pub mod modes;
+pub mod pmsm;
+pub mod ripple;
+pub mod rope;
+pub mod sensors;
+
+pub use mechanics::{Chain, ChainState};
+pub use rope::ChainParams;
+
+use drive_core::SensorFrame;
+
+use effects::Effects;
+use inverter::{alpha_beta_v, phase_voltages_v};
+use line::{BrakeAction, Line, MAX_NODES};
+use pmsm::{park_v, phase_currents_a, PmsmParams};
+use rig_config::RigConfig;
+use ripple::RippleTorque;
+use rope::{CAR, CW, DOF, ROPE_CAR, ROPE_CW, SHEAVE};
+use sensors::Sensors;
+
+/// Size of the nominal plant's state vector: 5 positions, 5 velocities, `i_d`, `i_q`.
+pub const STATE_LEN: usize = 2 * DOF + 2;
+
+/// Largest state vector, with every degree of freedom the effects add.
+pub const MAX_STATE_LEN: usize = 2 * MAX_NODES + 2;
+
+/// What the controller's outputs do to the plant, held between updates.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlantInputs {
+    /// PWM compare values, counts.
+    pub pwm_compare: [u16; 3],
+    /// Gate drivers enabled.
+    pub pwm_enabled: bool,
+    /// Brake applied (holds the sheave).
+    pub brake_engaged: bool,
+}
+
+/// Values a data-acquisition system would see, at the plant's current time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlantObservation {
+    /// Car acceleration, m/s^2, positive up.
+    pub car_acceleration_mps2: f64,
+    /// Counterweight acceleration, m/s^2, positive up.
+    pub counterweight_acceleration_mps2: f64,
+    /// Phase currents in the inverter legs (the machine's, plus an injected
+    /// phase-to-phase short's), A.
+    pub phase_currents_a: [f64; 3],
+    /// Electromagnetic torque of the machine, N m.
+    pub motor_torque_nm: f64,
+    /// Ripple torque, N m.
+    pub ripple_torque_nm: f64,
+    /// Shaft speed, rad/s (positive: car up).
+    pub shaft_speed_radps: f64,
+    /// Shaft angle from the start, rad.
+    pub shaft_angle_rad: f64,
+    /// Counterweight-side rope length, m.
+    pub counterweight_side_length_m: f64,
+    /// Car displacement from the start, m (positive up).
+    pub car_position_m: f64,
+}
+
+/// A phase-to-phase short between two inverter outputs (fault injection):
+/// a path of `resistance_ohm` and `inductance_h` that the averaged leg
+/// voltages drive, `L di/dt = v_from - v_to - R i`. Its current flows out of
+/// leg `from` and into leg `to`, through their current sensors, and not
+/// through the machine.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhaseShort {
+    /// Leg the short current leaves (0 = a, 1 = b, 2 = c).
+    pub from: usize,
+    /// Leg it enters.
+    pub to: usize,
+    /// Resistance of the short, ohm.
+    pub resistance_ohm: f64,
+    /// Inductance of the short, H.
+    pub inductance_h: f64,
+}
+
+/// Faults of the power stage, the machine, the load and the brake (fault
+/// injection; all off by default).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlantFaults {
+    /// A phase-to-phase short at the inverter outputs.
+    pub phase_short: Option<PhaseShort>,
+    /// An open machine phase (0 = a, 1 = b, 2 = c): its current is zero and
+    /// the other two carry the same current in opposite directions.
+    /// Modelled in the stationary frame with `L = (L_d + L_q)/2` (exact for
+    /// the rig's surface magnets, `L_d = L_q`).
+    pub open_phase: Option<usize>,
+    /// The brake stays applied whatever the drive commands.
+    pub brake_stuck_closed: bool,
+    /// Extra vertical force on the car, N, positive up (a load change: `-dm g`).
+    pub car_extra_force_n: f64,
+}
+
+/// The whole plant: chain, machine, ripple, inverter and sensors.
+#[derive(Clone, Debug)]
+pub struct Plant {
+    /// The rope chain (Eqn 1-6).
+    pub chain: Chain,
+    /// The machine.
+    pub pmsm: PmsmParams,
+    /// Angle-locked torque ripple.
+    pub ripple: RippleTorque,
+    /// Sensor scaling.
+    pub sensors: Sensors,
+    /// DC-bus voltage, V.
+    pub dc_bus_v: f64,
+    /// PWM timer period, counts.
+    pub pwm_period_counts: u16,
+    /// Injected faults (none in the nominal plant).
+    pub faults: PlantFaults,
+    /// The effects of the library switched on (none: the nominal plant).
+    /// Set at construction ([`Plant::with_effects`]): the line's layout
+    /// follows from them.
+    effects: Effects,
+    /// The chain as a line of masses and springs.
+    line: Line,
+    /// PWM frequency, Hz (dead time).
+    pub pwm_hz: f64,
+    /// Clamp angle of the elastic brake (`brake_stop`), rad.
+    clamp_angle_rad: f64,
+    state: [f64; MAX_STATE_LEN],
+    inputs: PlantInputs,
+    v_alpha_beta: (f64, f64),
+    phase_v: [f64; 3],
+    short_current_a: f64,
+    time_s: f64,
+}
+
+impl Plant {
+    /// The nominal plant of `rig` with a car of `m_car_kg`, at rest at
+    /// counterweight-side rope length `lw_start_m`, brake applied, PWM off.
+    pub fn new(rig: &RigConfig, m_car_kg: f64, lw_start_m: f64) -> Self {
+        Self::with_effects(rig, m_car_kg, lw_start_m, &Effects::none())
+    }
+
+    /// The plant of `rig` with the library's `effects` switched on, a car of
+    /// `m_car_kg` (kg), at rest at counterweight-side rope length
+    /// `lw_start_m` (m), brake applied, PWM off. With `brake_stop` the
+    /// clamp starts pre-deflected so that it carries the out-of-balance
+    /// torque (the plant starts at rest).
+    pub fn with_effects(rig: &RigConfig, m_car_kg: f64, lw_start_m: f64, effects: &Effects) -> Self {
+        let chain = Chain::new(ChainParams::from_rig(rig, m_car_kg), lw_start_m);
+        let line = Line::new(effects);
+        let clamp_angle_rad = match &effects.brake_stop {
+            Some(b) => {
+                let lever = effects.sheave_eccentricity.map_or(1.0, |e| e.lever_ratio(0.0));
+                let lumped = line.lumped(&chain, 0.0);
+                b.preloaded_clamp_angle_rad(0.0, chain.params.out_of_balance_torque_nm(lumped.lw_m) * lever)
+            }
+            None => 0.0,
+        };
+        Self {
+            chain,
+            pmsm: PmsmParams::from_rig(rig),
+            ripple: RippleTorque::from_rig(&rig.ripple),
+            sensors: Sensors::from_rig(rig),
+            dc_bus_v: rig.inverter.dc_bus_v,
+            pwm_period_counts: rig.pwm_period_counts(),
+            faults: PlantFaults::default(),
+            effects: *effects,
+            line,
+            pwm_hz: rig.inverter.pwm_hz,
+            clamp_angle_rad,
+            state: [0.0; MAX_STATE_LEN],
+            inputs: PlantInputs { brake_engaged: true, ..PlantInputs::default() },
+            v_alpha_beta: (0.0, 0.0),
+            phase_v: [0.0; 3],
+            short_current_a: 0.0,
+            time_s: 0.0,
+        }
+    }
+
+    /// The effects switched on.
+    pub fn effects(&self) -> &Effects {
+        &self.effects
+    }
+
+    /// The line of masses and springs the chain is simulated as.
+    pub fn line(&self) -> &Line {
+        &self.line
+    }
+
+    /// Number of mechanical coordinates (5 for the nominal chain).
+    pub fn nodes(&self) -> usize {
+        self.line.layout.nodes
+    }
+
+    fn state_len(&self) -> usize {
+        2 * self.nodes() + 2
+    }
+
+    /// Positions (m) and velocities (m/s) of every node of the line, in
+    /// [`line::Layout`] order.
+    pub fn node_state(&self) -> (&[f64], &[f64]) {
+        let n = self.nodes();
+        (&self.state[..n], &self.state[n..2 * n])
+    }
+
+    /// Sets the positions (m) and velocities (m/s) of the line's nodes (for
+    /// tests and initial conditions); extra or missing values are ignored.
+    pub fn set_node_state(&mut self, position_m: &[f64], velocity_mps: &[f64]) {
+        let n = self.nodes();
+        for (slot, v) in self.state[..n].iter_mut().zip(position_m) {
+            *slot = *v;
+        }
+        for (slot, v) in self.state[n..2 * n].iter_mut().zip(velocity_mps) {
+            *slot = *v;
+        }
+    }
+
+    /// Clamp angle of the elastic brake, rad (`brake_stop`; meaningless without it).
+    pub fn clamp_angle_rad(&self) -> f64 {
+        self.clamp_angle_rad
+    }
+
+    /// Mechanical energy, J: [`Line::mechanical_energy_j`] with the clamp's
+    /// when the brake is applied through `brake_stop`.
+    pub fn mechanical_energy_j(&self) -> f64 {
+        let (position, velocity) = self.node_state();
+        let clamp = (self.inputs.brake_engaged && self.effects.brake_stop.is_some()).then_some(self.clamp_angle_rad);
+        self.line.mechanical_energy_j(&self.chain, position, velocity, clamp)
+    }
+
+    /// Simulated time, s.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Mechanical state in the nominal chain's five coordinates. With
+    /// effects that add coordinates it is a projection: counterweight,
+    /// the middle rope node of each side, the sheave and the car body.
+    pub fn chain_state(&self) -> ChainState {
+        let layout = &self.line.layout;
+        let n = layout.nodes;
+        let mut chain = ChainState::default();
+        let picks = [
+            (CW, layout.counterweight()),
+            (ROPE_CW, layout.middle_cw_rope()),
+            (SHEAVE, layout.sheave),
+            (ROPE_CAR, layout.middle_car_rope()),
+            (CAR, layout.body),
+        ];
+        for (to, from) in picks {
+            chain.position_m[to] = self.state[from];
+            chain.velocity_mps[to] = self.state[n + from];
+        }
+        chain
+    }
+
+    /// Inputs now in force.
+    pub fn inputs(&self) -> PlantInputs {
+        self.inputs
+    }
+
+    /// Applies new controller outputs. Switching the PWM off opens every
+    /// switch (currents to zero, see [`inverter`]); engaging the brake stops
+    /// the sheave.
+    ///
+    /// With `brake_stop` the brake clamps the sheave elastically at the
+    /// angle it has when the brake engages instead of stopping it.
+    pub fn set_inputs(&mut self, mut inputs: PlantInputs) {
+        inputs.brake_engaged |= self.faults.brake_stuck_closed;
+        let n = self.nodes();
+        if !inputs.pwm_enabled {
+            self.state[2 * n] = 0.0;
+            self.state[2 * n + 1] = 0.0;
+            self.short_current_a = 0.0;
+        }
+        if inputs.brake_engaged && !self.inputs.brake_engaged {
+            let sheave = self.line.layout.sheave;
+            if self.effects.brake_stop.is_some() {
+                self.clamp_angle_rad = self.state[sheave] / self.chain.params.sheave_radius_m;
+            } else {
+                self.state[n + sheave] = 0.0;
+            }
+        }
+        self.phase_v = phase_voltages_v(inputs.pwm_compare, self.pwm_period_counts, self.dc_bus_v);
+        self.v_alpha_beta = alpha_beta_v(self.phase_v);
+        self.inputs = inputs;
+    }
+
+    /// Opens machine phase `phase` (0 = a, 1 = b, 2 = c) from now on, or
+    /// closes it again (`None`); the present current is projected onto what
+    /// the remaining two phases can carry.
+    pub fn set_open_phase(&mut self, phase: Option<usize>) {
+        self.faults.open_phase = phase.map(|p| p.min(2));
+        if let Some(p) = self.faults.open_phase {
+            let theta_e = self.pmsm.pole_pairs * self.shaft_angle_rad(&self.state);
+            let n = self.nodes();
+            let (id, iq) = (self.state[2 * n], self.state[2 * n + 1]);
+            let (s, c) = theta_e.sin_cos();
+            let (alpha, beta) = (id * c - iq * s, id * s + iq * c);
+            let n = open_phase_direction(p);
+            let i_n = alpha * n.0 + beta * n.1;
+            let nodes = self.nodes();
+            self.state[2 * nodes] = i_n * (n.0 * c + n.1 * s);
+            self.state[2 * nodes + 1] = i_n * (-n.0 * s + n.1 * c);
+        }
+    }
+
+    /// Current in the phase-to-phase short, A (zero without one).
+    pub fn short_current_a(&self) -> f64 {
+        self.short_current_a
+    }
+
+    fn shaft_angle_rad(&self, state: &[f64]) -> f64 {
+        state[self.line.layout.sheave] / self.chain.params.sheave_radius_m
+    }
+
+    /// Stationary-frame voltages (V) applied to the machine: the averaged
+    /// inverter's, plus the dead time's error (`dead_time`) for the machine
+    /// currents `(i_d, i_q)` (A) at electrical angle `theta_e` (rad).
+    fn machine_v_alpha_beta(&self, id: f64, iq: f64, theta_e: f64) -> (f64, f64) {
+        match &self.effects.dead_time {
+            None => self.v_alpha_beta,
+            Some(d) => {
+                let errors = d.phase_voltage_errors_v(phase_currents_a(id, iq, theta_e), self.dc_bus_v, self.pwm_hz);
+                let (ea, eb) = alpha_beta_v(errors);
+                (self.v_alpha_beta.0 + ea, self.v_alpha_beta.1 + eb)
+            }
+        }
+    }
+
+    /// Time derivative `dy` of the state vector `y` (the first
+    /// `2 * nodes + 2` entries of each).
+    fn derivative(&self, y: &[f64], dy: &mut [f64]) {
+        let n = self.nodes();
+        let sheave = self.line.layout.sheave;
+        let (id, iq) = (y[2 * n], y[2 * n + 1]);
+        let r = self.chain.params.sheave_radius_m;
+        let theta_m = y[sheave] / r;
+        let omega_m = y[n + sheave] / r;
+        let p = self.pmsm.pole_pairs;
+        // One sin_cos of the shaft angle serves the ripple harmonics and,
+        // for a whole number of pole pairs, the Park transform.
+        let (s_m, c_m) = theta_m.sin_cos();
+        let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
+            (false, _) => (0.0, 0.0),
+            (true, None) => {
+                let (va, vb) = self.machine_v_alpha_beta(id, iq, p * theta_m);
+                let (vd, vq) = if p.fract() == 0.0 && p > 0.0 && p <= 64.0 {
+                    let (c, s) = ripple::unit_power(c_m, s_m, p as u32);
+                    (va * c + vb * s, -va * s + vb * c)
+                } else {
+                    park_v(va, vb, p * theta_m)
+                };
+                self.pmsm.current_derivative(id, iq, vd, vq, p * omega_m)
+            }
+            (true, Some(phase)) => self.open_phase_current_derivative(phase, id, iq, p * theta_m, p * omega_m),
+        };
+        let torque = self.pmsm.torque_nm(id, iq) + self.ripple.torque_at(theta_m, s_m, c_m);
+        let brake = match (self.inputs.brake_engaged, self.effects.brake_stop.is_some()) {
+            (false, _) => BrakeAction::Released,
+            (true, false) => BrakeAction::Held,
+            (true, true) => BrakeAction::Clamped { angle_rad: self.clamp_angle_rad },
+        };
+        dy[..n].copy_from_slice(&y[n..2 * n]);
+        if brake == BrakeAction::Held {
+            dy[sheave] = 0.0;
+        }
+        self.line.accelerations(
+            &self.chain,
+            &y[..n],
+            &y[n..2 * n],
+            torque,
+            brake,
+            self.faults.car_extra_force_n,
+            &mut dy[n..2 * n],
+        );
+        dy[2 * n] = did;
+        dy[2 * n + 1] = diq;
+    }
+
+    /// `(d/dt i_d, d/dt i_q)` (A/s) with phase `phase` open: the current is
+    /// `i_n n`, `n` the unit vector of the stationary frame perpendicular to
+    /// that phase's axis, and `L di_n/dt = v.n - R i_n - e.n` with the
+    /// back-EMF `e = w_e psi (-sin, cos)`, `L = (L_d + L_q)/2`.
+    fn open_phase_current_derivative(&self, phase: usize, id: f64, iq: f64, theta_e: f64, omega_e: f64) -> (f64, f64) {
+        let (s, c) = theta_e.sin_cos();
+        let n = open_phase_direction(phase);
+        let i_n = (id * c - iq * s) * n.0 + (id * s + iq * c) * n.1;
+        let m = &self.pmsm;
+        let l = 0.5 * (m.ld_h + m.lq_h);
+        let v_alpha_beta = self.machine_v_alpha_beta(id, iq, theta_e);
+        let v_n = v_alpha_beta.0 * n.0 + v_alpha_beta.1 * n.1;
+        let e_n = omega_e * m.flux_linkage_wb * (-s * n.0 + c * n.1);
+        let di_n = (v_n - m.resistance_ohm * i_n - e_n) / l;
+        let (dalpha, dbeta) = (di_n * n.0, di_n * n.1);
+        // Park of the derivative plus the rotation of the frame.
+        (dalpha * c + dbeta * s + omega_e * iq, -dalpha * s + dbeta * c - omega_e * id)
+    }
+
+    /// Longest RK4 step (s) that keeps `h omega_max <= 1` for the line now
+    /// ([`Line::omega_max_radps`]).
+    pub fn stable_step_s(&self) -> f64 {
+        let clamped = self.inputs.brake_engaged && self.effects.brake_stop.is_some();
+        1.0 / self.line.omega_max_radps(&self.chain, self.state[self.line.layout.sheave], clamped)
+    }
+
+    /// Integrates over `duration_s` with the inputs held, in equal classical
+    /// Runge-Kutta (RK4) steps no longer than `max_step_s` nor than
+    /// [`Self::stable_step_s`] (so any `max_step_s` is stable); a
+    /// phase-to-phase short's current follows its exact first-order
+    /// solution.
+    pub fn advance(&mut self, duration_s: f64, max_step_s: f64) {
+        if duration_s <= 0.0 {
+            return;
+        }
+        // `min` keeps `max_step_s` if the bound is NaN (a diverged state).
+        let step = max_step_s.min(self.stable_step_s());
+        let steps = (duration_s / step).ceil();
+        let steps = if steps.is_nan() { 1 } else { steps.clamp(1.0, 1.0e7) as usize };
+        let h = duration_s / steps as f64;
+        let len = self.state_len();
+        let mut state = self.state;
+        let mut scratch = Rk4Scratch::new();
+        for _ in 0..steps {
+            scratch.step(&mut state[..len], h, |y, dy| self.derivative(y, dy));
+        }
+        self.state = state;
+        if let (Some(short), true) = (self.faults.phase_short, self.inputs.pwm_enabled) {
+            let r = short.resistance_ohm.max(1e-6);
+            let settled = (self.phase_v[short.from.min(2)] - self.phase_v[short.to.min(2)]) / r;
+            let decay = (-duration_s * r / short.inductance_h.max(1e-9)).exp();
+            self.short_current_a = settled + (self.short_current_a - settled) * decay;
+        }
+        self.time_s += duration_s;
+    }
+
+    /// The sensor readings the drive takes now (with the transducer errors
+    /// of `current_sensor_error` and the encoder's of `encoder_error`).
+    pub fn sensor_frame(&self) -> SensorFrame {
+        let o = self.observe();
+        let currents = match &self.effects.current_sensor_error {
+            None => o.phase_currents_a,
+            Some(e) => e.measured_a(o.phase_currents_a),
+        };
+        let angle = match &self.effects.encoder_error {
+            None => o.shaft_angle_rad,
+            Some(e) => e.measured_angle_rad(o.shaft_angle_rad),
+        };
+        SensorFrame {
+            phase_current_codes: currents.map(|i| self.sensors.current_code(i)),
+            encoder_count: self.sensors.encoder_count(angle),
+            dc_bus_code: self.sensors.dc_bus_code(self.dc_bus_v),
+            time_us: Sensors::time_us(self.time_s),
+        }
+    }
+
+    /// Currents in the inverter legs (what the phase-current sensors
+    /// measure): the machine's plus a phase-to-phase short's, A.
+    fn leg_currents_a(&self, mut machine_a: [f64; 3]) -> [f64; 3] {
+        if let Some(short) = self.faults.phase_short {
+            machine_a[short.from.min(2)] += self.short_current_a;
+            machine_a[short.to.min(2)] -= self.short_current_a;
+        }
+        machine_a
+    }
+
+    /// What the rig's instruments see now (the car's accelerometer is on
+    /// the car body: the frame's body with `car_frame_mode`).
+    pub fn observe(&self) -> PlantObservation {
+        let n = self.nodes();
+        let layout = &self.line.layout;
+        let (id, iq) = (self.state[2 * n], self.state[2 * n + 1]);
+        let theta_m = self.shaft_angle_rad(&self.state);
+        let mut dy = [0.0; MAX_STATE_LEN];
+        self.derivative(&self.state, &mut dy);
+        let r = self.chain.params.sheave_radius_m;
+        PlantObservation {
+            car_acceleration_mps2: dy[n + layout.body],
+            counterweight_acceleration_mps2: -dy[n + layout.counterweight()],
+            phase_currents_a: self.leg_currents_a(phase_currents_a(id, iq, self.pmsm.pole_pairs * theta_m)),
+            motor_torque_nm: self.pmsm.torque_nm(id, iq),
+            ripple_torque_nm: self.ripple.torque_nm(theta_m),
+            shaft_speed_radps: self.state[n + layout.sheave] / r,
+            shaft_angle_rad: theta_m,
+            counterweight_side_length_m: self.line.counterweight_side_length_m(&self.chain, self.state[layout.sheave]),
+            car_position_m: self.state[layout.body],
+        }
+    }
+}
+
+/// Unit vector `(alpha, beta)` perpendicular to the axis of `phase` (the
+/// direction of the current the other two phases can carry).
+fn open_phase_direction(phase: usize) -> (f64, f64) {
+    let half_sqrt3 = 0.5 * 3f64.sqrt();
+    match phase {
+        0 => (0.0, 1.0),
+        1 => (half_sqrt3, 0.5),
+        _ => (half_sqrt3, -0.5),
+    }
+}
+
+/// One classical fourth-order Runge-Kutta step of `y' = f(y)` over `h`,
+/// in place, for a state of at most [`MAX_STATE_LEN`] values; `f(y, dy)`
+/// writes the derivative of `y` into `dy`.
+pub fn rk4_step_slice(y: &mut [f64], h: f64, f: impl Fn(&[f64], &mut [f64])) {
+    Rk4Scratch::new().step(y, h, f);
+}
+
+/// Work space of [`rk4_step_slice`], reused over many steps.
+struct Rk4Scratch {
+    k: [[f64; MAX_STATE_LEN]; 4],
+    tmp: [f64; MAX_STATE_LEN],
+}
+
+impl Rk4Scratch {
+    fn new() -> Self {
+        Self { k: [[0.0; MAX_STATE_LEN]; 4], tmp: [0.0; MAX_STATE_LEN] }
+    }
+
+    fn step(&mut self, y: &mut [f64], h: f64, f: impl Fn(&[f64], &mut [f64])) {
+        let len = y.len();
+        assert!(len <= MAX_STATE_LEN, "state of {len} values: at most {MAX_STATE_LEN}");
+        let [k1, k2, k3, k4] = &mut self.k;
+        let tmp = &mut self.tmp;
+        f(y, &mut k1[..len]);
+        for i in 0..len {
+            tmp[i] = y[i] + h / 2.0 * k1[i];
+        }
+        f(&tmp[..len], &mut k2[..len]);
+        for i in 0..len {
+            tmp[i] = y[i] + h / 2.0 * k2[i];
+        }
+        f(&tmp[..len], &mut k3[..len]);
+        for i in 0..len {
+            tmp[i] = y[i] + h * k3[i];
+        }
+        f(&tmp[..len], &mut k4[..len]);
+        for i in 0..len {
+            y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+    }
+}
+
+/// One classical fourth-order Runge-Kutta step of `y' = f(y)` over `h`.
+pub fn rk4_step<const N: usize>(y: &[f64; N], h: f64, f: impl Fn(&[f64; N]) -> [f64; N]) -> [f64; N] {
+    let shifted = |base: &[f64; N], k: &[f64; N], scale: f64| -> [f64; N] {
+        let mut out = *base;
+        for i in 0..N {
+            out[i] += scale * k[i];
+        }
+        out
+    };
+    let k1 = f(y);
+    let k2 = f(&shifted(y, &k1, h / 2.0));
+    let k3 = f(&shifted(y, &k2, h / 2.0));
+    let k4 = f(&shifted(y, &k3, h));
+    let mut out = *y;
+    for i in 0..N {
+        out[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+    out
+}

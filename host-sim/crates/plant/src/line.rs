@@ -1,0 +1,433 @@
+//! The plant's rope chain as a line of lumped masses joined by springs,
+//! built from [`ChainParams`] and the mechanical effects of [`Effects`]: the
+//! nominal 5-DOF chain of Eqn 1-6 when no effect is on, and otherwise a
+//! longer line (up to [`MAX_NODES`] coordinates).
+//!
+//! Nodes, from the counterweight end to the car end (every coordinate a
+//! displacement from the static equilibrium at the start, positive in the
+//! rope's direction when the car goes up, like [`super::rope`]):
+//!
+//! `cw`, `N` counterweight-side rope masses (the nearest to the counterweight
+//! first), `sheave` (`u_sh = r0 theta`), [`pulley`], `N` car-side rope masses
+//! (the nearest to the sheave first), car `hitch`, [car `body`].
+//!
+//! `N` is `rope_discretization`'s (1 without it: Eqn 1-2), the pulley node
+//! is there with `diverting_pulley`, the body with `car_frame_mode` (the car
+//! is then split into hitch and body joined by the frame spring and damper;
+//! without it the hitch is the whole car and carries the accelerometer).
+//! Springs join consecutive nodes. Rope lengths follow the rope's motion at
+//! the sheave, `l_w = l_w0 + g(theta)` (Eqn 3; `g = u_sh` without
+//! `sheave_eccentricity`), so masses and stiffnesses change during a travel.
+//!
+//! The arithmetic of the nominal chain (`N = 1`, no other mechanical effect)
+//! is that of [`super::mechanics::Chain::acceleration_mps2`] operation for
+//! operation, so the plant reproduces it bit for bit.
+
+use super::effects::rope_discretization::{element_mass_kg, elements_per_side, spring_n_per_m, MAX_ELEMENTS};
+use super::effects::tension_stiffening::{rope_ea_n, static_tension_n};
+use super::effects::Effects;
+use super::mechanics::{Chain, MIN_ROPE_LENGTH_M};
+use super::rope::ChainParams;
+
+/// Most coordinates of the line: counterweight, `2 * 8` rope masses,
+/// sheave, pulley, hitch and body.
+pub const MAX_NODES: usize = 2 * MAX_ELEMENTS + 5;
+
+/// Where each body sits in the line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layout {
+    /// Number of coordinates.
+    pub nodes: usize,
+    /// Rope elements per side.
+    pub elements: usize,
+    /// Index of the sheave edge.
+    pub sheave: usize,
+    /// Index of the pulley rim, with `diverting_pulley`.
+    pub pulley: Option<usize>,
+    /// Index of the car's rope hitch (the whole car without `car_frame_mode`).
+    pub hitch: usize,
+    /// Index of the body carrying the accelerometer (`hitch` without `car_frame_mode`).
+    pub body: usize,
+}
+
+impl Layout {
+    /// The layout `effects` give.
+    pub fn new(effects: &Effects) -> Self {
+        let n = elements_per_side(effects.rope_discretization.as_ref());
+        let sheave = n + 1;
+        let pulley = effects.diverting_pulley.map(|_| sheave + 1);
+        let hitch = pulley.unwrap_or(sheave) + n + 1;
+        let body = if effects.car_frame_mode.is_some() { hitch + 1 } else { hitch };
+        Self { nodes: body + 1, elements: n, sheave, pulley, hitch, body }
+    }
+
+    /// Index of the counterweight (always 0).
+    pub fn counterweight(&self) -> usize {
+        0
+    }
+
+    /// The counterweight-side rope node nearest the middle of the side.
+    pub fn middle_cw_rope(&self) -> usize {
+        1 + (self.elements - 1) / 2
+    }
+
+    /// The car-side rope node nearest the middle of the side below the
+    /// sheave (or pulley).
+    pub fn middle_car_rope(&self) -> usize {
+        self.pulley.unwrap_or(self.sheave) + 1 + self.elements / 2
+    }
+}
+
+/// What the brake does to the sheave in one evaluation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BrakeAction {
+    /// Released: the sheave is free.
+    Released,
+    /// Applied, nominal: the sheave is held rigidly (its acceleration and
+    /// velocity are zero).
+    Held,
+    /// Applied through the elastic clamp of `brake_stop`, clamped at
+    /// `angle_rad` (rad).
+    Clamped {
+        /// Clamp angle, rad.
+        angle_rad: f64,
+    },
+}
+
+/// Masses, springs and damping of the line at one configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lumped {
+    /// Counterweight-side rope length, m (clamped to the model's range).
+    pub lw_m: f64,
+    /// Node masses, kg (the first `nodes` are used).
+    pub masses_kg: [f64; MAX_NODES],
+    /// `springs[i]` joins nodes `i` and `i + 1`, N/m.
+    pub springs_n_per_m: [f64; MAX_NODES],
+    /// Viscous damping on each node's absolute velocity, kg/s.
+    pub damping_kg_per_s: [f64; MAX_NODES],
+    /// Damper between hitch and body (frame mode), kg/s.
+    pub frame_damping_kg_per_s: f64,
+}
+
+/// The line for a chain and its effects (only the mechanical effects
+/// matter here: tension stiffening, pulley, discretisation, frame mode,
+/// guide friction, brake clamp, sheave eccentricity).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    /// The effects.
+    pub effects: Effects,
+    /// Node indices.
+    pub layout: Layout,
+}
+
+impl Line {
+    /// The line of `effects`.
+    pub fn new(effects: &Effects) -> Self {
+        Self { effects: *effects, layout: Layout::new(effects) }
+    }
+
+    /// Rope displacement at the sheave, m, for sheave coordinate
+    /// `u_sh_m` (m): `g(theta)` with eccentricity, `u_sh` without.
+    pub fn sheave_rope_displacement_m(&self, params: &ChainParams, u_sh_m: f64) -> f64 {
+        match &self.effects.sheave_eccentricity {
+            None => u_sh_m,
+            Some(e) => e.rope_displacement_m(params.sheave_radius_m, u_sh_m / params.sheave_radius_m),
+        }
+    }
+
+    /// Counterweight-side rope length, m, unclamped (Eqn 3 with `g`).
+    pub fn counterweight_side_length_m(&self, chain: &Chain, u_sh_m: f64) -> f64 {
+        if chain.lengths_follow_sheave {
+            chain.lw_start_m + self.sheave_rope_displacement_m(&chain.params, u_sh_m)
+        } else {
+            chain.lw_start_m
+        }
+    }
+
+    /// Largest counterweight-side length the model accepts, m (the car
+    /// side keeps [`MIN_ROPE_LENGTH_M`] below the pulley).
+    fn lw_max_m(&self, p: &ChainParams) -> f64 {
+        match &self.effects.diverting_pulley {
+            None => p.rope_total_length_m - MIN_ROPE_LENGTH_M,
+            Some(pulley) => p.rope_total_length_m - MIN_ROPE_LENGTH_M - pulley.sheave_to_pulley_m,
+        }
+    }
+
+    /// Masses, springs and damping with the sheave at `u_sh_m` (m).
+    pub fn lumped(&self, chain: &Chain, u_sh_m: f64) -> Lumped {
+        let p = &chain.params;
+        let e = &self.effects;
+        let layout = &self.layout;
+        let lw = self.counterweight_side_length_m(chain, u_sh_m).clamp(MIN_ROPE_LENGTH_M, self.lw_max_m(p));
+        let lc = p.car_side_length_m(lw);
+        let n = layout.elements;
+        let mu = p.rope_mass_per_length_kg_per_m;
+        let g = p.gravity_mps2;
+        let stiffening = e.tension_stiffening.as_ref();
+        let mut out = Lumped {
+            lw_m: lw,
+            masses_kg: [0.0; MAX_NODES],
+            springs_n_per_m: [0.0; MAX_NODES],
+            damping_kg_per_s: [0.0; MAX_NODES],
+            frame_damping_kg_per_s: 0.0,
+        };
+        // Counterweight side, listed from the counterweight up.
+        out.masses_kg[0] = p.m_cw_kg;
+        let cw_element = element_mass_kg(lw, n, mu);
+        for j in 0..n {
+            out.masses_kg[1 + j] = cw_element;
+        }
+        for j in 0..=n {
+            out.springs_n_per_m[j] = spring_n_per_m(lw, n, j, mu, p.rope_ea_n, p.m_cw_kg, g, stiffening);
+        }
+        let r = p.sheave_radius_m;
+        out.masses_kg[layout.sheave] = p.sheave_inertia_kg_m2 / (r * r);
+        // Car side, from the sheave (or pulley) down.
+        let mut top = layout.sheave;
+        let mut hanging = lc;
+        if let (Some(pulley), Some(node)) = (&e.diverting_pulley, layout.pulley) {
+            hanging = pulley.rope_below_pulley_m(lc);
+            let tension = static_tension_n(p.m_car_kg, mu, hanging, g);
+            out.springs_n_per_m[layout.sheave] =
+                pulley.segment_stiffness_n_per_m(rope_ea_n(stiffening, p.rope_ea_n, tension));
+            out.masses_kg[node] = pulley.equivalent_mass_kg(mu);
+            top = node;
+        }
+        let car_element = element_mass_kg(hanging, n, mu);
+        for j in 0..n {
+            out.masses_kg[top + 1 + j] = car_element;
+        }
+        for j in 0..=n {
+            // Spring top + j is the side's spring n - j counted from the car.
+            out.springs_n_per_m[top + j] =
+                spring_n_per_m(hanging, n, n - j, mu, p.rope_ea_n, p.m_car_kg, g, stiffening);
+        }
+        match &e.car_frame_mode {
+            None => out.masses_kg[layout.hitch] = p.m_car_kg,
+            Some(frame) => {
+                out.masses_kg[layout.hitch] = frame.hitch_mass_kg(p.m_car_kg);
+                out.masses_kg[layout.body] = frame.body_mass_kg(p.m_car_kg);
+                out.springs_n_per_m[layout.hitch] = frame.stiffness_n_per_m(p.m_car_kg);
+                out.frame_damping_kg_per_s = frame.damping_kg_per_s(p.m_car_kg);
+            }
+        }
+        out.damping_kg_per_s[0] = p.c_cw_kg_per_s;
+        out.damping_kg_per_s[layout.sheave] = p.c_sheave_nms_per_rad / (r * r);
+        out.damping_kg_per_s[layout.hitch] = p.c_car_kg_per_s;
+        out
+    }
+
+    /// Node accelerations (m/s^2) into `accel` (the first `nodes`), for
+    /// positions `position_m` (m) and velocities `velocity_mps` (m/s) of
+    /// the nodes, shaft torque `shaft_torque_nm` (N m, positive lifts the
+    /// car), the brake's action and an extra vertical force on the car body
+    /// `car_extra_force_n` (N, positive up).
+    ///
+    /// Forces: springs between consecutive nodes; the drive's torque minus
+    /// the out-of-balance torque (Eqn 4) on the sheave, through the lever
+    /// ratio `r(theta)/r0` with eccentricity (which also applies to every
+    /// rope force on the sheave, whose rope end sits at `g(theta)`); viscous
+    /// guide damping on counterweight and hitch, `c_sh / r^2` on the sheave;
+    /// dry guide friction on counterweight and hitch; the frame damper
+    /// between hitch and body; the brake (held, or the elastic clamp).
+    #[allow(clippy::too_many_arguments)]
+    pub fn accelerations(
+        &self,
+        chain: &Chain,
+        position_m: &[f64],
+        velocity_mps: &[f64],
+        shaft_torque_nm: f64,
+        brake: BrakeAction,
+        car_extra_force_n: f64,
+        accel: &mut [f64],
+    ) {
+        let p = &chain.params;
+        let layout = &self.layout;
+        let nodes = layout.nodes;
+        let sheave = layout.sheave;
+        let lumped = self.lumped(chain, position_m[sheave]);
+        let k = &lumped.springs_n_per_m;
+        let r = p.sheave_radius_m;
+        // Spring end positions: the rope at the sheave sits at g(theta).
+        let eccentricity = self.effects.sheave_eccentricity.as_ref();
+        let (sheave_end, lever) = match eccentricity {
+            None => (position_m[sheave], 1.0),
+            Some(e) => {
+                let theta = position_m[sheave] / r;
+                (e.rope_displacement_m(r, theta), e.lever_ratio(theta))
+            }
+        };
+        let ends = |i: usize| if i == sheave { sheave_end } else { position_m[i] };
+        let mut torque = shaft_torque_nm;
+        if let BrakeAction::Clamped { angle_rad } = brake {
+            if let Some(clamp) = &self.effects.brake_stop {
+                torque += clamp.torque_nm(position_m[sheave] / r, angle_rad, velocity_mps[sheave] / r);
+            }
+        }
+        let out_of_balance = p.out_of_balance_torque_nm(lumped.lw_m);
+        for i in 0..nodes {
+            // Same order of operations as the nominal stiffness-matrix row.
+            let mut elastic = 0.0;
+            let mut diagonal = 0.0;
+            if i > 0 {
+                elastic += -k[i - 1] * ends(i - 1);
+                diagonal += k[i - 1];
+            }
+            if i + 1 < nodes {
+                diagonal += k[i];
+            }
+            elastic += diagonal * ends(i);
+            if i + 1 < nodes {
+                elastic += -k[i] * ends(i + 1);
+            }
+            let force = if i == sheave {
+                if eccentricity.is_some() {
+                    elastic *= lever;
+                    (torque - out_of_balance * lever) / r
+                } else {
+                    (torque - out_of_balance) / r
+                }
+            } else {
+                0.0
+            };
+            accel[i] = (force - lumped.damping_kg_per_s[i] * velocity_mps[i] - elastic) / lumped.masses_kg[i];
+        }
+        if let Some(friction) = &self.effects.coulomb_guide_friction {
+            for i in [0, layout.hitch] {
+                accel[i] += friction.force_n(velocity_mps[i]) / lumped.masses_kg[i];
+            }
+        }
+        if layout.body != layout.hitch && lumped.frame_damping_kg_per_s != 0.0 {
+            let f = lumped.frame_damping_kg_per_s * (velocity_mps[layout.body] - velocity_mps[layout.hitch]);
+            accel[layout.hitch] += f / lumped.masses_kg[layout.hitch];
+            accel[layout.body] -= f / lumped.masses_kg[layout.body];
+        }
+        if brake == BrakeAction::Held {
+            accel[sheave] = 0.0;
+        }
+        if car_extra_force_n != 0.0 {
+            accel[layout.body] += car_extra_force_n / lumped.masses_kg[layout.body];
+        }
+    }
+
+    /// An upper bound of the line's highest rate, rad/s, with the sheave at
+    /// `u_sh_m` (m): Gershgorin's bound `sqrt(max_i sum_j |K_ij| / m_i)` of
+    /// the elastic frequencies (with the brake clamp as a spring to ground),
+    /// and the damping and dry-friction rates `c / m`, `F / (v_slip m)`.
+    /// An explicit RK4 step `h` with `h omega_max <= 1` is stable and
+    /// accurate.
+    pub fn omega_max_radps(&self, chain: &Chain, u_sh_m: f64, clamped: bool) -> f64 {
+        let lumped = self.lumped(chain, u_sh_m);
+        let layout = &self.layout;
+        let k = &lumped.springs_n_per_m;
+        let mut elastic: f64 = 0.0;
+        let mut rate: f64 = 0.0;
+        for i in 0..layout.nodes {
+            let left = if i > 0 { k[i - 1] } else { 0.0 };
+            let right = if i + 1 < layout.nodes { k[i] } else { 0.0 };
+            let mut row = 2.0 * (left + right);
+            let mut c = lumped.damping_kg_per_s[i];
+            if i == layout.sheave && clamped {
+                if let Some(clamp) = &self.effects.brake_stop {
+                    let r2 = chain.params.sheave_radius_m * chain.params.sheave_radius_m;
+                    row += clamp.clamp_stiffness_nm_per_rad / r2;
+                    c += clamp.clamp_damping_nms_per_rad / r2;
+                }
+            }
+            if (i == layout.hitch || i == layout.body) && layout.body != layout.hitch {
+                c += 2.0 * lumped.frame_damping_kg_per_s;
+            }
+            let m = lumped.masses_kg[i];
+            elastic = elastic.max(row / m);
+            rate = rate.max(c / m);
+            if let (Some(f), true) = (&self.effects.coulomb_guide_friction, i == 0 || i == layout.hitch) {
+                rate = rate.max(f.stiffness_rate_per_s(m));
+            }
+        }
+        elastic.sqrt().max(rate)
+    }
+
+    /// Kinetic plus elastic energy of the line, J, plus the potential of
+    /// the out-of-balance torque (`tau_ob g(theta) / r0`) and of a brake
+    /// clamp: conserved without damping, friction, drive torque and with
+    /// the rope lengths frozen (`Chain::lengths_follow_sheave = false`).
+    pub fn mechanical_energy_j(
+        &self,
+        chain: &Chain,
+        position_m: &[f64],
+        velocity_mps: &[f64],
+        clamp_angle_rad: Option<f64>,
+    ) -> f64 {
+        let p = &chain.params;
+        let layout = &self.layout;
+        let sheave = layout.sheave;
+        let lumped = self.lumped(chain, position_m[sheave]);
+        let mut ends = [0.0; MAX_NODES];
+        ends[..layout.nodes].copy_from_slice(&position_m[..layout.nodes]);
+        ends[sheave] = self.sheave_rope_displacement_m(p, position_m[sheave]);
+        let kinetic: f64 =
+            (0..layout.nodes).map(|i| 0.5 * lumped.masses_kg[i] * velocity_mps[i] * velocity_mps[i]).sum();
+        let elastic: f64 =
+            (0..layout.nodes - 1).map(|i| 0.5 * lumped.springs_n_per_m[i] * (ends[i + 1] - ends[i]).powi(2)).sum();
+        let gravity = p.out_of_balance_torque_nm(lumped.lw_m) * ends[sheave] / p.sheave_radius_m;
+        let clamp = match (clamp_angle_rad, &self.effects.brake_stop) {
+            (Some(angle), Some(b)) => {
+                0.5 * b.clamp_stiffness_nm_per_rad * (position_m[sheave] / p.sheave_radius_m - angle).powi(2)
+            }
+            _ => 0.0,
+        };
+        kinetic + elastic + gravity + clamp
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::EffectKind;
+    use crate::rope::DOF;
+    use rig_config::RigConfig;
+
+    fn chain(m_car: f64, lw: f64) -> Chain {
+        Chain::new(ChainParams::from_rig(&RigConfig::embedded_default().unwrap(), m_car), lw)
+    }
+
+    #[test]
+    fn layouts() {
+        let nominal = Layout::new(&Effects::none());
+        assert_eq!((nominal.nodes, nominal.sheave, nominal.hitch, nominal.body), (DOF, 2, 4, 4));
+        let mut e = Effects::none();
+        e.set(EffectKind::RopeDiscretization, &[8.0]).unwrap();
+        e.set(EffectKind::DivertingPulley, &EffectKind::DivertingPulley.defaults()).unwrap();
+        e.set(EffectKind::CarFrameMode, &EffectKind::CarFrameMode.defaults()).unwrap();
+        let l = Layout::new(&e);
+        assert_eq!(l.nodes, MAX_NODES);
+        assert_eq!((l.sheave, l.pulley, l.hitch, l.body), (9, Some(10), 19, 20));
+    }
+
+    /// The line without effects is the nominal chain, bit for bit, at
+    /// arbitrary states (and with N = 1, alpha = 0 switched on).
+    #[test]
+    fn nominal_line_is_the_nominal_chain_bit_for_bit() {
+        let mut one = Effects::none();
+        one.set(EffectKind::RopeDiscretization, &[1.0]).unwrap();
+        one.set(EffectKind::TensionStiffening, &[0.0, 300.0]).unwrap();
+        for effects in [Effects::none(), one] {
+            let line = Line::new(&effects);
+            for (m, lw, seed) in [(70.5, 1.3, 1.0), (33.0, 7.2, -2.0), (45.5, 4.0, 0.5)] {
+                let c = chain(m, lw);
+                let mut state = crate::ChainState::default();
+                for i in 0..DOF {
+                    state.position_m[i] = 1e-4 * seed * (i as f64 + 0.3).sin();
+                    state.velocity_mps[i] = 0.3 * seed * (i as f64 * 1.7).cos();
+                }
+                for brake in [false, true] {
+                    let expected = c.acceleration_mps2(&state, 17.3 * seed, brake);
+                    let mut got = [0.0; DOF];
+                    let action = if brake { BrakeAction::Held } else { BrakeAction::Released };
+                    line.accelerations(&c, &state.position_m, &state.velocity_mps, 17.3 * seed, action, 0.0, &mut got);
+                    assert_eq!(got, expected);
+                }
+            }
+        }
+    }
+}
