@@ -4,7 +4,9 @@
 //!
 //! Every value is SI unless its name says otherwise. A value out of its
 //! physical range is refused with the file, the `[section].field` and the
-//! accepted range.
+//! accepted range; so is a field the format does not know (a misspelt
+//! optional field would otherwise leave its default in force), an empty car
+//! list, and a file larger than [`MAX_TEXT_FILE_BYTES`].
 
 #![warn(missing_docs)]
 
@@ -17,6 +19,40 @@ use serde::Deserialize;
 pub const EMBEDDED_RIG_TOML: &str = include_str!("../../configs/rig.toml");
 /// Name used in error messages for the embedded rig file.
 pub const EMBEDDED_RIG_NAME: &str = "configs/rig.toml (embedded)";
+
+/// Largest text input file read whole (a rig file, an effects, faults or
+/// foreign-rig file, a recording's metadata), bytes: 1 MiB, some hundred
+/// times a real one (the reference rig file is under 4 kB).
+pub const MAX_TEXT_FILE_BYTES: u64 = 1 << 20;
+
+/// Reads the text file `path`, refusing one larger than `max_bytes` before
+/// reading it whole (the size of a regular file is checked first; for a
+/// pipe or device at most `max_bytes + 1` bytes are read).
+///
+/// # Errors
+/// The I/O error; [`std::io::ErrorKind::FileTooLarge`] with the limit in
+/// its message for a file over `max_bytes`; [`std::io::ErrorKind::InvalidData`]
+/// for text that is not UTF-8.
+pub fn read_text_file(path: &Path, max_bytes: u64) -> std::io::Result<String> {
+    use std::io::Read;
+    let too_large = || {
+        std::io::Error::new(
+            std::io::ErrorKind::FileTooLarge,
+            format!("the file is larger than {max_bytes} bytes, the limit for this input"),
+        )
+    };
+    let file = std::fs::File::open(path)?;
+    if file.metadata()?.len() > max_bytes {
+        return Err(too_large());
+    }
+    let mut bytes = Vec::new();
+    file.take(max_bytes.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(too_large());
+    }
+    String::from_utf8(bytes)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, format!("not UTF-8 text: {e}")))
+}
 
 /// Errors loading or validating a rig file.
 #[derive(Debug, thiserror::Error)]
@@ -37,6 +73,18 @@ pub enum ConfigError {
         /// Parser message, with line and column.
         message: String,
     },
+    /// A field that holds no usable value (e.g. an empty list).
+    #[error("{path}: field `{field}` {found}: expected {expected}")]
+    Invalid {
+        /// File path.
+        path: String,
+        /// `[section].field`.
+        field: String,
+        /// What the field holds, in words.
+        found: String,
+        /// What is accepted, in words.
+        expected: String,
+    },
     /// A value outside its physical range.
     #[error("{path}: field `{field}` = {value} is out of range: expected {expected}")]
     OutOfRange {
@@ -53,6 +101,7 @@ pub enum ConfigError {
 
 /// `[mechanics]`: the 5-DOF model of the paper (Eqn 1-6, 10-13).
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Mechanics {
     /// Counterweight mass `m_w`, kg.
     pub m_cw_kg: f64,
@@ -86,6 +135,7 @@ pub struct Mechanics {
 
 /// `[travel]`: the reference profile (paper Fig. 3).
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Travel {
     /// Rated speed, m/s.
     pub rated_speed_mps: f64,
@@ -101,6 +151,7 @@ pub struct Travel {
 
 /// `[motor]`: PMSM in the dq frame.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Motor {
     /// Pole pairs `p` (Eqn 7).
     pub pole_pairs: u32,
@@ -120,6 +171,7 @@ pub struct Motor {
 
 /// `[inverter]`: power stage and sensors.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Inverter {
     /// DC-bus voltage, V.
     pub dc_bus_v: f64,
@@ -143,6 +195,7 @@ pub struct Inverter {
 
 /// `[control]`: loop rates and bandwidths.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Control {
     /// Current-loop rate, Hz (one step per PWM period).
     pub current_loop_hz: f64,
@@ -174,6 +227,7 @@ pub struct Control {
 /// One `[[ripple]]` component: an angle-locked shaft torque
 /// `amplitude cos(order theta_m + phase)` (paper section 3.3).
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Ripple {
     /// Source of the component.
     pub name: String,
@@ -188,6 +242,7 @@ pub struct Ripple {
 
 /// `[measurement]`: acquisition settings of the rig.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Measurement {
     /// Sample rate, Hz.
     pub sample_rate_hz: f64,
@@ -199,6 +254,7 @@ pub struct Measurement {
 
 /// The whole rig file.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct RigConfig {
     /// `[mechanics]`.
     pub mechanics: Mechanics,
@@ -286,7 +342,7 @@ impl RigConfig {
 
     /// Reads, parses and validates a rig file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path)
+        let text = read_text_file(path, MAX_TEXT_FILE_BYTES)
             .map_err(|source| ConfigError::Io { path: path.display().to_string(), source })?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
@@ -301,6 +357,16 @@ impl RigConfig {
         let c = Checker { path: origin };
         let m = &self.mechanics;
         c.positive("[mechanics].m_cw_kg", m.m_cw_kg, 1.0e5)?;
+        if m.m_car_kg.is_empty() {
+            return Err(ConfigError::Invalid {
+                path: origin.to_string(),
+                field: "[mechanics].m_car_kg".to_string(),
+                found: "is an empty list".to_string(),
+                expected: "at least one car mass in kg, e.g. m_car_kg = [70.5] (the commands default to the \
+                           heaviest)"
+                    .to_string(),
+            });
+        }
         for (i, mass) in m.m_car_kg.iter().enumerate() {
             c.positive(&format!("[mechanics].m_car_kg[{i}]"), *mass, 1.0e5)?;
         }
@@ -566,6 +632,58 @@ mod tests {
         let text = EMBEDDED_RIG_TOML.replace("pole_pairs = 6", "pole_pairs = \"six\"");
         let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
         assert!(err.contains("line") && err.contains("pole_pairs"), "{err}");
+    }
+
+    #[test]
+    fn unknown_and_misspelt_fields_are_refused_naming_them() {
+        // A misspelt optional field: refused, not silently replaced by its default.
+        let text = EMBEDDED_RIG_TOML.replace("[control]\n", "[control]\nspeed_loop_bandwith_hz = 3.0\n");
+        assert_ne!(text, EMBEDDED_RIG_TOML);
+        let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
+        assert!(
+            err.contains("bad.toml")
+                && err.contains("speed_loop_bandwith_hz")
+                && err.contains("speed_loop_bandwidth_hz"),
+            "{err}"
+        );
+        // An extra field in any table, and an extra table.
+        for (from, to) in [
+            ("[mechanics]\n", "[mechanics]\nextra_field = 1\n"),
+            ("[measurement]\n", "[measurement]\nextra_field = 1\n"),
+            ("[[ripple]]\n", "[[ripple]]\nextra_field = 1\n"),
+            ("[travel]\n", "[extra]\nx = 1\n\n[travel]\n"),
+        ] {
+            let text = EMBEDDED_RIG_TOML.replacen(from, to, 1);
+            assert_ne!(text, EMBEDDED_RIG_TOML, "{from}");
+            let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
+            assert!(err.contains("bad.toml") && err.contains("unknown field") && err.contains("line"), "{err}");
+        }
+    }
+
+    #[test]
+    fn an_empty_car_list_is_refused_naming_the_field() {
+        let line = EMBEDDED_RIG_TOML.lines().find(|l| l.starts_with("m_car_kg")).unwrap();
+        let text = EMBEDDED_RIG_TOML.replace(line, "m_car_kg = []");
+        let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
+        assert!(err.contains("bad.toml") && err.contains("[mechanics].m_car_kg") && err.contains("empty"), "{err}");
+        assert!(err.contains("expected at least one car mass"), "{err}");
+    }
+
+    #[test]
+    fn a_file_over_the_size_bound_is_refused_before_it_is_read() {
+        let dir = std::env::temp_dir().join(format!("rig-config-size-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("huge.toml");
+        // Sparse: the size is what counts, not the bytes.
+        let file = std::fs::File::create(&path).unwrap();
+        file.set_len(MAX_TEXT_FILE_BYTES + 1).unwrap();
+        let err = RigConfig::load(&path).unwrap_err().to_string();
+        assert!(err.contains("huge.toml") && err.contains(&MAX_TEXT_FILE_BYTES.to_string()), "{err}");
+        let small = dir.join("small.toml");
+        std::fs::write(&small, EMBEDDED_RIG_TOML).unwrap();
+        assert_eq!(RigConfig::load(&small).unwrap(), RigConfig::embedded_default().unwrap());
+        assert_eq!(read_text_file(&small, 10).unwrap_err().kind(), std::io::ErrorKind::FileTooLarge);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

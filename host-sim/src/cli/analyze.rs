@@ -13,7 +13,7 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::create_out_dir;
+use super::{check_count, check_open_range, output_dir};
 use diagnosis::travel_signals::{counterweight_side_length_m, travel_torque, TravelTorque};
 use dsp::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Spectrogram};
 use plant::modes::natural_modes;
@@ -27,22 +27,37 @@ use rig_config::RigConfig;
 pub struct AnalyzeArgs {
     /// The dataset directory (pairs `<stem>.toml` + `<stem>.csv`).
     pub dataset: PathBuf,
-    /// Welch segment length for the torque PSD, s.
-    #[arg(long = "welch-segment", value_name = "S", default_value_t = 4.0)]
+    /// Welch segment length for the torque PSD, s (at most the constant-speed
+    /// stage; the frequency resolution is 1 / segment).
+    #[arg(long = "welch-segment", value_name = "S", default_value_t = 4.0, allow_negative_numbers = true)]
     pub welch_segment_s: f64,
     /// Burg spectrogram: window, s.
-    #[arg(long = "burg-window", value_name = "S", default_value_t = 1.0)]
+    #[arg(long = "burg-window", value_name = "S", default_value_t = 1.0, allow_negative_numbers = true)]
     pub burg_window_s: f64,
     /// Burg spectrogram: AR model order.
-    #[arg(long = "burg-order", default_value_t = 40)]
+    #[arg(long = "burg-order", default_value_t = 40, allow_negative_numbers = true)]
     pub burg_order: usize,
     /// STFT spectrogram window, s.
-    #[arg(long = "stft-window", value_name = "S", default_value_t = 2.0)]
+    #[arg(long = "stft-window", value_name = "S", default_value_t = 2.0, allow_negative_numbers = true)]
     pub stft_window_s: f64,
     /// Output directory (one folder per recording).
     #[arg(long, value_name = "DIR", default_value = "out/analyze")]
     pub out: PathBuf,
+    /// Replace the outputs of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
 }
+
+/// Longest analysis window of the flags, s.
+const MAX_WINDOW_S: f64 = 600.0;
+/// Highest Burg order of `--burg-order`.
+const MAX_BURG_ORDER: usize = 1000;
+/// A line is resolved when it lies at least this many bins of the Welch
+/// PSD from 0 Hz and from the Nyquist frequency (`Psd::line_amplitude`) ...
+const LINE_EDGE_BINS: f64 = 3.0;
+/// ... and this many bins from every other line of the list (two main
+/// lobes of the Hann window and a bin between them).
+const LINE_SEPARATION_BINS: f64 = 5.0;
 
 /// A labelled line of the torque ripple.
 #[derive(Debug, Serialize)]
@@ -64,6 +79,9 @@ struct TravelAnalysis {
     electrical_offset_rad: f64,
     mean_torque_nm: f64,
     ripple_lines: Vec<RippleLine>,
+    /// Orders whose line the Welch segment cannot resolve (too close to 0 Hz,
+    /// the Nyquist frequency or another line): not reported.
+    unresolved_orders: Vec<u32>,
     files: Vec<String>,
 }
 
@@ -84,17 +102,26 @@ fn ripple_sources(pole_pairs: u32) -> Vec<(u32, String)> {
 
 /// Runs `analyze`.
 pub fn run(rig: &RigConfig, args: &AnalyzeArgs) -> anyhow::Result<()> {
+    check_open_range("--welch-segment", args.welch_segment_s, 0.0, MAX_WINDOW_S)?;
+    check_open_range("--burg-window", args.burg_window_s, 0.0, MAX_WINDOW_S)?;
+    check_count("--burg-order", args.burg_order, 1, MAX_BURG_ORDER)?;
+    check_open_range("--stft-window", args.stft_window_s, 0.0, MAX_WINDOW_S)?;
     let dataset = read_dataset(&args.dataset, rig.mechanics.rope_total_length_m)?;
-    create_out_dir(&args.out)?;
+    let out = output_dir(&args.out, args.force)?;
+    let travels = dataset.iter().filter(|(_, r)| matches!(r.meta.kind, RecordingKind::Travel { .. }));
+    out.refuse_existing(
+        std::iter::once("analyze.json".to_string()).chain(travels.map(|(stem, _)| format!("{stem}/torque_psd.csv"))),
+    )?;
     let mut results = Vec::new();
     let mut skipped = Vec::new();
     for (stem, recording) in &dataset {
         match recording.meta.kind {
-            RecordingKind::Travel { .. } => results.push(analyze_travel(rig, args, stem, recording)?),
+            RecordingKind::Travel { .. } => results
+                .push(analyze_travel(rig, args, stem, recording, &out).with_context(|| format!("recording `{stem}`"))?),
             RecordingKind::FreeDecay { .. } => skipped.push(format!("{stem}: free decay (see `identify`)")),
         }
     }
-    let json = args.out.join("analyze.json");
+    let json = out.path("analyze.json");
     #[derive(Serialize)]
     struct Report<'a> {
         dataset: String,
@@ -104,22 +131,38 @@ pub fn run(rig: &RigConfig, args: &AnalyzeArgs) -> anyhow::Result<()> {
     let report = Report { dataset: args.dataset.display().to_string(), travels: &results, skipped: &skipped };
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("cannot write {}", json.display()))?;
+    let json = out.published(&json);
+    out.commit()?;
     for t in &results {
-        println!(
+        outln!(
             "{}: constant speed {:.2}-{:.2} s, f_mech {:.4} Hz, mean torque {:.2} N m",
-            t.recording, t.constant_speed_start_s, t.constant_speed_end_s, t.mechanical_frequency_hz, t.mean_torque_nm
+            t.recording,
+            t.constant_speed_start_s,
+            t.constant_speed_end_s,
+            t.mechanical_frequency_hz,
+            t.mean_torque_nm
         );
         for line in &t.ripple_lines {
-            println!(
+            outln!(
                 "  {:>3} x f_mech {:>8.3} Hz: {:>8.4} N m  {}",
-                line.mechanical_order, line.frequency_hz, line.amplitude_nm, line.source
+                line.mechanical_order,
+                line.frequency_hz,
+                line.amplitude_nm,
+                line.source
+            );
+        }
+        if !t.unresolved_orders.is_empty() {
+            outln!(
+                "  not resolved with --welch-segment {} s (lines too close to 0 Hz or to each other): orders {:?}",
+                args.welch_segment_s,
+                t.unresolved_orders
             );
         }
     }
     for s in &skipped {
-        println!("skipped {s}");
+        outln!("skipped {s}");
     }
-    println!("wrote {} and one folder per travel in {}", json.display(), args.out.display());
+    outln!("wrote {} and one folder per travel in {}", json.display(), args.out.display());
     Ok(())
 }
 
@@ -128,15 +171,17 @@ fn analyze_travel(
     args: &AnalyzeArgs,
     stem: &str,
     recording: &Recording,
+    output: &crate::output::OutputDir,
 ) -> anyhow::Result<TravelAnalysis> {
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         anyhow::bail!("`{stem}` is not a travel");
     };
     let fs = recording.meta.sample_rate_hz;
     let pole_pairs = rig.motor.pole_pairs;
-    let out = args.out.join(stem);
-    create_out_dir(&out)?;
+    let out = output.path(stem);
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let mut files = Vec::new();
+    let published = |path: &std::path::Path| output.published(path).display().to_string();
 
     let TravelTorque {
         speed_radps: speed,
@@ -150,12 +195,40 @@ fn analyze_travel(
     let stage_torque = &torque[stage.clone()];
     let mean_torque = stage_torque.iter().sum::<f64>() / stage_torque.len() as f64;
 
-    let segment = ((args.welch_segment_s * fs) as usize).min(stage_torque.len());
-    let psd = welch_psd(stage_torque, fs, segment, 0.5)?;
+    let stage_s = stage_torque.len() as f64 / fs;
+    if args.welch_segment_s > stage_s {
+        anyhow::bail!(
+            "the constant-speed stage ({:.2}-{:.2} s) lasts {stage_s:.2} s, shorter than the Welch segment \
+             (--welch-segment {} s); expected a stage of at least one segment: give a --welch-segment of at most \
+             {:.2} s (its frequency resolution is 1 / segment)",
+            stage.start as f64 / fs,
+            stage.end as f64 / fs,
+            args.welch_segment_s,
+            (stage_s * 100.0).floor() / 100.0
+        );
+    }
+    let segment = (args.welch_segment_s * fs).round() as usize;
+    let psd = welch_psd(stage_torque, fs, segment, 0.5).context("torque PSD (--welch-segment)")?;
     let mut ripple_lines = Vec::new();
-    for (order, source) in ripple_sources(pole_pairs) {
+    let mut unresolved_orders = Vec::new();
+    let sources = ripple_sources(pole_pairs);
+    let bins = psd.bin_width_hz();
+    for (order, source) in &sources {
+        let (order, source) = (*order, source.clone());
         let expected = order as f64 * f_mech;
         if expected >= 0.5 * fs {
+            continue;
+        }
+        let nearest = sources
+            .iter()
+            .filter(|(o, _)| *o != order)
+            .map(|(o, _)| (*o as f64 * f_mech - expected).abs())
+            .fold(f64::INFINITY, f64::min);
+        let resolved = expected >= LINE_EDGE_BINS * bins
+            && expected <= 0.5 * fs - LINE_EDGE_BINS * bins
+            && nearest >= LINE_SEPARATION_BINS * bins;
+        if !resolved {
+            unresolved_orders.push(order);
             continue;
         }
         if let Some((frequency_hz, amplitude_nm)) =
@@ -177,7 +250,7 @@ fn analyze_travel(
         writeln!(csv, "{f},{d}")?;
     }
     csv.flush()?;
-    files.push(psd_csv.display().to_string());
+    files.push(published(&psd_csv));
     let band: Vec<(f64, f64)> = psd
         .frequency_hz
         .iter()
@@ -194,7 +267,7 @@ fn analyze_travel(
         "PSD [dB re 1 (N m)^2/Hz]",
         &[Series::new("machine torque (dq0)", x, y)],
     )?;
-    files.push(psd_png.display().to_string());
+    files.push(published(&psd_png));
 
     // Accelerations: 1 Hz zero-phase high-pass, spectrograms with the model's modes.
     let mut chain = ChainParams::from_rig(rig, m_car_kg);
@@ -204,7 +277,8 @@ fn analyze_travel(
     let [_, band_hi] = rig.measurement.spectrogram_band_hz;
     for (name, label) in [(ACC_CAR, "car"), (ACC_CW, "counterweight"), (ACC_MACHINE, "machine")] {
         let Some(acc) = recording.column(name) else { continue };
-        let filtered = highpass_zero_phase(&acc.values, fs, rig.measurement.highpass_hz)?;
+        let filtered = highpass_zero_phase(&acc.values, fs, rig.measurement.highpass_hz)
+            .with_context(|| format!("`{name}`: high-pass at [measurement].highpass_hz"))?;
         let hp_png = out.join(format!("{name}_hp.png"));
         line_plot(
             &hp_png,
@@ -213,9 +287,16 @@ fn analyze_travel(
             "acceleration [m/s^2]",
             &[Series::new(label, time.clone(), filtered.clone())],
         )?;
-        files.push(hp_png.display().to_string());
-        let burg = burg_spectrogram(&filtered, fs, args.burg_window_s, 0.75, args.burg_order, band_hi, 0.25)?;
-        let stft = stft_spectrogram(&filtered, fs, args.stft_window_s, 0.9, band_hi)?;
+        files.push(published(&hp_png));
+        let burg = burg_spectrogram(&filtered, fs, args.burg_window_s, 0.75, args.burg_order, band_hi, 0.25)
+            .with_context(|| {
+                format!(
+                    "`{name}`: Burg spectrogram (--burg-window {} s, --burg-order {})",
+                    args.burg_window_s, args.burg_order
+                )
+            })?;
+        let stft = stft_spectrogram(&filtered, fs, args.stft_window_s, 0.9, band_hi)
+            .with_context(|| format!("`{name}`: STFT spectrogram (--stft-window {} s)", args.stft_window_s))?;
         for (method, spectrogram) in [("burg", &burg), ("stft", &stft)] {
             let png = out.join(format!("{name}_spectrogram_{method}.png"));
             spectrogram_plot(
@@ -225,7 +306,7 @@ fn analyze_travel(
                 &mode_overlays(&chain, &lw, fs, spectrogram, band_hi),
                 None,
             )?;
-            files.push(png.display().to_string());
+            files.push(published(&png));
         }
     }
     Ok(TravelAnalysis {
@@ -236,6 +317,7 @@ fn analyze_travel(
         electrical_offset_rad: offset,
         mean_torque_nm: mean_torque,
         ripple_lines,
+        unresolved_orders,
         files,
     })
 }

@@ -13,14 +13,14 @@ use rig_config::RigConfig;
 #[derive(Debug, Args)]
 pub struct BenchArgs {
     /// Number of travels to time (alternating up and down).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, allow_negative_numbers = true)]
     pub repeat: usize,
 }
 
 /// Runs `bench`: times full travels of the heaviest car and reports the
 /// ratio of simulated to wall-clock time.
 pub fn run(rig: &RigConfig, args: &BenchArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.repeat >= 1, "--repeat = {} is out of range: expected at least 1", args.repeat);
+    super::check_count("--repeat", args.repeat, 1, 1000)?;
     let m_car = default_car_mass_kg(rig);
     let options = SimOptions::for_rig(rig);
     let mut ratios = Vec::new();
@@ -31,7 +31,7 @@ pub fn run(rig: &RigConfig, args: &BenchArgs) -> anyhow::Result<()> {
         let run = simulate_travel(rig, &spec, &options, None)?;
         let wall = started.elapsed().as_secs_f64();
         let ratio = run.duration_s() / wall;
-        println!(
+        outln!(
             "travel {} ({direction:?}): {:.2} s simulated in {wall:.3} s = {ratio:.1}x real time",
             k + 1,
             run.duration_s()
@@ -39,7 +39,7 @@ pub fn run(rig: &RigConfig, args: &BenchArgs) -> anyhow::Result<()> {
         ratios.push(ratio);
     }
     ratios.sort_by(f64::total_cmp);
-    println!(
+    outln!(
         "closed-loop travel, m_car = {m_car} kg, step {:.3e} s, {} Hz recording: median {:.1}x real time (min {:.1}x, max {:.1}x) on {} thread",
         options.max_step_s,
         options.sample_rate_hz,

@@ -13,7 +13,7 @@ use drive_core::ripple::Strategy;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
-use super::create_out_dir;
+use super::output_dir;
 use closed_loop::compensation::{all_cases, calibrate_table, run_case, CompareRow};
 use plots::{line_plot, Series};
 use rig_config::RigConfig;
@@ -32,11 +32,14 @@ pub struct CompareArgs {
     #[arg(long)]
     pub nominal_only: bool,
     /// Travels iterative learning runs before the measured one.
-    #[arg(long, value_name = "N", default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3, allow_negative_numbers = true)]
     pub learning_travels: usize,
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "out/compare")]
     pub out: PathBuf,
+    /// Replace the tables of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -67,14 +70,18 @@ pub fn run(rig: &RigConfig, args: &CompareArgs) -> anyhow::Result<()> {
             rows.extend(read_rows(path)?);
         }
         rows.sort_by_key(|r| r.case_index);
-        create_out_dir(&args.out)?;
-        return write_outputs(&args.out, &rows, None);
+        let out = output_dir(&args.out, args.force)?;
+        out.refuse_existing(OUTPUTS)?;
+        write_outputs(&out, &rows, None)?;
+        out.commit()?;
+        return Ok(());
     }
     if args.learning_travels > 50 {
         bail!("--learning-travels {}: expected at most 50", args.learning_travels);
     }
     let shard = args.shard.as_deref().map(parse_shard).transpose()?;
-    create_out_dir(&args.out)?;
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(OUTPUTS)?;
     let started = Instant::now();
     let table = calibrate_table(rig).context("calibration travel for strategy 1's table")?;
     let cases: Vec<(usize, _)> = all_cases(rig)
@@ -105,11 +112,28 @@ pub fn run(rig: &RigConfig, args: &CompareArgs) -> anyhow::Result<()> {
         rows.extend(r?);
     }
     let wall = started.elapsed().as_secs_f64();
-    println!("{} cases x {} strategies in {wall:.1} s", cases.len(), STRATEGIES.len());
-    write_outputs(&args.out, &rows, Some(&table))
+    outln!("{} cases x {} strategies in {wall:.1} s", cases.len(), STRATEGIES.len());
+    write_outputs(&out, &rows, Some(&table))?;
+    out.commit()?;
+    Ok(())
 }
 
+/// Files `compare` writes.
+const OUTPUTS: [&str; 5] = ["compare.csv", "compare.json", "compare.md", "compare_12x.png", "compare_a95.png"];
+
+/// Largest `compare.csv` that `--merge` reads, bytes (a full sweep's is
+/// about 100 kB).
+const MAX_MERGE_CSV_BYTES: u64 = 64 << 20;
+
 fn read_rows(path: &Path) -> anyhow::Result<Vec<CompareRow>> {
+    let size = std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?.len();
+    if size > MAX_MERGE_CSV_BYTES {
+        bail!(
+            "{}: {size} bytes; expected a compare.csv of at most {MAX_MERGE_CSV_BYTES} bytes (a full sweep's is \
+             about 100 kB)",
+            path.display()
+        );
+    }
     let mut reader = csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut rows = Vec::new();
     for (i, row) in reader.deserialize().enumerate() {
@@ -124,7 +148,12 @@ fn fmt_opt(v: Option<f64>) -> String {
     v.map_or("never".into(), |v| format!("{v:.1}"))
 }
 
-fn write_outputs(out: &Path, rows: &[CompareRow], table: Option<&HarmonicTable>) -> anyhow::Result<()> {
+fn write_outputs(
+    output: &crate::output::OutputDir,
+    rows: &[CompareRow],
+    table: Option<&HarmonicTable>,
+) -> anyhow::Result<()> {
+    let out = output.staging();
     let csv_path = out.join("compare.csv");
     let mut writer =
         csv::Writer::from_path(&csv_path).with_context(|| format!("cannot write {}", csv_path.display()))?;
@@ -196,8 +225,13 @@ fn write_outputs(out: &Path, rows: &[CompareRow], table: Option<&HarmonicTable>)
             "change [%]",
             &series(&|r| r.a95_change_pct),
         )?;
-        println!("plots: {}, {}", db_path.display(), a95_path.display());
+        outln!("plots: {}, {}", output.published(&db_path).display(), output.published(&a95_path).display());
     }
-    println!("table: {}, {}, {}", csv_path.display(), md_path.display(), json_path.display());
+    outln!(
+        "table: {}, {}, {}",
+        output.published(&csv_path).display(),
+        output.published(&md_path).display(),
+        output.published(&json_path).display()
+    );
     Ok(())
 }

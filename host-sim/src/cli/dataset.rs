@@ -9,9 +9,9 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use rand::SeedableRng;
 
-use super::create_out_dir;
+use super::output_dir;
 use closed_loop::foreign::{Acquisition, ForeignDrive, ForeignRig};
-use closed_loop::synthetic::{make_dataset, make_foreign_dataset, DatasetSpec};
+use closed_loop::synthetic::{dataset_stems, make_dataset, make_foreign_dataset, DatasetSpec};
 use plant::effects::Effects;
 use recording::write_recording;
 use rig_config::RigConfig;
@@ -68,19 +68,19 @@ pub struct DatasetArgs {
     #[arg(long = "effect", value_name = "EFFECT")]
     pub effect: Vec<String>,
     /// Car masses, kg (default: the rig's four); one travel up and one down each.
-    #[arg(long = "mass", value_name = "KG", value_delimiter = ',')]
+    #[arg(long = "mass", value_name = "KG", value_delimiter = ',', allow_negative_numbers = true)]
     pub masses_kg: Vec<f64>,
     /// Sample rate, Hz (default: the rig's, or the foreign acquisition's).
-    #[arg(long, value_name = "HZ")]
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
     pub sample_rate: Option<f64>,
     /// RMS accelerometer noise, m/s^2 (default: 0.01, or the foreign acquisition's).
-    #[arg(long, value_name = "MPS2")]
+    #[arg(long, value_name = "MPS2", allow_negative_numbers = true)]
     pub acc_noise: Option<f64>,
     /// RMS current-probe noise, A (default: 0.02, or the foreign acquisition's).
-    #[arg(long, value_name = "A")]
+    #[arg(long, value_name = "A", allow_negative_numbers = true)]
     pub current_noise: Option<f64>,
     /// Seed of the noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
     /// The drive: the project's drive core or a commercial drive (default:
     /// project, commercial with --drive-param or --foreign-seed).
@@ -98,7 +98,7 @@ pub struct DatasetArgs {
     pub daq_params: Vec<String>,
     /// Draws a foreign rig at random with this seed: the commercial drive's
     /// and the foreign acquisition's parameters within their ranges.
-    #[arg(long = "foreign-seed", value_name = "N", conflicts_with = "foreign_file")]
+    #[arg(long = "foreign-seed", value_name = "N", conflicts_with = "foreign_file", allow_negative_numbers = true)]
     pub foreign_seed: Option<u64>,
     /// A foreign rig from a TOML file: `[drive]` and/or `[acquisition]`
     /// tables of `name = value` (what `dataset` prints for a foreign rig).
@@ -107,13 +107,16 @@ pub struct DatasetArgs {
     /// Output directory (the dataset).
     #[arg(long, value_name = "DIR", default_value = "out/dataset")]
     pub out: PathBuf,
+    /// Replace recordings of the same stem (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The foreign rig the flags describe (`None` when both parts are the project's).
 fn foreign_rig(args: &DatasetArgs) -> anyhow::Result<Option<ForeignRig>> {
     let from_file = match &args.foreign_file {
         Some(path) => {
-            let text = std::fs::read_to_string(path)
+            let text = rig_config::read_text_file(path, rig_config::MAX_TEXT_FILE_BYTES)
                 .with_context(|| format!("cannot read the foreign-rig file {}", path.display()))?;
             Some(ForeignRig::from_toml_str(&text, &path.display().to_string())?)
         }
@@ -194,8 +197,9 @@ pub fn run(rig: &RigConfig, args: &DatasetArgs) -> anyhow::Result<()> {
         spec.current_noise_a = current_noise;
     }
     spec.seed = args.seed;
-    create_out_dir(&args.out)?;
-    println!(
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(dataset_stems(&spec).iter().flat_map(|s| [format!("{s}.toml"), format!("{s}.csv")]))?;
+    outln!(
         "simulating {} travels and {} decays with {}",
         2 * spec.m_car_kg.len(),
         spec.decay_masses_kg.len(),
@@ -204,13 +208,17 @@ pub fn run(rig: &RigConfig, args: &DatasetArgs) -> anyhow::Result<()> {
     let recordings = match &foreign {
         None => make_dataset(rig, &spec)?,
         Some(foreign) => {
-            println!("foreign rig:\n{}", foreign.to_toml());
+            outln!("foreign rig:\n{}", foreign.to_toml());
             make_foreign_dataset(rig, &spec, foreign)?
         }
     };
     for (stem, recording) in recordings {
-        let (toml, _) = write_recording(&args.out, &stem, &recording)?;
-        println!("wrote {}", toml.display());
+        write_recording(out.staging(), &stem, &recording)?;
+    }
+    for path in out.commit()? {
+        if path.extension().is_some_and(|e| e == "toml") {
+            outln!("wrote {}", path.display());
+        }
     }
     Ok(())
 }

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::{check_open_range, create_out_dir};
+use super::{check_count, check_open_range, output_dir};
 use plant::effects::Effects;
-use plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay_with, FreeDecaySpec};
+use plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay_with, FreeDecaySpec, MAX_ELEMENTS};
 use recording::write::write_recording;
 use recording::{Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
 use rig_config::RigConfig;
@@ -37,11 +37,14 @@ pub struct DecayArgs {
     #[arg(long = "duration", value_name = "S", default_value_t = 3.0, allow_negative_numbers = true)]
     pub duration_s: f64,
     /// Rope elements of the discretised rope.
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = 40, allow_negative_numbers = true)]
     pub elements: usize,
     /// Output directory (the dataset).
     #[arg(long, value_name = "DIR", default_value = "out/decay")]
     pub out: PathBuf,
+    /// Replace recordings of the same stem (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
     /// Effects of the library, from a TOML file (`[name]` tables); of them
     /// a free decay has tension stiffening, the car frame mode and dry
     /// guide friction, the others are ignored.
@@ -58,19 +61,34 @@ pub fn run(rig: &RigConfig, args: &DecayArgs) -> anyhow::Result<()> {
     let m = &rig.mechanics;
     let masses = if args.masses_kg.is_empty() { m.m_car_kg.clone() } else { args.masses_kg.clone() };
     check_open_range("--duration", args.duration_s, 0.0, 600.0)?;
+    check_count("--elements", args.elements, 1, MAX_ELEMENTS)?;
+    for &mass in &masses {
+        check_open_range("--mass", mass, 0.0, 1.0e5)?;
+    }
+    for &length in &args.lengths_m {
+        check_open_range("--length", length, 0.0, 1.0e3)?;
+    }
+    if let Some(ea) = args.rope_ea_n {
+        check_open_range("--ea", ea, 0.0, 1.0e12)?;
+    }
+    if let Some(c) = args.damping_kg_per_s {
+        check_open_range("--damping", c, -1e-300, 1.0e6)?;
+    }
+    let stems: Vec<String> =
+        masses.iter().flat_map(|mass| args.lengths_m.iter().map(move |length| stem(*mass, *length))).collect();
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(stems.iter().flat_map(|s| [format!("{s}.toml"), format!("{s}.csv")]))?;
     let requested = Effects::from_file_and_flags(args.effects_file.as_deref(), &args.effect)?;
     let effects = requested.for_free_decay();
     let ignored: Vec<&str> =
         requested.enabled().into_iter().filter(|k| effects.values(*k).is_none()).map(|k| k.name()).collect();
     if !ignored.is_empty() {
-        println!("effects a free decay does not have, ignored: {}", ignored.join(", "));
+        outln!("effects a free decay does not have, ignored: {}", ignored.join(", "));
     }
-    create_out_dir(&args.out)?;
     let fs = rig.measurement.sample_rate_hz;
+    let mut lines = Vec::new();
     for &mass in &masses {
-        check_open_range("--mass", mass, 0.0, 1.0e5)?;
         for &length in &args.lengths_m {
-            check_open_range("--length", length, 0.0, 1.0e3)?;
             let spec = FreeDecaySpec {
                 mass_kg: mass,
                 rope_length_m: length,
@@ -97,14 +115,22 @@ pub fn run(rig: &RigConfig, args: &DecayArgs) -> anyhow::Result<()> {
                 },
                 columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, acc)],
             };
-            let stem = format!("decay_l{length}_m{mass}");
-            let (toml, _) = write_recording(&args.out, &stem, &recording)?;
-            println!(
+            let (toml, _) = write_recording(out.staging(), &stem(mass, length), &recording)?;
+            lines.push(format!(
                 "{}: m = {mass} kg on l = {length} m, first natural frequency (Eqn 9) {:.3} Hz",
-                toml.display(),
+                out.published(&toml).display(),
                 eqn9_first_frequency_hz(spec.rope_ea_n, spec.rope_mass_per_length_kg_per_m, length, mass)
-            );
+            ));
         }
     }
+    out.commit()?;
+    for line in lines {
+        outln!("{line}");
+    }
     Ok(())
+}
+
+/// The stem of the recording of `mass_kg` on `length_m`.
+fn stem(mass_kg: f64, length_m: f64) -> String {
+    format!("decay_l{length_m}_m{mass_kg}")
 }

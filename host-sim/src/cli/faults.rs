@@ -15,7 +15,7 @@ use drive_core::config::Direction;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
-use super::{check_open_range, create_out_dir, default_car_mass_kg};
+use super::{check_open_range, default_car_mass_kg, output_dir};
 use closed_loop::faults::run::{default_matrix, run_case_with, FaultCase, FaultOutcome};
 use closed_loop::faults::{parse_fault, parse_fault_toml, FaultSpec};
 use closed_loop::TravelSpec;
@@ -60,6 +60,9 @@ pub struct FaultsArgs {
     /// Output directory (`faults.csv`, `faults.md`, `faults.json`).
     #[arg(long, value_name = "DIR", default_value = "out/faults")]
     pub out: PathBuf,
+    /// Replace the tables of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -73,7 +76,8 @@ pub fn cases(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<Vec<FaultCase
     let mut given: Vec<FaultSpec> =
         args.faults.iter().map(|text| parse_fault(text)).collect::<Result<_, _>>().map_err(anyhow::Error::from)?;
     if let Some(path) = &args.faults_file {
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let text = rig_config::read_text_file(path, rig_config::MAX_TEXT_FILE_BYTES)
+            .with_context(|| format!("cannot read {}", path.display()))?;
         given.extend(parse_fault_toml(&text).with_context(|| format!("{}", path.display()))?);
     }
     let directions: &[Direction] = match args.direction {
@@ -95,7 +99,8 @@ pub fn cases(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<Vec<FaultCase
 /// Runs `faults`.
 pub fn run(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<()> {
     let cases = cases(rig, args)?;
-    create_out_dir(&args.out)?;
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(["faults.md", "faults.csv", "faults.json"])?;
     let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(cases.len() as u64) };
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} faulted travels, {elapsed} ({eta} left)")
@@ -116,17 +121,18 @@ pub fn run(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<()> {
 
     let rows: Vec<Row> = outcomes.iter().map(Row::of).collect();
     let md = markdown(&rows);
-    std::fs::write(args.out.join("faults.md"), &md).context("cannot write faults.md")?;
-    write_csv(&args.out.join("faults.csv"), &rows)?;
+    std::fs::write(out.path("faults.md"), &md).context("cannot write faults.md")?;
+    write_csv(&out.path("faults.csv"), &rows)?;
     let json = serde_json::to_string_pretty(&serde_json::json!({
         "m_car_kg": cases.first().map(|c| c.travel.m_car_kg),
         "after_trip_s": args.after_trip_s,
         "wall_time_s": elapsed,
         "cases": rows,
     }))?;
-    std::fs::write(args.out.join("faults.json"), json).context("cannot write faults.json")?;
-    print!("{md}");
-    println!("{} faulted travels in {elapsed:.1} s; tables in {}", rows.len(), args.out.display());
+    std::fs::write(out.path("faults.json"), json).context("cannot write faults.json")?;
+    out.commit()?;
+    outln!("{}", md.trim_end_matches('\n'));
+    outln!("{} faulted travels in {elapsed:.1} s; tables in {}", rows.len(), args.out.display());
     Ok(())
 }
 
@@ -289,6 +295,7 @@ mod tests {
             direction: Directions::Up,
             after_trip_s: 0.05,
             out,
+            force: false,
             quiet: true,
         }
     }

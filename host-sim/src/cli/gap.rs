@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::create_out_dir;
+use super::output_dir;
 use diagnosis::signals::decimation_factor;
 use diagnosis::simulate::{model_step_s, simulate_recording};
 use diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
@@ -28,15 +28,18 @@ pub struct GapArgs {
     /// Output directory for gap.json, gap.md, CSV tables and plots.
     #[arg(long, value_name = "DIR", default_value = "out/gap")]
     pub out: PathBuf,
+    /// Replace the report of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
     /// Effects to try, comma separated (default: the whole library).
     #[arg(long = "effects", value_name = "NAMES", value_delimiter = ',')]
     pub effects: Vec<String>,
     /// Largest mean excess gap (dB) of the calibrated nominal model still
     /// called `nominal`.
-    #[arg(long, value_name = "DB", default_value_t = diagnosis::NOMINAL_EXCESS_DB)]
+    #[arg(long, value_name = "DB", default_value_t = diagnosis::NOMINAL_EXCESS_DB, allow_negative_numbers = true)]
     pub nominal_excess_db: f64,
     /// Smallest held-out shrink of the gap (0-1) for `explained`.
-    #[arg(long, value_name = "FRACTION", default_value_t = diagnosis::EXPLAINED_SHRINK)]
+    #[arg(long, value_name = "FRACTION", default_value_t = diagnosis::EXPLAINED_SHRINK, allow_negative_numbers = true)]
     pub explained_shrink: f64,
 }
 
@@ -81,7 +84,8 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
             .collect::<anyhow::Result<Vec<_>>>()?
     };
     let dataset = read_dataset(&args.dataset, rig.mechanics.rope_total_length_m)?;
-    create_out_dir(&args.out)?;
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(["gap.json", "gap.md"])?;
     let bar = ProgressBar::new(1);
     bar.set_style(
         ProgressStyle::with_template("{msg:24} [{elapsed_precise}] {wide_bar} {pos}/{len} runs")
@@ -133,7 +137,7 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
                 let spectrogram = stft_spectrogram(&values, rate, 0.5, 0.75, 400.0)?;
                 let file = format!("spectrogram_{}.png", label.replace(' ', "_"));
                 spectrogram_plot(
-                    &args.out.join(&file),
+                    &out.path(&file),
                     &format!("car acceleration, {stem}: {label} (dB re 1 (m/s^2)^2/Hz)"),
                     &spectrogram,
                     &[],
@@ -143,13 +147,14 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
             }
         }
     }
-    let written = write_report(&args.out, &report, &plots)?;
-    println!(
+    write_report(out.staging(), &report, &plots)?;
+    let written = out.commit()?;
+    outln!(
         "verdict: {:?}{}",
         report.verdict,
         report.explained_by.as_ref().map_or(String::new(), |e| format!(" by {e}"))
     );
-    println!(
+    outln!(
         "nominal excess gap {:.2} dB (noise {:.2} dB); located in {:?}, {}, {}, {}",
         report.nominal_excess_db,
         report.noise_gap_db,
@@ -158,10 +163,10 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         report.location.phase.name(),
         report.location.band
     );
-    println!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
+    outln!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
     for l in &report.rig_speed_loops {
         match (&l.controller, &l.refused) {
-            (Some(c), _) => println!(
+            (Some(c), _) => outln!(
                 "  {}: the rig drive's speed loop Kp {:.2} N m s/rad, Ki {:.1} N m/rad, estimate {:.1} ms late \
                  and {:.1} ms lag ({:.1} % of the torque's 4-40 Hz vibration)",
                 l.recording,
@@ -172,7 +177,7 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
                 100.0 * c.dynamic_fit
             ),
             (None, reason) => {
-                println!(
+                outln!(
                     "  {}: the rig drive's speed loop not identified: {}",
                     l.recording,
                     reason.as_deref().unwrap_or("-")
@@ -181,13 +186,13 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(why) = &report.attribution_refused {
-        println!("attribution: {why}");
+        outln!("attribution: {why}");
     }
     for l in &report.left_out {
-        println!("left out: {}: {}", l.recording, l.reason);
+        outln!("left out: {}: {}", l.recording, l.reason);
     }
     for c in report.ranking.iter().take(5) {
-        println!(
+        outln!(
             "  {:<48} held-out {:.2} -> {:.2} dB ({:+.0} %)",
             c.name,
             c.held_out_gap_before_db,
@@ -195,9 +200,9 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
             -100.0 * c.held_out_shrink
         );
     }
-    println!("{} simulations in {:.1} s", report.simulations, report.runtime_s);
+    outln!("{} simulations in {:.1} s", report.simulations, report.runtime_s);
     for p in written {
-        println!("wrote {}", p.display());
+        outln!("wrote {}", p.display());
     }
     Ok(())
 }

@@ -10,11 +10,11 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::create_out_dir;
-use diagnosis::identify_dataset::{identify_dataset, LeftOut};
+use super::output_dir;
+use diagnosis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
 use plots::{line_plot, Series};
 use recording::read::read_dataset;
-use recording::RecordingKind;
+use recording::{Recording, RecordingKind};
 use rig_config::RigConfig;
 
 /// Options of `identify`.
@@ -23,11 +23,83 @@ pub struct IdentifyArgs {
     /// The dataset directory (pairs `<stem>.toml` + `<stem>.csv`).
     pub dataset: PathBuf,
     /// Highest frequency searched for the first mode of a free decay, Hz.
-    #[arg(long = "max-frequency", value_name = "HZ", default_value_t = 200.0)]
+    #[arg(long = "max-frequency", value_name = "HZ", default_value_t = 200.0, allow_negative_numbers = true)]
     pub max_frequency_hz: f64,
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "out/identify")]
     pub out: PathBuf,
+    /// Replace the outputs of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Files `identify` writes.
+const OUTPUTS: [&str; 3] = ["identify.json", "free_decays.csv", "ea_vs_tension.png"];
+
+/// Refuses a dataset of which a kind of recording gives nothing: every free
+/// decay (or every travel) left out. The error lists each one's reason and,
+/// when `--max-frequency` lies below the first mode that the rig's `EA`
+/// predicts for a decay (Eqn 9), says so.
+fn refuse_empty_results(
+    rig: &RigConfig,
+    args: &IdentifyArgs,
+    dataset: &[(String, Recording)],
+    id: &DatasetIdentification,
+) -> anyhow::Result<()> {
+    let m = &rig.mechanics;
+    let reasons = |decays: bool| -> String {
+        let of_kind = |stem: &str| {
+            dataset.iter().any(|(s, r)| s == stem && matches!(r.meta.kind, RecordingKind::FreeDecay { .. }) == decays)
+        };
+        id.left_out
+            .iter()
+            .filter(|l| of_kind(&l.recording))
+            .map(|l| format!("\n  {}: {}", l.recording, l.reason))
+            .collect()
+    };
+    let decays: Vec<(&str, f64, f64)> = dataset
+        .iter()
+        .filter_map(|(stem, r)| match r.meta.kind {
+            RecordingKind::FreeDecay { mass_kg, rope_length_m } => Some((stem.as_str(), mass_kg, rope_length_m)),
+            RecordingKind::Travel { .. } => None,
+        })
+        .collect();
+    if !decays.is_empty() && id.decays.is_empty() {
+        let predicted = decays
+            .iter()
+            .map(|&(stem, mass, length)| {
+                let f1 = plant::free_decay::eqn9_first_frequency_hz(
+                    m.rope_ea_n,
+                    m.rope_mass_per_length_kg_per_m,
+                    length,
+                    mass,
+                );
+                (stem, f1)
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        let hint = match predicted {
+            Some((stem, f1)) if args.max_frequency_hz < f1 => format!(
+                "\n--max-frequency = {} Hz lies below the first mode that the rig's EA ({:e} N) predicts \
+                 (Eqn 9: {f1:.2} Hz for `{stem}`): expected a --max-frequency above the first mode (default 200 Hz)",
+                args.max_frequency_hz, m.rope_ea_n
+            ),
+            _ => String::new(),
+        };
+        anyhow::bail!(
+            "no free decay of `{}` gives EA (Eqn 9); every one was left out:{}{hint}",
+            args.dataset.display(),
+            reasons(true)
+        );
+    }
+    let travels = dataset.len() - decays.len();
+    if travels > 0 && id.travels.is_empty() {
+        anyhow::bail!(
+            "no travel of `{}` gives the sheave damping (Eqn 13); every one was left out:{}",
+            args.dataset.display(),
+            reasons(false)
+        );
+    }
+    Ok(())
 }
 
 /// One free decay's result, with the recording it came from.
@@ -74,8 +146,10 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     super::check_open_range("--max-frequency", args.max_frequency_hz, 1.0, 1.0e6)?;
     let m = &rig.mechanics;
     let dataset = read_dataset(&args.dataset, m.rope_total_length_m)?;
-    create_out_dir(&args.out)?;
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(OUTPUTS)?;
     let id = identify_dataset(rig, &dataset, args.max_frequency_hz);
+    refuse_empty_results(rig, args, &dataset, &id)?;
     let kind_of = |stem: &str| dataset.iter().find(|(s, _)| s == stem).map(|(_, r)| r.meta.kind.clone());
     let report = Report {
         dataset: args.dataset.display().to_string(),
@@ -123,10 +197,10 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
         left_out: id.left_out,
     };
 
-    let json = args.out.join("identify.json");
+    let json = out.path(OUTPUTS[0]);
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("cannot write {}", json.display()))?;
-    let csv_path = args.out.join("free_decays.csv");
+    let csv_path = out.path(OUTPUTS[1]);
     let mut csv = std::io::BufWriter::new(std::fs::File::create(&csv_path)?);
     writeln!(
         csv,
@@ -152,7 +226,7 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (x, y) = points.into_iter().unzip();
         line_plot(
-            &args.out.join("ea_vs_tension.png"),
+            &out.path(OUTPUTS[2]),
             "Rope EA from free decays (Eqn 9) against rope tension",
             "tension m g [N]",
             "EA [N]",
@@ -160,12 +234,20 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
         )?;
     }
 
-    println!(
+    let (json, csv_path) = (out.published(&json), out.published(&csv_path));
+    out.commit()?;
+    outln!(
         "{:<28} {:>8} {:>6} {:>9} {:>12} {:>8} {:>10}",
-        "free decay", "m [kg]", "l [m]", "f1 [Hz]", "EA [N]", "zeta", "c [kg/s]"
+        "free decay",
+        "m [kg]",
+        "l [m]",
+        "f1 [Hz]",
+        "EA [N]",
+        "zeta",
+        "c [kg/s]"
     );
     for d in &report.free_decays {
-        println!(
+        outln!(
             "{:<28} {:>8.1} {:>6.2} {:>9.3} {:>12.4e} {:>8.4} {:>10.1}",
             d.recording,
             d.mass_kg,
@@ -177,14 +259,17 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
         );
     }
     for t in &report.travels {
-        println!(
+        outln!(
             "{:<28} c_sheave = {:.3} N m s/rad (Eqn 13; mean torque {:+.2} N m at {:+.3} rad/s)",
-            t.recording, t.sheave_damping_nms_per_rad, t.mean_torque_nm, t.mean_speed_radps
+            t.recording,
+            t.sheave_damping_nms_per_rad,
+            t.mean_torque_nm,
+            t.mean_speed_radps
         );
     }
     for l in &report.left_out {
-        println!("left out: {}: {}", l.recording, l.reason);
+        outln!("left out: {}: {}", l.recording, l.reason);
     }
-    println!("wrote {}, {}", json.display(), csv_path.display());
+    outln!("wrote {}, {}", json.display(), csv_path.display());
     Ok(())
 }

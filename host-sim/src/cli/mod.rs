@@ -1,4 +1,19 @@
 //! Command-line interface: one file per command.
+//!
+//! The commands print with `outln!` (not `println!`): a closed standard
+//! output ends the printing quietly instead of panicking
+//! ([`crate::output::print_line`]); they write files through an
+//! [`OutputDir`](crate::output::OutputDir) (temporary names, nothing
+//! replaced without `--force`).
+
+/// `println!` for the commands: the line goes to standard output through
+/// [`crate::output::print_line`], which never panics (a closed pipe
+/// silences the rest of the output).
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::output::print_line(format_args!($($arg)*))
+    };
+}
 
 pub mod analyze;
 pub mod bench;
@@ -106,6 +121,52 @@ pub fn load_rig(path: Option<&Path>) -> anyhow::Result<RigConfig> {
     })
 }
 
+/// The message of `error` and of its causes, joined by `: `, each cause
+/// once: a cause whose text the message already holds (an I/O error that the
+/// error's own text quotes) is not repeated.
+pub fn error_message(error: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in error.chain() {
+        let cause = cause.to_string();
+        if text.contains(&cause) {
+            continue;
+        }
+        // A cause that repeats the context it is given in (`recording `x``
+        // then `recording `x`: ...`) replaces it.
+        if !text.is_empty() && cause.starts_with(text.as_str()) {
+            text = cause;
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&cause);
+    }
+    text
+}
+
+/// Largest number of points of a sweep on the command line (e.g. `modes`'s
+/// rope lengths): far beyond a useful plot or table, far below what would
+/// exhaust memory or disk (`modes` writes about 600 bytes a point).
+pub const MAX_SWEEP_POINTS: usize = 100_000;
+
+/// Number of points of the sweep `from..=to` by `step` (all checked finite,
+/// `step > 0`, `to >= from`), refused before anything is allocated when it
+/// exceeds [`MAX_SWEEP_POINTS`], naming `step_flag` and the smallest step
+/// accepted.
+pub fn sweep_points(step_flag: &str, from: f64, to: f64, step: f64) -> anyhow::Result<usize> {
+    let points = ((to - from) / step + 1e-9).floor() + 1.0;
+    if points.is_finite() && points >= 1.0 && points <= MAX_SWEEP_POINTS as f64 {
+        Ok(points as usize)
+    } else {
+        let smallest = (to - from) / (MAX_SWEEP_POINTS - 1) as f64;
+        anyhow::bail!(
+            "{step_flag} = {step:e} gives {points:.0} points from {from} to {to}; expected at most \
+             {MAX_SWEEP_POINTS} points: a step of at least {smallest:.3e}"
+        )
+    }
+}
+
 /// Checks a command-line value: finite and inside `(lo, hi)` (exclusive).
 pub fn check_open_range(flag: &str, value: f64, lo: f64, hi: f64) -> anyhow::Result<()> {
     if value.is_finite() && value > lo && value < hi {
@@ -126,6 +187,22 @@ pub fn column<'a>(recording: &'a Recording, name: &str, stem: &str) -> anyhow::R
 /// Creates the output directory.
 pub fn create_out_dir(dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))
+}
+
+/// The output directory `dir` of a command, its files staged under
+/// temporary names ([`OutputDir`](crate::output::OutputDir)); `force`
+/// is the command's `--force`.
+pub fn output_dir(dir: &Path, force: bool) -> anyhow::Result<crate::output::OutputDir> {
+    Ok(crate::output::OutputDir::create(dir, force)?)
+}
+
+/// Checks a count on the command line: inside `[lo, hi]`.
+pub fn check_count(flag: &str, value: usize, lo: usize, hi: usize) -> anyhow::Result<()> {
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        anyhow::bail!("{flag} = {value} is out of range: expected a whole number in [{lo}, {hi}]")
+    }
 }
 
 /// A ripple-compensation strategy on the command line.
@@ -160,4 +237,30 @@ impl StrategyArg {
 /// The default car mass of `rig`: the heaviest car of `[mechanics].m_car_kg`.
 pub fn default_car_mass_kg(rig: &RigConfig) -> f64 {
     rig.mechanics.m_car_kg.iter().copied().fold(rig.mechanics.m_cw_kg, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_os_error_quoted_by_its_context_is_printed_once() {
+        let os = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file or directory (os error 2)");
+        let config = rig_config::ConfigError::Io { path: "/x.toml".into(), source: os };
+        let message = error_message(&anyhow::Error::new(config));
+        assert_eq!(message, "/x.toml: cannot read: No such file or directory (os error 2)");
+        // A cause the message does not quote is kept.
+        let e = anyhow::Error::new(std::io::Error::other("disk full")).context("writing out/a.csv");
+        assert_eq!(error_message(&e), "writing out/a.csv: disk full");
+        let e = anyhow::anyhow!("recording `x`: no stage").context("recording `x`");
+        assert_eq!(error_message(&e), "recording `x`: no stage");
+    }
+
+    #[test]
+    fn an_absurd_sweep_is_refused_before_allocation() {
+        assert_eq!(sweep_points("--lw-step", 0.1, 8.5, 0.05).unwrap(), 169);
+        let err = sweep_points("--lw-step", 0.1, 8.5, 1e-9).unwrap_err().to_string();
+        assert!(err.contains("--lw-step") && err.contains("100000") && err.contains("8.400e-5"), "{err}");
+        assert!(sweep_points("--lw-step", 0.1, 8.5, 1e-300).is_err());
+    }
 }

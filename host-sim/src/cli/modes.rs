@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use super::{check_open_range, create_out_dir, default_car_mass_kg};
+use super::{check_open_range, default_car_mass_kg, output_dir, sweep_points};
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, COORDINATE_NAMES, DOF};
 use plots::{line_plot, Series};
@@ -30,6 +30,9 @@ pub struct ModesArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "out/modes")]
     pub out: PathBuf,
+    /// Replace the outputs of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Runs `modes`: writes `modes.csv`, `mode_shapes.csv`, `modes.png` and
@@ -43,15 +46,18 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     check_open_range("--lw-from", lw_from, 0.0, total)?;
     check_open_range("--lw-to", lw_to, lw_from, total)?;
     check_open_range("--lw-step", args.lw_step_m, 0.0, total)?;
-    create_out_dir(&args.out)?;
+    let count = sweep_points("--lw-step", lw_from, lw_to, args.lw_step_m)?;
+    let band = rig.measurement.spectrogram_band_hz[1];
+    let band_png = format!("modes_0-{band}hz.png");
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(["modes.csv", "mode_shapes.csv", "modes.png", band_png.as_str()])?;
 
     let chain = ChainParams::from_rig(rig, m_car);
-    let count = ((lw_to - lw_from) / args.lw_step_m + 1e-9).floor() as usize + 1;
     // Lengths on the step grid, rounded so that e.g. 4.0 prints as 4.
     let lengths: Vec<f64> = (0..count).map(|i| ((lw_from + i as f64 * args.lw_step_m) * 1e9).round() / 1e9).collect();
     let modes: Vec<_> = lengths.iter().map(|&lw| natural_modes(&chain, lw)).collect();
 
-    let csv_path = args.out.join("modes.csv");
+    let csv_path = out.path("modes.csv");
     let mut csv = std::io::BufWriter::new(
         std::fs::File::create(&csv_path).with_context(|| format!("cannot write {}", csv_path.display()))?,
     );
@@ -62,7 +68,7 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     }
     csv.flush()?;
 
-    let shapes_path = args.out.join("mode_shapes.csv");
+    let shapes_path = out.path("mode_shapes.csv");
     let mut shapes = std::io::BufWriter::new(
         std::fs::File::create(&shapes_path).with_context(|| format!("cannot write {}", shapes_path.display()))?,
     );
@@ -90,30 +96,31 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     };
     let title = format!("Natural frequencies (Eqn 10), m_car = {m_car} kg, m_cw = {} kg", rig.mechanics.m_cw_kg);
     line_plot(
-        &args.out.join("modes.png"),
+        &out.path("modes.png"),
         &title,
         "counterweight-side rope length lw [m]",
         "frequency [Hz]",
         &series(f64::INFINITY),
     )?;
-    let band = rig.measurement.spectrogram_band_hz[1];
     line_plot(
-        &args.out.join(format!("modes_0-{band}hz.png")),
+        &out.path(&band_png),
         &format!("{title}, 0-{band} Hz"),
         "counterweight-side rope length lw [m]",
         "frequency [Hz]",
         &series(band),
     )?;
 
-    println!("m_car = {m_car} kg: natural frequencies at {} rope lengths from {lw_from} to {lw_to} m", lengths.len());
-    println!("{:>8} {:>9} {:>9} {:>9} {:>9} {:>9}", "lw [m]", "f1 [Hz]", "f2 [Hz]", "f3 [Hz]", "f4 [Hz]", "f5 [Hz]");
+    outln!("m_car = {m_car} kg: natural frequencies at {} rope lengths from {lw_from} to {lw_to} m", lengths.len());
+    outln!("{:>8} {:>9} {:>9} {:>9} {:>9} {:>9}", "lw [m]", "f1 [Hz]", "f2 [Hz]", "f3 [Hz]", "f4 [Hz]", "f5 [Hz]");
     let stride = (lengths.len() / 12).max(1);
     for (i, (lw, m)) in lengths.iter().zip(&modes).enumerate() {
         if i % stride == 0 || (lw - 4.0).abs() < 1e-9 || i + 1 == lengths.len() {
             let f = m.frequencies_hz;
-            println!("{lw:8.3} {:9.2} {:9.2} {:9.2} {:9.2} {:9.2}", f[0], f[1], f[2], f[3], f[4]);
+            outln!("{lw:8.3} {:9.2} {:9.2} {:9.2} {:9.2} {:9.2}", f[0], f[1], f[2], f[3], f[4]);
         }
     }
-    println!("wrote {}, {} and plots in {}", csv_path.display(), shapes_path.display(), args.out.display());
+    let (csv_path, shapes_path) = (out.published(&csv_path), out.published(&shapes_path));
+    out.commit()?;
+    outln!("wrote {}, {} and plots in {}", csv_path.display(), shapes_path.display(), args.out.display());
     Ok(())
 }

@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::travel::DirectionArg;
 use super::StrategyArg;
-use super::{check_open_range, create_out_dir, default_car_mass_kg};
+use super::{check_open_range, default_car_mass_kg, output_dir};
 use closed_loop::compensation::rig_ripple_table;
 use closed_loop::pil::{default_elf_path, PilOptions, PilTarget};
 use closed_loop::{simulate_travel_with, SimOptions, TravelSpec};
@@ -31,7 +31,7 @@ pub struct PilArgs {
     pub direction: DirectionArg,
     /// Control steps to run (16 000 per second; the default covers the start
     /// from rest through the acceleration); 0 runs the whole travel.
-    #[arg(long, default_value_t = 20_000)]
+    #[arg(long, default_value_t = 20_000, allow_negative_numbers = true)]
     pub steps: u64,
     /// The PIL target ELF (default: pil/target/thumbv7em-none-eabihf/release/pil).
     #[arg(long, value_name = "FILE")]
@@ -40,7 +40,7 @@ pub struct PilArgs {
     #[arg(long, value_name = "FILE", default_value = "qemu-system-arm")]
     pub qemu: PathBuf,
     /// QEMU `-icount shift`: 2^shift ns of virtual time per instruction.
-    #[arg(long = "icount-shift", default_value_t = 5)]
+    #[arg(long = "icount-shift", default_value_t = 5, allow_negative_numbers = true)]
     pub icount_shift: u32,
     /// Ripple compensation on the target (strategy 1's table: the rig's
     /// `[[ripple]]` negated; strategy 4 adds the chain observer). Learning
@@ -50,6 +50,9 @@ pub struct PilArgs {
     /// Output directory (`pil_steps.csv`, `qemu.log`).
     #[arg(long, value_name = "DIR", default_value = "out/pil")]
     pub out: PathBuf,
+    /// Replace the outputs of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -88,12 +91,38 @@ pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
         DirectionArg::Up => Direction::Up,
         DirectionArg::Down => Direction::Down,
     };
-    create_out_dir(&args.out)?;
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(["pil_steps.csv", "qemu.log"])?;
+    let result = run_in(rig, args, m_car, direction, &out);
+    if result.is_err() && !out.path("qemu.log").exists() {
+        // QEMU never ran: nothing to keep.
+        return result;
+    }
+    // The QEMU log is published also when the run fails: it tells why.
+    let published = out.commit();
+    result?;
+    published?;
+    outln!(
+        "per-step costs: {}; QEMU log (defmt over semihosting): {}",
+        args.out.join("pil_steps.csv").display(),
+        args.out.join("qemu.log").display()
+    );
+    Ok(())
+}
+
+/// The PIL run of `run`, its files written into `out`.
+fn run_in(
+    rig: &RigConfig,
+    args: &PilArgs,
+    m_car: f64,
+    direction: Direction,
+    out: &crate::output::OutputDir,
+) -> anyhow::Result<()> {
     let options = PilOptions {
         elf: args.elf.clone().unwrap_or_else(default_elf_path),
         qemu: args.qemu.clone(),
         icount_shift: args.icount_shift,
-        log: Some(args.out.join("qemu.log")),
+        log: Some(out.path("qemu.log")),
         ..PilOptions::default()
     };
     let drive = rig.drive_config();
@@ -111,7 +140,7 @@ pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
     let run = simulate_travel_with(rig, &spec, &sim_options, &mut target, Some(&bar), None)?;
     let wall = started.elapsed().as_secs_f64();
     let reports = target.reports();
-    println!(
+    outln!(
         "{} control steps ({:.2} s of travel, m_car = {m_car} kg, {direction:?}, compensation {}) on the emulated \
          Cortex-M4F in {wall:.1} s: every output bit-identical to the host build",
         reports.len(),
@@ -133,19 +162,19 @@ pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
         "current loop + speed loop tick (every 8th step)",
         "idle (PWM off: supervisor only)",
     ];
-    println!("instructions per step under QEMU -icount shift={} ({per_tick} per SysTick tick):", args.icount_shift);
-    println!("{:<50} {:>7} {:>9} {:>9}", "steps", "count", "mean", "max");
+    outln!("instructions per step under QEMU -icount shift={} ({per_tick} per SysTick tick):", args.icount_shift);
+    outln!("{:<50} {:>7} {:>9} {:>9}", "steps", "count", "mean", "max");
     for (class, name) in names.iter().enumerate() {
         let costs = reports.iter().enumerate().filter(|(i, r)| class_of(*i, r) == class).map(|(_, r)| instructions(r));
         if let Some(s) = summarize(costs) {
-            println!("{name:<50} {:>7} {:>9.1} {:>9.1}", s.steps, s.mean, s.max);
+            outln!("{name:<50} {:>7} {:>9.1} {:>9.1}", s.steps, s.mean, s.max);
         }
     }
     if let Some(s) = summarize(reports.iter().map(instructions)) {
-        println!("{:<50} {:>7} {:>9.1} {:>9.1}", "all steps", s.steps, s.mean, s.max);
+        outln!("{:<50} {:>7} {:>9.1} {:>9.1}", "all steps", s.steps, s.mean, s.max);
     }
 
-    let path = args.out.join("pil_steps.csv");
+    let path = out.path("pil_steps.csv");
     let mut csv = std::io::BufWriter::new(
         std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
     );
@@ -162,10 +191,5 @@ pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
         )?;
     }
     csv.flush()?;
-    println!(
-        "per-step costs: {}; QEMU log (defmt over semihosting): {}",
-        path.display(),
-        args.out.join("qemu.log").display()
-    );
     Ok(())
 }

@@ -4,14 +4,14 @@
 //! ride-quality analyzers (`EVIMP1`, vertical = z; no speed signal, so the
 //! whole run only).
 
-use std::io::{BufRead, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::create_out_dir;
+use super::output_dir;
 use dsp::{constant_speed_stage, ride_quality, wk_weighting, RideQuality};
 use plots::{line_plot, Series};
 use recording::{read_evimp, read_recording, RecordingKind, ACC_CAR, SPEED};
@@ -25,7 +25,13 @@ pub struct RideQualityArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "out/ride-quality")]
     pub out: PathBuf,
+    /// Replace the outputs of an earlier run (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
 }
+
+/// Files `ride-quality` writes.
+const OUTPUTS: [&str; 3] = ["ride_quality.json", "ride_quality.csv", "ride_quality_wk.png"];
 
 #[derive(Debug, Serialize)]
 struct RegionReport {
@@ -54,31 +60,57 @@ fn region_report(name: &'static str, q: &RideQuality, fs: f64) -> RegionReport {
     }
 }
 
-fn is_evimp(path: &Path) -> anyhow::Result<bool> {
+/// The start of the first line of `path` (at most 64 bytes, lossy UTF-8,
+/// trimmed): `EVIMP1` for an EVIMP export.
+fn first_line(path: &Path) -> anyhow::Result<String> {
     let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let mut first = String::new();
-    // A non-UTF-8 first line is not EVIMP; the recording reader reports it.
-    let _ = std::io::BufReader::new(file).read_line(&mut first);
-    Ok(first.trim() == "EVIMP1")
+    let mut head = Vec::new();
+    file.take(64).read_to_end(&mut head).with_context(|| format!("cannot read {}", path.display()))?;
+    let head = head.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&head);
+    let line = head.split(|&b| b == b'\n').next().unwrap_or_default();
+    Ok(String::from_utf8_lossy(line).trim().to_string())
 }
 
 /// Runs `ride-quality`.
 pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
-    let (vertical, fs, stage, source) = if is_evimp(&args.file)? {
+    let first = first_line(&args.file)?;
+    let is_toml = args.file.extension().is_some_and(|e| e == "toml");
+    let (vertical, fs, stage, source) = if first == "EVIMP1" {
         let e = read_evimp(&args.file)?;
         (e.z_mps2(), e.sample_rate_hz, None, "EVIMP1 export (z axis)")
-    } else {
+    } else if is_toml {
         let recording = read_recording(&args.file, rig.mechanics.rope_total_length_m)?;
         let fs = recording.meta.sample_rate_hz;
         let acc = recording.column(ACC_CAR).map(|c| c.values.clone()).context("no acc_car_mps2 column")?;
         let stage = match (&recording.meta.kind, recording.column(SPEED)) {
-            (RecordingKind::Travel { .. }, Some(speed)) => Some(constant_speed_stage(&speed.values, fs)?),
+            (RecordingKind::Travel { .. }, Some(speed)) => match constant_speed_stage(&speed.values, fs) {
+                Ok(stage) => Some(stage),
+                Err(e) => {
+                    eprintln!("note: no constant-speed region, the whole run only: {e}");
+                    None
+                }
+            },
             _ => None,
         };
         (acc, fs, stage, "measurement format (acc_car_mps2)")
+    } else {
+        let sibling = args.file.with_extension("toml");
+        let hint = if args.file.extension().is_some_and(|e| e == "csv") && sibling.is_file() {
+            format!(" (it is the samples file of a recording: give its metadata file `{}`)", sibling.display())
+        } else {
+            String::new()
+        };
+        anyhow::bail!(
+            "`{}` is neither an `EVIMP1` export (its first line is {first:?}, not `EVIMP1`) nor a recording of the \
+             measurement format{hint}; expected an EVIMP1 text export or the `<stem>.toml` of a recording, with its \
+             `<stem>.csv` beside it",
+            args.file.display()
+        );
     };
-    create_out_dir(&args.out)?;
-    let report = ride_quality(&vertical, fs, stage)?;
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(OUTPUTS)?;
+    let report = ride_quality(&vertical, fs, stage)
+        .with_context(|| format!("`{}`: ride quality (ISO 18738-1)", args.file.display()))?;
     let mut regions = vec![region_report("whole run", &report.whole_run, fs)];
     if let Some(q) = &report.constant_speed {
         regions.push(region_report("constant speed", q, fs));
@@ -91,16 +123,16 @@ pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
         direction: String,
         regions: &'a [RegionReport],
     }
-    let json_path = args.out.join("ride_quality.json");
-    let out = Out {
+    let json_path = out.path(OUTPUTS[0]);
+    let summary = Out {
         file: args.file.display().to_string(),
         source,
         sample_rate_hz: fs,
         direction: format!("{:?}", report.direction),
         regions: &regions,
     };
-    std::fs::write(&json_path, serde_json::to_string_pretty(&out)?)?;
-    let csv_path = args.out.join("ride_quality.csv");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&summary)?)?;
+    let csv_path = out.path(OUTPUTS[1]);
     let mut csv = std::io::BufWriter::new(std::fs::File::create(&csv_path)?);
     writeln!(csv, "region,start_s,end_s,max_peak_to_peak_mg,a95_peak_to_peak_mg,peak_to_peak_count,max_acceleration_mg,max_deceleration_mg,max_jerk_mps3")?;
     for r in &regions {
@@ -121,7 +153,7 @@ pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
     csv.flush()?;
     let weighted: Vec<f64> = wk_weighting(&vertical, fs)?.iter().map(|a| a / dsp::ride_quality::MPS2_PER_MG).collect();
     let time: Vec<f64> = (0..weighted.len()).map(|i| i as f64 / fs).collect();
-    let png = args.out.join("ride_quality_wk.png");
+    let png = out.path(OUTPUTS[2]);
     line_plot(
         &png,
         "Vertical vibration, ISO 2631-1 Wk weighted",
@@ -130,14 +162,20 @@ pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
         &[Series::new("Wk", time, weighted)],
     )?;
 
-    println!("{} ({source}), {fs} Hz, direction {:?}", args.file.display(), report.direction);
-    println!(
+    let published: Vec<PathBuf> = out.commit()?;
+    outln!("{} ({source}), {fs} Hz, direction {:?}", args.file.display(), report.direction);
+    outln!(
         "{:<16} {:>10} {:>10} {:>10} {:>10} {:>10}",
-        "region", "max p-p", "A95 p-p", "max acc", "max dec", "max jerk"
+        "region",
+        "max p-p",
+        "A95 p-p",
+        "max acc",
+        "max dec",
+        "max jerk"
     );
-    println!("{:<16} {:>10} {:>10} {:>10} {:>10} {:>10}", "", "[mg]", "[mg]", "[mg]", "[mg]", "[m/s^3]");
+    outln!("{:<16} {:>10} {:>10} {:>10} {:>10} {:>10}", "", "[mg]", "[mg]", "[mg]", "[mg]", "[m/s^3]");
     for r in &regions {
-        println!(
+        outln!(
             "{:<16} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>10.3}",
             r.region,
             r.max_peak_to_peak_mg,
@@ -147,6 +185,6 @@ pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
             r.max_jerk_mps3
         );
     }
-    println!("wrote {}, {}, {}", json_path.display(), csv_path.display(), png.display());
+    outln!("wrote {}", published.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));
     Ok(())
 }

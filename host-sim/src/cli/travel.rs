@@ -9,7 +9,7 @@ use drive_core::ripple::Strategy;
 use drive_core::Controller;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::{check_open_range, create_out_dir, default_car_mass_kg};
+use super::{check_open_range, default_car_mass_kg, output_dir};
 use closed_loop::compensation::{compensator, rig_ripple_table};
 use closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
 use dsp::{highpass_zero_phase, stft_spectrogram};
@@ -48,7 +48,7 @@ pub struct TravelArgs {
     #[arg(long = "max-step", value_name = "S", allow_negative_numbers = true)]
     pub max_step_s: Option<f64>,
     /// Spectrogram window, s.
-    #[arg(long = "spectrogram-window", value_name = "S", default_value_t = 2.0)]
+    #[arg(long = "spectrogram-window", value_name = "S", default_value_t = 2.0, allow_negative_numbers = true)]
     pub spectrogram_window_s: f64,
     /// Recording stem (default: travel_<direction>_m<mass>).
     #[arg(long)]
@@ -56,6 +56,9 @@ pub struct TravelArgs {
     /// Output directory (the dataset).
     #[arg(long, value_name = "DIR", default_value = "out/travel")]
     pub out: PathBuf,
+    /// Replace a recording and plots of the same stem (default: refuse to overwrite).
+    #[arg(long)]
+    pub force: bool,
     /// Torque-ripple compensation of the drive.
     #[arg(long, value_enum, default_value_t = CompensationArg::Off)]
     pub compensation: CompensationArg,
@@ -107,11 +110,23 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     let mut options = SimOptions::for_rig(rig);
     options.effects = Effects::from_file_and_flags(args.effects_file.as_deref(), &args.effect)?;
     if let Some(step) = args.max_step_s {
-        check_open_range("--max-step", step, 0.0, 0.5 / rig.control.current_loop_hz + 1e-15)?;
+        // At least 1 ns: a full travel takes about 1.3e6 steps of the
+        // default 15.6 us; a much smaller step would run for days.
+        check_open_range("--max-step", step, 1e-9, 0.5 / rig.control.current_loop_hz + 1e-15)?;
         options.max_step_s = step;
     }
     check_open_range("--spectrogram-window", args.spectrogram_window_s, 0.0, 60.0)?;
-    create_out_dir(&args.out)?;
+    let stem = args
+        .stem
+        .clone()
+        .unwrap_or_else(|| format!("travel_{}_m{m_car}", if direction == Direction::Up { "up" } else { "down" }));
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(
+        ["toml", "csv"]
+            .map(|e| format!("{stem}.{e}"))
+            .into_iter()
+            .chain(PLOTS.map(|suffix| format!("{stem}_{suffix}.png"))),
+    )?;
 
     let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
     bar.set_style(
@@ -136,7 +151,7 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     };
     let run = simulate_travel_with(rig, &spec, &options, &mut controller, Some(&bar), None)?;
     let wall = started.elapsed().as_secs_f64();
-    println!(
+    outln!(
         "simulated {:.2} s of travel (m_car = {m_car} kg, {direction:?}, lw {} -> {} m, {}) in {wall:.2} s: {:.1}x real time",
         run.duration_s(),
         spec.lw_start_m,
@@ -145,10 +160,6 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         run.duration_s() / wall
     );
 
-    let stem = args
-        .stem
-        .clone()
-        .unwrap_or_else(|| format!("travel_{}_m{m_car}", if direction == Direction::Up { "up" } else { "down" }));
     let recording = run.to_recording(
         &spec,
         rig.mechanics.m_cw_kg,
@@ -158,17 +169,31 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
             options.max_step_s
         ),
     );
-    let (toml_path, csv_path) = write_recording(&args.out, &stem, &recording)?;
-    println!("recording: {} and {}", toml_path.display(), csv_path.display());
-    plots(rig, &spec, &run, args, &stem)?;
+    let (toml_path, csv_path) = write_recording(out.staging(), &stem, &recording)?;
+    let (toml_path, csv_path) = (out.published(&toml_path), out.published(&csv_path));
+    let plot_paths = plots(rig, &spec, &run, args, &stem, &out)?;
+    out.commit()?;
+    outln!("recording: {} and {}", toml_path.display(), csv_path.display());
+    outln!("plots: {}", plot_paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));
     Ok(())
 }
 
-fn plots(rig: &RigConfig, spec: &TravelSpec, run: &TravelRun, args: &TravelArgs, stem: &str) -> anyhow::Result<()> {
+/// The plots of a travel: `<stem>_<suffix>.png`.
+const PLOTS: [&str; 3] = ["acc_car_hp", "spectrogram", "drive"];
+
+/// Draws the [`PLOTS`] into `out`; returns their published paths.
+fn plots(
+    rig: &RigConfig,
+    spec: &TravelSpec,
+    run: &TravelRun,
+    args: &TravelArgs,
+    stem: &str,
+    out: &crate::output::OutputDir,
+) -> anyhow::Result<Vec<PathBuf>> {
     let fs = run.sample_rate_hz;
     let highpass_hz = rig.measurement.highpass_hz;
     let filtered = highpass_zero_phase(&run.acc_car_mps2, fs, highpass_hz)?;
-    let hp_path = args.out.join(format!("{stem}_acc_car_hp.png"));
+    let hp_path = out.path(format!("{stem}_{}.png", PLOTS[0]));
     line_plot(
         &hp_path,
         &format!("Car acceleration, high-passed at {highpass_hz} Hz (paper Fig. 7), m_car = {} kg", spec.m_car_kg),
@@ -195,7 +220,7 @@ fn plots(rig: &RigConfig, spec: &TravelSpec, run: &TravelRun, args: &TravelArgs,
             Series::new(format!("model f{}", k + 1), spectrogram.times_s.clone(), y)
         })
         .collect();
-    let spectrogram_path = args.out.join(format!("{stem}_spectrogram.png"));
+    let spectrogram_path = out.path(format!("{stem}_{}.png", PLOTS[1]));
     spectrogram_plot(
         &spectrogram_path,
         &format!("Car acceleration spectrogram (STFT, {} s window), dB re 1 (m/s^2)^2/Hz", args.spectrogram_window_s),
@@ -204,7 +229,7 @@ fn plots(rig: &RigConfig, spec: &TravelSpec, run: &TravelRun, args: &TravelArgs,
         None,
     )?;
 
-    let drive_path = args.out.join(format!("{stem}_drive.png"));
+    let drive_path = out.path(format!("{stem}_{}.png", PLOTS[2]));
     let r = rig.mechanics.sheave_radius_m;
     line_plot(
         &drive_path,
@@ -216,6 +241,5 @@ fn plots(rig: &RigConfig, spec: &TravelSpec, run: &TravelRun, args: &TravelArgs,
             Series::new("encoder estimate", run.time_s.clone(), run.speed_radps.iter().map(|w| w * r).collect()),
         ],
     )?;
-    println!("plots: {}, {}, {}", hp_path.display(), spectrogram_path.display(), drive_path.display());
-    Ok(())
+    Ok([hp_path, spectrogram_path, drive_path].iter().map(|p| out.published(p)).collect())
 }

@@ -117,7 +117,7 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> Result<Vec<(String, 
                 ..SimOptions::for_rig(rig)
             };
             let run = simulate_travel(rig, &travel, &options, None)?;
-            let name = format!("travel_{}_m{m:.1}", if direction == Direction::Up { "up" } else { "down" });
+            let name = travel_stem(m, direction);
             let description = format!("full plant: {}", spec.effects.summary());
             Ok((name, run.to_recording(&travel, rig.mechanics.m_cw_kg, description)))
         })
@@ -147,9 +147,26 @@ pub fn make_dataset(rig: &RigConfig, spec: &DatasetSpec) -> Result<Vec<(String, 
             columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, acc)],
         };
         add_noise(&mut recording, ACC_CAR, spec.acc_noise_mps2, &mut rng);
-        out.push((format!("decay_m{mass:.1}"), recording));
+        out.push((decay_stem(mass), recording));
     }
     Ok(out)
+}
+
+/// The stem of the travel of `m_car_kg` in `direction` in a dataset of
+/// [`make_dataset`] or [`make_foreign_dataset`].
+pub fn travel_stem(m_car_kg: f64, direction: Direction) -> String {
+    format!("travel_{}_m{m_car_kg:.1}", if direction == Direction::Up { "up" } else { "down" })
+}
+
+/// The stem of the free decay of `mass_kg` in a dataset.
+pub fn decay_stem(mass_kg: f64) -> String {
+    format!("decay_m{mass_kg:.1}")
+}
+
+/// Every stem of the dataset `spec` describes, before it is simulated.
+pub fn dataset_stems(spec: &DatasetSpec) -> Vec<String> {
+    let travels = spec.m_car_kg.iter().flat_map(|&m| [travel_stem(m, Direction::Up), travel_stem(m, Direction::Down)]);
+    travels.chain(spec.decay_masses_kg.iter().map(|&m| decay_stem(m))).collect()
 }
 
 /// Rope elements of the free decays of a foreign rig: with 40 the rope's own
@@ -208,7 +225,7 @@ pub fn make_foreign_dataset(
             };
             let travel = TravelSpec { m_car_kg: m, direction, lw_start_m, lw_end_m };
             let mut rng = recording_rng(spec.seed, index);
-            let name = format!("travel_{}_m{m:.1}", if direction == Direction::Up { "up" } else { "down" });
+            let name = travel_stem(m, direction);
             Ok((name, foreign_travel(rig, spec, foreign, &travel, &mut rng)?))
         })
         .collect();
@@ -218,7 +235,7 @@ pub fn make_foreign_dataset(
     }
     for (i, &mass) in spec.decay_masses_kg.iter().enumerate() {
         let mut rng = recording_rng(spec.seed, travels.len() + i);
-        out.push((format!("decay_m{mass:.1}"), foreign_decay(rig, spec, foreign, mass, &mut rng)?));
+        out.push((decay_stem(mass), foreign_decay(rig, spec, foreign, mass, &mut rng)?));
     }
     Ok(out)
 }

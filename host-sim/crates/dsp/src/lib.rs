@@ -127,6 +127,20 @@ pub enum AnalysisError {
         /// Top of the search band, Hz.
         band_top_hz: f64,
     },
+    /// The speed of a travel holds no constant-speed stage long enough for
+    /// the analyses of the stage (a travel cut short, or too short to
+    /// settle at a steady speed).
+    #[error(
+        "the longest constant-speed stage of the speed signal lasts {stage_s:.3} s; expected at least {min_s} s \
+         (the stage detector's smoothing window, about one shaft revolution of the reference rig, over which \
+         the torque ripple averages out): is the travel cut short, or too short to reach a steady speed?"
+    )]
+    NoConstantSpeedStage {
+        /// Length of the longest stage found, s.
+        stage_s: f64,
+        /// Shortest stage accepted, s.
+        min_s: f64,
+    },
     /// The oscillation's amplitude does not decay: a negative damping is
     /// not physical (a disturbance, or not a free decay).
     #[error(

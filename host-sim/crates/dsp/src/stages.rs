@@ -50,6 +50,11 @@ pub const BAND_FRACTION: f64 = 0.02;
 /// The stage's first and last samples are the first and last of the rough
 /// stage at or above this fraction of the cruise level; dimensionless.
 pub const EDGE_FRACTION: f64 = 0.99;
+/// Shortest constant-speed stage [`constant_speed_stage`] accepts, s: the
+/// smoothing window (a shorter stage is the ramps' meeting, not a cruise;
+/// about one shaft revolution at the reference rig's 6.15 rad/s, over which
+/// the order-1 ripple averages out).
+pub const MIN_STAGE_S: f64 = SMOOTHING_WINDOW_S;
 /// Length of the centred moving average used to decide whether the machine
 /// moves ([`travel_phases`]), s.
 pub const MOTION_WINDOW_S: f64 = 0.1;
@@ -172,13 +177,21 @@ fn stage_of_smoothed(s: &[f64]) -> Result<(f64, Range<usize>), AnalysisError> {
 /// [`AnalysisError::EmptySignal`] or [`AnalysisError::NonFinite`] for a bad
 /// signal, [`AnalysisError::InvalidParameter`] for a bad sample rate or a
 /// speed that is zero throughout, [`AnalysisError::NumericOverflow`] for
-/// speeds near the f64 limit.
+/// speeds near the f64 limit, [`AnalysisError::NoConstantSpeedStage`] when
+/// the stage found is shorter than [`MIN_STAGE_S`] (a travel cut before
+/// its cruise, or one too short to have one: what such a stage would give
+/// is a ramp's average, not a constant-speed figure).
 pub fn constant_speed_stage(speed_radps: &[f64], sample_rate_hz: f64) -> Result<Range<usize>, AnalysisError> {
     check_sample_rate(sample_rate_hz)?;
     check_signal(speed_radps, 1, "a travel's speed signal")?;
     let window = window_samples(SMOOTHING_WINDOW_S, sample_rate_hz, speed_radps.len());
     let s = smoothed_abs(speed_radps, window);
-    Ok(stage_of_smoothed(&s)?.1)
+    let stage = stage_of_smoothed(&s)?.1;
+    let stage_s = stage.len() as f64 / sample_rate_hz;
+    if stage_s < MIN_STAGE_S {
+        return Err(AnalysisError::NoConstantSpeedStage { stage_s, min_s: MIN_STAGE_S });
+    }
+    Ok(stage)
 }
 
 /// All phases of a travel: standstill, acceleration, constant speed,
@@ -348,6 +361,26 @@ mod tests {
     }
 
     #[test]
+    fn a_travel_cut_before_its_cruise_or_without_one_has_no_stage() {
+        let fs = 4096.0;
+        let r = 0.065;
+        let p = s_curve(fs, 0.4 / r, 0.5 / r, 1.0 / r, 0.3, 10.0);
+        let y = measured(&p.speed, fs, (0.015, 0.01), 0.02, 7);
+        // Cut at 0.49 s, in the run-up: no stage (it used to find one on the ramp).
+        let cut = &y[..(0.49 * fs) as usize];
+        assert!(matches!(constant_speed_stage(cut, fs), Err(AnalysisError::NoConstantSpeedStage { .. })));
+        // Cut after 0.4 s of cruise: still too short.
+        let cut = &y[..((p.cruise_s.0 + 0.4) * fs) as usize];
+        assert!(matches!(constant_speed_stage(cut, fs), Err(AnalysisError::NoConstantSpeedStage { .. })));
+        // The whole travel has one.
+        assert!(constant_speed_stage(&y, fs).is_ok());
+        // A travel whose ramps meet (0.2 s of cruise) has none.
+        let p = s_curve(fs, 0.4 / r, 0.5 / r, 1.0 / r, 0.5, 0.2);
+        let y = measured(&p.speed, fs, (0.015, 0.01), 0.02, 8);
+        assert!(matches!(constant_speed_stage(&y, fs), Err(AnalysisError::NoConstantSpeedStage { .. })));
+    }
+
+    #[test]
     fn travel_phases_partition_the_record() {
         let fs = 16384.0;
         let r = 0.065;
@@ -397,6 +430,11 @@ mod tests {
         assert!(matches!(constant_speed_stage(&[1e308, 1e308], 1.0), Err(AnalysisError::NumericOverflow { .. })));
         // A constant speed is one stage over the whole record.
         assert_eq!(constant_speed_stage(&[2.0; 50], 10.0), Ok(0..50));
+        // ... if it lasts long enough to be one.
+        assert!(matches!(
+            constant_speed_stage(&[2.0; 9], 10.0),
+            Err(AnalysisError::NoConstantSpeedStage { min_s, .. }) if min_s == MIN_STAGE_S
+        ));
         assert_eq!(travel_phases(&[-2.0; 50], 10.0).unwrap().constant, 0..50);
     }
 }

@@ -21,6 +21,9 @@
 //!   sound column is either present in every sample or absent from all.
 //! * Line ends `\n` or `\r\n`; a UTF-8 byte-order mark is skipped; blank
 //!   lines are allowed only at the end of the file; at least 2 samples.
+//! * Physical bounds ([`EVIMP_BOUNDS`]): |x|, |y|, |z| at most 1e6 mg
+//!   (1000 g), the sound level at most 300 dB(A) in magnitude, the sample
+//!   rate at most 1e7 Hz; a line is at most [`super::MAX_LINE_BYTES`] long.
 
 use std::path::Path;
 
@@ -31,6 +34,11 @@ pub const STANDARD_GRAVITY_MPS2: f64 = 9.80665;
 
 /// Column names used in error messages, in row order.
 const COLUMNS: [&str; 4] = ["x_mg", "y_mg", "z_mg", "sound_dba"];
+
+/// The largest magnitude of each value of a row (in the order of
+/// `x_mg`, `y_mg`, `z_mg`, `sound_dba`) and its unit: far beyond any lift.
+pub const EVIMP_BOUNDS: [(f64, &str); 4] =
+    [(1.0e6, "mg (1000 g)"), (1.0e6, "mg (1000 g)"), (1.0e6, "mg (1000 g)"), (300.0, "dB(A)")];
 
 /// A ride-quality recording read from an `EVIMP1` text export.
 #[derive(Debug, Clone, PartialEq)]
@@ -92,7 +100,7 @@ pub fn read_evimp(path: &Path) -> Result<EvimpRecording, ReadError> {
     let sample_rate_hz = match lines.next_line()? {
         None => return Err(ReadError::EvimpSampleRate { path: path_buf(), found: "<end of file>".to_string() }),
         Some((_, text)) => match text.trim().parse::<f64>() {
-            Ok(rate) if rate.is_finite() && rate > 0.0 => rate,
+            Ok(rate) if rate.is_finite() && rate > 0.0 && rate <= super::MAX_SAMPLE_RATE_HZ => rate,
             _ => return Err(ReadError::EvimpSampleRate { path: path_buf(), found: excerpt(text.trim()) }),
         },
     };
@@ -135,8 +143,20 @@ pub fn read_evimp(path: &Path) -> Result<EvimpRecording, ReadError> {
             }
             Some(_) => {}
         }
-        for ((field, column), name) in text.split_ascii_whitespace().zip(&mut columns).zip(COLUMNS) {
+        for (((field, column), name), (limit, unit)) in
+            text.split_ascii_whitespace().zip(&mut columns).zip(COLUMNS).zip(EVIMP_BOUNDS)
+        {
             let value = match field.parse::<f64>() {
+                Ok(v) if v.is_finite() && v.abs() > limit => {
+                    return Err(ReadError::BeyondPhysicalBound {
+                        path: path_buf(),
+                        line,
+                        column: name.to_string(),
+                        text: excerpt(field),
+                        limit,
+                        unit,
+                    })
+                }
                 Ok(v) if v.is_finite() => v,
                 Ok(_) => {
                     return Err(ReadError::NonFinite {

@@ -57,6 +57,45 @@ pub const ANGLE: &str = "angle_rad";
 /// the drive, m/s. Optional.
 pub const REF_SPEED: &str = "ref_speed_mps";
 
+/// The physical bound of every column the specification defines: the
+/// largest magnitude a sample may have, with its unit and what it bounds.
+/// Far beyond any rig (an elevator's car accelerates at about 1 m/s^2, its
+/// machine turns at a few rad/s), far below where arithmetic on the values
+/// overflows: the reader refuses a sample past it as a corrupt value, naming
+/// the file, line and column. Unknown columns are only required to be finite.
+pub const COLUMN_BOUNDS: [(&str, f64, &str); 10] = [
+    (TIME_S, 1.0e9, "s (about 32 years)"),
+    (ACC_CAR, 1.0e4, "m/s^2 (about 1000 g)"),
+    (ACC_CW, 1.0e4, "m/s^2 (about 1000 g)"),
+    (ACC_MACHINE, 1.0e4, "m/s^2 (about 1000 g)"),
+    (I_A, 1.0e5, "A"),
+    (I_B, 1.0e5, "A"),
+    (I_C, 1.0e5, "A"),
+    (SPEED, 1.0e4, "rad/s (about 95 000 rpm)"),
+    (ANGLE, 1.0e9, "rad"),
+    (REF_SPEED, 100.0, "m/s"),
+];
+
+/// The bound of column `name` in [`COLUMN_BOUNDS`] (largest magnitude and
+/// its unit), or `None` for a column the specification does not define.
+pub fn column_bound(name: &str) -> Option<(f64, &'static str)> {
+    COLUMN_BOUNDS.iter().find(|(n, _, _)| *n == name).map(|&(_, bound, unit)| (bound, unit))
+}
+
+/// Largest metadata values the reader accepts (the rig file's own bounds):
+/// sample rate, Hz.
+pub const MAX_SAMPLE_RATE_HZ: f64 = 1.0e7;
+/// Largest mass (car, counterweight, free-decay mass), kg.
+pub const MAX_MASS_KG: f64 = 1.0e5;
+/// Largest free-decay rope length, m.
+pub const MAX_ROPE_LENGTH_M: f64 = 1.0e3;
+/// Largest metadata file (`<stem>.toml`) read, bytes (a real one is a few
+/// hundred).
+pub const MAX_META_BYTES: u64 = 1 << 20;
+/// Longest line of a samples file or an EVIMP export, bytes, line end
+/// excluded (a row of ten columns is about 250).
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
 /// Every column the specification defines, in the order of its table.
 pub const KNOWN_COLUMNS: [&str; 10] = [TIME_S, ACC_CAR, ACC_CW, ACC_MACHINE, I_A, I_B, I_C, SPEED, ANGLE, REF_SPEED];
 

@@ -30,11 +30,14 @@
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fs::{self, File};
-use std::io::{self, BufRead, BufReader};
+use std::io::{self, BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use super::write::TIME_STEP_RELATIVE_TOLERANCE;
-use super::{CarDirection, Column, Recording, RecordingKind, RecordingMeta, FORMAT, TIME_S};
+use super::{
+    column_bound, CarDirection, Column, Recording, RecordingKind, RecordingMeta, FORMAT, MAX_LINE_BYTES, MAX_MASS_KG,
+    MAX_META_BYTES, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ, TIME_S,
+};
 
 /// Error from reading a recording, a dataset or an EVIMP export. Every
 /// variant names the file; where it applies also the line (1-based; the CSV
@@ -58,7 +61,7 @@ pub enum ReadError {
         csv_path: PathBuf,
     },
     /// [`read_recording`] was given a path that does not end in `.toml`.
-    #[error("`{}` is not a metadata file; expected a path ending in `.toml`", .path.display())]
+    #[error("`{}` is not a metadata file; expected a path ending in `.toml`{}", .path.display(), toml_hint(.path))]
     NotTomlPath {
         /// The path given.
         path: PathBuf,
@@ -303,6 +306,43 @@ pub enum ReadError {
         /// Step expected, `1 / sample_rate_hz`, s.
         expected_s: f64,
     },
+    /// A file is larger than the reader reads whole.
+    #[error("`{}` is larger than {limit} bytes; expected {what} (this bound is far beyond a real one)", .path.display())]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The bound, bytes.
+        limit: u64,
+        /// What the file should be.
+        what: &'static str,
+    },
+    /// A line is longer than any real line.
+    #[error("`{}` line {line} is longer than {limit} bytes; expected one sample row of at most {limit} bytes (a real one is a few hundred)", .path.display())]
+    LineTooLong {
+        /// The file.
+        path: PathBuf,
+        /// Line (1-based).
+        line: usize,
+        /// The bound, bytes.
+        limit: usize,
+    },
+    /// A sample of a known column lies beyond its physical bound
+    /// ([`super::COLUMN_BOUNDS`]).
+    #[error("`{}` line {line}, column `{column}`: `{text}` is beyond the physical bound of the column; expected a magnitude of at most {limit} {unit}", .path.display())]
+    BeyondPhysicalBound {
+        /// The file.
+        path: PathBuf,
+        /// Line (1-based).
+        line: usize,
+        /// Column name.
+        column: String,
+        /// The field's text (shortened if long).
+        text: String,
+        /// Largest magnitude accepted.
+        limit: f64,
+        /// Unit of the bound (and what it amounts to).
+        unit: &'static str,
+    },
     /// Fewer than 2 samples.
     #[error("`{}`: {found} sample row(s); expected at least 2", .path.display())]
     TooFewSamples {
@@ -320,13 +360,24 @@ pub enum ReadError {
         found: String,
     },
     /// The sample-rate line of an EVIMP export is missing or invalid.
-    #[error("`{}` line 2: sample rate `{found}` is invalid; expected a finite number of Hz > 0, e.g. `256`", .path.display())]
+    #[error("`{}` line 2: sample rate `{found}` is invalid; expected a finite number of Hz > 0, at most 1e7, e.g. `256`", .path.display())]
     EvimpSampleRate {
         /// The file.
         path: PathBuf,
         /// The line's text (shortened if long), or `<end of file>`.
         found: String,
     },
+}
+
+/// The hint of [`ReadError::NotTomlPath`]: the metadata file to give when
+/// the samples file was given.
+fn toml_hint(path: &Path) -> String {
+    let toml = path.with_extension("toml");
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")) && toml.is_file() {
+        format!(" (this is the samples file of a recording: give its metadata file `{}`)", toml.display())
+    } else {
+        String::new()
+    }
 }
 
 /// Longest excerpt of offending text quoted in an error message, characters.
@@ -360,14 +411,20 @@ impl LineReader {
     /// `None` at the end of the file.
     pub(super) fn next_line(&mut self) -> Result<Option<(usize, &str)>, ReadError> {
         self.buf.clear();
-        let n = self
-            .reader
+        // At most one byte past the bound (and its line end): a line of
+        // gigabytes is refused, not read.
+        let n = (&mut self.reader)
+            .take(MAX_LINE_BYTES as u64 + 2)
             .read_until(b'\n', &mut self.buf)
             .map_err(|source| ReadError::Io { path: self.path.clone(), source })?;
         if n == 0 {
             return Ok(None);
         }
         self.line += 1;
+        let content = self.buf.strip_suffix(b"\n").map_or(self.buf.len(), |b| b.strip_suffix(b"\r").unwrap_or(b).len());
+        if content > MAX_LINE_BYTES {
+            return Err(ReadError::LineTooLong { path: self.path.clone(), line: self.line, limit: MAX_LINE_BYTES });
+        }
         let mut bytes = self.buf.as_slice();
         if let Some(rest) = bytes.strip_suffix(b"\n") {
             bytes = rest;
@@ -511,10 +568,14 @@ fn type_name(value: &toml::Value) -> &'static str {
 
 impl<'a> MetaFile<'a> {
     fn field(&self, name: &'static str, expected: &str) -> Result<Field<'_>, ReadError> {
-        let spanned = self.table.get(name).ok_or_else(|| ReadError::MissingField {
-            path: self.path.to_path_buf(),
-            field: name,
-            expected: expected.to_string(),
+        let spanned = self.table.get(name).ok_or_else(|| {
+            let near = self.table.keys().find(|k| !META_FIELDS.contains(&k.as_str()) && is_near_miss(k, name));
+            let hint = near.map(|k| format!(" (the file has `{k}`: misspelt?)")).unwrap_or_default();
+            ReadError::MissingField {
+                path: self.path.to_path_buf(),
+                field: name,
+                expected: format!("{expected}{hint}"),
+            }
         })?;
         Ok(Field { value: spanned.get_ref(), line: line_column(self.text, spanned.span().start).0 })
     }
@@ -565,9 +626,64 @@ impl<'a> MetaFile<'a> {
         }
     }
 
-    fn positive(&self, name: &'static str, expected: &str, type_expected: &'static str) -> Result<f64, ReadError> {
-        self.number(name, expected, |v| v > 0.0, type_expected).map(|(v, _)| v)
+    /// A number in `(0, max]`.
+    fn positive(
+        &self,
+        name: &'static str,
+        max: f64,
+        expected: &str,
+        type_expected: &'static str,
+    ) -> Result<f64, ReadError> {
+        self.number(name, expected, |v| v > 0.0 && v <= max, type_expected).map(|(v, _)| v)
     }
+}
+
+/// Every metadata field the specification defines.
+const META_FIELDS: [&str; 11] = [
+    "format",
+    "kind",
+    "sample_rate_hz",
+    "description",
+    "m_car_kg",
+    "m_cw_kg",
+    "direction",
+    "lw_start_m",
+    "lw_end_m",
+    "mass_kg",
+    "rope_length_m",
+];
+
+/// Whether `key` looks like a misspelling of `name`: the same but for case,
+/// `-`/`_` and surrounding spaces, or a unit suffix (`_hz`), or at most two
+/// edits (insertions, deletions, substitutions) apart.
+fn is_near_miss(key: &str, name: &str) -> bool {
+    let normal = |s: &str| s.trim().to_ascii_lowercase().replace('-', "_");
+    let (a, b) = (normal(key), normal(name));
+    if a == b {
+        return true;
+    }
+    // The unit left off, or one too many (`sample_rate` for `sample_rate_hz`).
+    let unit_suffix =
+        |long: &str, short: &str| long.strip_prefix(short).is_some_and(|rest| rest.starts_with('_') && rest.len() <= 4);
+    if unit_suffix(&a, &b) || unit_suffix(&b, &a) {
+        return true;
+    }
+    let (a, b): (Vec<char>, Vec<char>) = (a.chars().collect(), b.chars().collect());
+    if a.len().abs_diff(b.len()) > 2 || a.len() > 64 {
+        return false;
+    }
+    // Levenshtein distance, one row at a time.
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.iter().enumerate() {
+        let mut previous = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let substitution = previous + usize::from(ca != cb);
+            previous = row[j + 1];
+            row[j + 1] = substitution.min(row[j] + 1).min(row[j + 1] + 1);
+        }
+    }
+    row[b.len()] <= 2
 }
 
 /// Reads and checks the metadata file `toml_path` (`<stem>.toml`) alone.
@@ -583,7 +699,21 @@ impl<'a> MetaFile<'a> {
 /// field missing, a wrong type, a value out of range, `direction` invalid or
 /// contradicting the change of `lw`.
 pub fn read_meta(toml_path: &Path, rope_total_length_m: f64) -> Result<RecordingMeta, ReadError> {
-    let bytes = fs::read(toml_path).map_err(|source| ReadError::Io { path: toml_path.to_path_buf(), source })?;
+    let io_err = |source| ReadError::Io { path: toml_path.to_path_buf(), source };
+    let too_large = || ReadError::TooLarge {
+        path: toml_path.to_path_buf(),
+        limit: MAX_META_BYTES,
+        what: "a metadata file of a few hundred bytes",
+    };
+    let file = open(toml_path)?;
+    if file.metadata().map_err(io_err)?.len() > MAX_META_BYTES {
+        return Err(too_large());
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_META_BYTES + 1).read_to_end(&mut bytes).map_err(io_err)?;
+    if bytes.len() as u64 > MAX_META_BYTES {
+        return Err(too_large());
+    }
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
     let text = std::str::from_utf8(bytes).map_err(|e| {
         let valid = &bytes[..e.valid_up_to()];
@@ -621,7 +751,12 @@ fn parse_meta(text: &str, path: &Path, rope_total_length_m: f64) -> Result<Recor
             return Err(ReadError::UnknownKind { path: path.to_path_buf(), line: kind_line, found: excerpt(other) })
         }
     };
-    let sample_rate_hz = file.positive("sample_rate_hz", "a finite sample rate > 0 Hz", "a number (Hz)")?;
+    let sample_rate_hz = file.positive(
+        "sample_rate_hz",
+        MAX_SAMPLE_RATE_HZ,
+        &format!("a finite sample rate > 0 Hz, at most {MAX_SAMPLE_RATE_HZ} Hz"),
+        "a number (Hz)",
+    )?;
     let description = match file.table.get("description") {
         None => None,
         Some(spanned) => match spanned.get_ref() {
@@ -634,8 +769,18 @@ fn parse_meta(text: &str, path: &Path, rope_total_length_m: f64) -> Result<Recor
     };
 
     let kind = if is_travel {
-        let m_car_kg = file.positive("m_car_kg", "a finite car mass > 0 kg", "a number (kg)")?;
-        let m_cw_kg = file.positive("m_cw_kg", "a finite counterweight mass > 0 kg", "a number (kg)")?;
+        let m_car_kg = file.positive(
+            "m_car_kg",
+            MAX_MASS_KG,
+            &format!("a finite car mass > 0 kg, at most {MAX_MASS_KG} kg"),
+            "a number (kg)",
+        )?;
+        let m_cw_kg = file.positive(
+            "m_cw_kg",
+            MAX_MASS_KG,
+            &format!("a finite counterweight mass > 0 kg, at most {MAX_MASS_KG} kg"),
+            "a number (kg)",
+        )?;
         let (direction_text, direction_line) =
             file.string("direction", "direction = \"up\" or direction = \"down\"")?;
         let direction = match direction_text {
@@ -670,8 +815,18 @@ fn parse_meta(text: &str, path: &Path, rope_total_length_m: f64) -> Result<Recor
         }
         RecordingKind::Travel { m_car_kg, m_cw_kg, direction, lw_start_m, lw_end_m }
     } else {
-        let mass_kg = file.positive("mass_kg", "a finite hanging mass > 0 kg", "a number (kg)")?;
-        let rope_length_m = file.positive("rope_length_m", "a finite rope length > 0 m", "a number (m)")?;
+        let mass_kg = file.positive(
+            "mass_kg",
+            MAX_MASS_KG,
+            &format!("a finite hanging mass > 0 kg, at most {MAX_MASS_KG} kg"),
+            "a number (kg)",
+        )?;
+        let rope_length_m = file.positive(
+            "rope_length_m",
+            MAX_ROPE_LENGTH_M,
+            &format!("a finite rope length > 0 m, at most {MAX_ROPE_LENGTH_M} m"),
+            "a number (m)",
+        )?;
         RecordingKind::FreeDecay { mass_kg, rope_length_m }
     };
     Ok(RecordingMeta { kind, sample_rate_hz, description })
@@ -740,6 +895,30 @@ fn parse_value(text: &str, path: &Path, line: usize, name: &str) -> Result<f64, 
     }
 }
 
+/// [`parse_value`], and for a known column (`bound` = its largest magnitude
+/// and unit, [`super::COLUMN_BOUNDS`]) within that bound.
+#[inline]
+fn parse_bounded(
+    text: &str,
+    path: &Path,
+    line: usize,
+    name: &str,
+    bound: Option<(f64, &'static str)>,
+) -> Result<f64, ReadError> {
+    let value = parse_value(text, path, line, name)?;
+    match bound {
+        Some((limit, unit)) if value.abs() > limit => Err(ReadError::BeyondPhysicalBound {
+            path: path.to_path_buf(),
+            line,
+            column: name.to_string(),
+            text: excerpt(text),
+            limit,
+            unit,
+        }),
+        _ => Ok(value),
+    }
+}
+
 /// Reads and checks the samples file `csv_path` (`<stem>.csv`) for a
 /// recording with metadata `meta` (from [`read_meta`]).
 ///
@@ -796,6 +975,7 @@ fn read_columns_from(file: File, path: &Path, meta: &RecordingMeta) -> Result<Ve
             return Err(ReadError::MissingColumn { path: path_buf(), column, kind: meta.kind.name(), required, hint });
         }
     }
+    let bounds: Vec<Option<(f64, &'static str)>> = names.iter().map(|n| column_bound(n)).collect();
     let time_index = names.iter().position(|n| n == TIME_S).unwrap_or(0);
     let period = 1.0 / meta.sample_rate_hz;
     let ncols = names.len();
@@ -832,16 +1012,16 @@ fn read_columns_from(file: File, path: &Path, meta: &RecordingMeta) -> Result<Ve
                     expected: expected_fields(),
                 });
             }
-            for ((field, column), name) in fields.iter().zip(&mut values).zip(&names) {
-                column.push(parse_value(field, path, line, name)?);
+            for (((field, column), name), bound) in fields.iter().zip(&mut values).zip(&names).zip(&bounds) {
+                column.push(parse_bounded(field, path, line, name, *bound)?);
             }
         } else {
             let found = text.bytes().filter(|&b| b == b',').count() + 1;
             if found != ncols {
                 return Err(ReadError::FieldCount { path: path_buf(), line, found, expected: expected_fields() });
             }
-            for ((field, column), name) in text.split(',').zip(&mut values).zip(&names) {
-                column.push(parse_value(field, path, line, name)?);
+            for (((field, column), name), bound) in text.split(',').zip(&mut values).zip(&names).zip(&bounds) {
+                column.push(parse_bounded(field, path, line, name, *bound)?);
             }
         }
         let time = values[time_index][rows];
@@ -887,6 +1067,15 @@ mod tests {
         assert_eq!(split_quoted("\"a\"b,c"), Err((1, "text follows the closing quote")));
         // A quote inside an unquoted field is kept as text.
         assert_eq!(split_quoted("a\"b,c").unwrap(), ["a\"b", "c"]);
+    }
+
+    #[test]
+    fn near_misses_of_field_names_are_recognised() {
+        assert!(is_near_miss("m_car_kgs", "m_car_kg"));
+        assert!(is_near_miss("M-Car_Kg", "m_car_kg"));
+        assert!(is_near_miss("sample_rate", "sample_rate_hz"));
+        assert!(!is_near_miss("description", "direction"));
+        assert!(!is_near_miss("kind", "mass_kg"));
     }
 
     #[test]

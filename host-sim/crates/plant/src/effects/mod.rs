@@ -519,9 +519,11 @@ impl Effects {
             None => Effects::none(),
             Some(path) => {
                 let origin = path.display().to_string();
-                let text = std::fs::read_to_string(path).map_err(|e| EffectError::Syntax {
-                    origin: origin.clone(),
-                    message: format!("cannot read the effects file: {e}"),
+                let text = rig_config::read_text_file(path, rig_config::MAX_TEXT_FILE_BYTES).map_err(|e| {
+                    EffectError::Syntax {
+                        origin: origin.clone(),
+                        message: format!("cannot read the effects file: {e}"),
+                    }
                 })?;
                 Effects::from_toml_str(&text, &origin)?
             }

@@ -1,0 +1,274 @@
+//! Fuzz targets (proptest, a fixed number of cases so that CI runs them in
+//! about a second) for the parsers of text a user hands the commands: the
+//! rig config (`--config`), a recording's metadata (the `<stem>.toml`
+//! sidecar) and the `EVIMP1` export. Each must return an error or a value
+//! that satisfies every documented bound; none may panic.
+//! `host-sim/tests/recording_read.rs` fuzzes the samples reader.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use proptest::prelude::*;
+use recording::evimp::EVIMP_BOUNDS;
+use recording::{read_evimp, read_meta, RecordingKind, MAX_MASS_KG, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ};
+use rig_config::RigConfig;
+
+/// Cases per target: enough to cover the strategies' shapes, small enough
+/// for every CI run.
+const CASES: u32 = 256;
+
+/// Total rope length of the reference rig, m.
+const ROPE_TOTAL_M: f64 = 8.6;
+
+thread_local! {
+    static DIR: tempfile::TempDir = tempfile::tempdir().unwrap();
+}
+
+/// Writes `bytes` to `name` in this thread's scratch directory.
+fn scratch(name: &str, bytes: &[u8]) -> PathBuf {
+    DIR.with(|d| {
+        let path = d.path().join(name);
+        fs::write(&path, bytes).unwrap();
+        path
+    })
+}
+
+/// One edit of a byte string; positions are taken modulo the length.
+#[derive(Debug, Clone)]
+enum Edit {
+    Flip(usize, u8),
+    Truncate(usize),
+    Insert(usize, u8),
+    Delete(usize, usize),
+    /// Inserts one of a few texts that matter to TOML and numbers.
+    Splice(usize, usize),
+}
+
+const SPLICES: [&str; 12] = ["\n", "=", "[", "]", "\"", "-", "1e308", "nan", "inf", "[]", "x = 1\n", "\n[mechanics]\n"];
+
+fn edit() -> impl Strategy<Value = Edit> {
+    prop_oneof![
+        (any::<usize>(), 1..=255u8).prop_map(|(p, m)| Edit::Flip(p, m)),
+        any::<usize>().prop_map(Edit::Truncate),
+        (any::<usize>(), any::<u8>()).prop_map(|(p, b)| Edit::Insert(p, b)),
+        (any::<usize>(), 1..40usize).prop_map(|(p, n)| Edit::Delete(p, n)),
+        (any::<usize>(), 0..SPLICES.len()).prop_map(|(p, k)| Edit::Splice(p, k)),
+    ]
+}
+
+fn apply(mut bytes: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
+    for e in edits {
+        let len = bytes.len();
+        match *e {
+            Edit::Flip(p, m) if len > 0 => bytes[p % len] ^= m,
+            Edit::Truncate(p) => bytes.truncate(p % (len + 1)),
+            Edit::Insert(p, b) => bytes.insert(p % (len + 1), b),
+            Edit::Delete(p, n) if len > 0 => {
+                let start = p % len;
+                bytes.drain(start..(start + n).min(len));
+            }
+            Edit::Splice(p, k) => {
+                let at = p % (len + 1);
+                bytes.splice(at..at, SPLICES[k].bytes());
+            }
+            _ => {}
+        }
+    }
+    bytes
+}
+
+/// Number text a user (or a broken export) might write.
+fn number_text() -> impl Strategy<Value = String> {
+    prop_oneof![
+        any::<f64>().prop_map(|v| format!("{v:?}")),
+        (-1.0e3..1.0e3f64).prop_map(|v| format!("{v}")),
+        any::<i64>().prop_map(|v| v.to_string()),
+        prop::sample::select(vec!["0", "-0.0", "1e300", "-1e300", "nan", "inf", "-inf", "1e-320", "\"70.5\"", "[]"])
+            .prop_map(String::from),
+    ]
+}
+
+/// An `Ok` rig config satisfies what validation promises.
+fn check_rig(text: &str) {
+    match RigConfig::from_toml_str(text, "fuzz.toml") {
+        Ok(rig) => {
+            rig.validate("again").expect("a config accepted once validates again");
+            let m = &rig.mechanics;
+            assert!(!m.m_car_kg.is_empty());
+            assert!(m.m_car_kg.iter().all(|v| v.is_finite() && *v > 0.0 && *v <= 1.0e5));
+            assert!(rig.travel.lw_low_m < rig.travel.lw_high_m && rig.travel.lw_high_m < m.rope_total_length_m);
+            let _ = rig.drive_config();
+            let _ = rig.observer_model();
+        }
+        Err(e) => assert!(e.to_string().starts_with("fuzz.toml"), "{e}"),
+    }
+}
+
+/// An `Ok` metadata file satisfies the reader's bounds.
+fn check_meta(path: &Path) {
+    let Ok(meta) = read_meta(path, ROPE_TOTAL_M) else { return };
+    assert!(meta.sample_rate_hz > 0.0 && meta.sample_rate_hz <= MAX_SAMPLE_RATE_HZ, "{meta:?}");
+    match meta.kind {
+        RecordingKind::Travel { m_car_kg, m_cw_kg, direction, lw_start_m, lw_end_m } => {
+            for mass in [m_car_kg, m_cw_kg] {
+                assert!(mass > 0.0 && mass <= MAX_MASS_KG, "{meta:?}");
+            }
+            for lw in [lw_start_m, lw_end_m] {
+                assert!(lw > 0.0 && lw < ROPE_TOTAL_M, "{meta:?}");
+            }
+            let up = direction == recording::CarDirection::Up;
+            assert_eq!(up, lw_end_m > lw_start_m, "{meta:?}");
+            assert_ne!(lw_end_m, lw_start_m);
+        }
+        RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
+            assert!(mass_kg > 0.0 && mass_kg <= MAX_MASS_KG, "{meta:?}");
+            assert!(rope_length_m > 0.0 && rope_length_m <= MAX_ROPE_LENGTH_M, "{meta:?}");
+        }
+    }
+}
+
+/// An `Ok` EVIMP export satisfies the reader's bounds.
+fn check_evimp(path: &Path) {
+    let Ok(e) = read_evimp(path) else { return };
+    assert!(e.sample_rate_hz > 0.0 && e.sample_rate_hz <= MAX_SAMPLE_RATE_HZ);
+    let n = e.len();
+    assert!(n >= 2 && e.x_mg.len() == n && e.y_mg.len() == n);
+    let mut channels = vec![&e.x_mg, &e.y_mg, &e.z_mg];
+    if let Some(sound) = &e.sound_dba {
+        assert_eq!(sound.len(), n);
+        channels.push(sound);
+    }
+    for (values, (bound, _)) in channels.into_iter().zip(EVIMP_BOUNDS) {
+        assert!(values.iter().all(|v| v.is_finite() && v.abs() <= bound));
+    }
+}
+
+const META_TRAVEL: &str = "format = \"elevator-measurement/1\"
+kind = \"travel\"
+sample_rate_hz = 4096.0
+description = \"fuzz\"
+m_car_kg = 70.5
+m_cw_kg = 33.0
+direction = \"up\"
+lw_start_m = 1.0
+lw_end_m = 7.6
+";
+
+const META_FIELDS: [&str; 11] = [
+    "format",
+    "kind",
+    "sample_rate_hz",
+    "description",
+    "m_car_kg",
+    "m_cw_kg",
+    "direction",
+    "lw_start_m",
+    "lw_end_m",
+    "mass_kg",
+    "rope_length_m",
+];
+
+/// A metadata file of random fields: each known field absent or with a
+/// random value, kinds and directions drawn from valid and invalid text,
+/// and unknown fields.
+fn meta_text() -> impl Strategy<Value = String> {
+    let value = prop_oneof![
+        number_text(),
+        prop::sample::select(vec![
+            "\"elevator-measurement/1\"",
+            "\"travel\"",
+            "\"free_decay\"",
+            "\"up\"",
+            "\"down\"",
+            "true",
+            "{ a = 1 }",
+        ])
+        .prop_map(String::from),
+    ];
+    (
+        prop::collection::vec(prop::option::of(value), META_FIELDS.len()),
+        prop::collection::vec(("[a-z_]{1,12}", number_text()), 0..3),
+    )
+        .prop_map(|(values, extra)| {
+            let mut text = String::new();
+            for (name, value) in META_FIELDS.iter().zip(values) {
+                if let Some(v) = value {
+                    text.push_str(&format!("{name} = {v}\n"));
+                }
+            }
+            for (name, v) in extra {
+                if !META_FIELDS.contains(&name.as_str()) {
+                    text.push_str(&format!("{name} = {v}\n"));
+                }
+            }
+            text
+        })
+}
+
+/// An EVIMP export of random rows: the tag and the rate right or wrong,
+/// 0-6 rows of 2-5 values (numbers beyond the bounds among them), spaces or
+/// tabs between them.
+fn evimp_text() -> impl Strategy<Value = String> {
+    let tag = prop::sample::select(vec!["EVIMP1", "EVIMP1 ", "EVIMP2", ""]);
+    let rate = prop_oneof![number_text(), Just("256".to_string())];
+    let row = prop::collection::vec(number_text(), 2..=5);
+    let sep = prop::sample::select(vec![" ", "\t", "  ", " \t "]);
+    (tag, rate, prop::collection::vec(row, 0..6), sep, any::<bool>()).prop_map(|(tag, rate, rows, sep, crlf)| {
+        let end = if crlf { "\r\n" } else { "\n" };
+        let mut text = format!("{tag}{end}{rate}{end}");
+        for row in rows {
+            text.push_str(&row.join(sep));
+            text.push_str(end);
+        }
+        text
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: CASES, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn rig_config_mutated_parses_or_is_refused(edits in prop::collection::vec(edit(), 0..6)) {
+        let bytes = apply(rig_config::EMBEDDED_RIG_TOML.as_bytes().to_vec(), &edits);
+        check_rig(&String::from_utf8_lossy(&bytes));
+    }
+
+    #[test]
+    fn rig_config_with_random_values_is_valid_or_refused(line in any::<prop::sample::Index>(), value in number_text()) {
+        // Replace the value of one `key = value` line of the embedded rig.
+        let text = rig_config::EMBEDDED_RIG_TOML;
+        let lines: Vec<&str> = text.lines().collect();
+        let assignments: Vec<usize> = (0..lines.len()).filter(|&i| lines[i].contains(" = ")).collect();
+        let i = assignments[line.index(assignments.len())];
+        let key = lines[i].split(" = ").next().unwrap();
+        let mut edited: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+        edited[i] = format!("{key} = {value}");
+        check_rig(&edited.join("\n"));
+    }
+
+    #[test]
+    fn rig_config_with_an_unknown_field_is_refused_naming_it(table in any::<prop::sample::Index>(), name in "zz_[a-z_]{0,10}") {
+        let text = rig_config::EMBEDDED_RIG_TOML;
+        let headers: Vec<&str> = text.lines().filter(|l| l.starts_with('[')).collect();
+        let header = headers[table.index(headers.len())];
+        let edited = text.replacen(&format!("{header}\n"), &format!("{header}\n{name} = 1\n"), 1);
+        let err = RigConfig::from_toml_str(&edited, "fuzz.toml").unwrap_err().to_string();
+        prop_assert!(err.contains(&name) && err.contains("unknown field"), "{}", err);
+    }
+
+    #[test]
+    fn sidecar_of_random_fields_is_valid_or_refused(text in meta_text()) {
+        check_meta(&scratch("meta.toml", text.as_bytes()));
+    }
+
+    #[test]
+    fn sidecar_mutated_is_valid_or_refused(edits in prop::collection::vec(edit(), 0..6)) {
+        check_meta(&scratch("mutated.toml", &apply(META_TRAVEL.as_bytes().to_vec(), &edits)));
+    }
+
+    #[test]
+    fn evimp_of_random_rows_is_valid_or_refused(text in evimp_text(), edits in prop::collection::vec(edit(), 0..3)) {
+        check_evimp(&scratch("ride.txt", text.as_bytes()));
+        check_evimp(&scratch("ride_mutated.txt", &apply(text.into_bytes(), &edits)));
+    }
+}
