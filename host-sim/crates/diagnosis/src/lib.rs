@@ -419,16 +419,13 @@ fn decide_drive(
             Err(e) => format!("the project's drive cannot run travel `{stem}` ({e:#})"),
             Ok(closed) => {
                 let d = start_stop_torque_gap_db(measured, closed);
-                if d > DRIVE_MISMATCH_DB {
-                    format!(
-                        "the torque of travel `{stem}` at standstill (start and stop) lies {d:.1} dB (RMS) from \
-                         the project's drive (more than {DRIVE_MISMATCH_DB} dB): another start and stop sequence"
-                    )
-                } else if let Some(reason) = other_speed_law(stem, measured, closed) {
-                    reason
-                } else {
+                if d <= DRIVE_MISMATCH_DB {
                     continue;
                 }
+                format!(
+                    "the torque of travel `{stem}` at standstill (start and stop) lies {d:.1} dB (RMS) from the \
+                     project's drive (more than {DRIVE_MISMATCH_DB} dB): another start and stop sequence"
+                )
             }
         };
         return DriveFinding { drive: DriveModel::Foreign, reason };
@@ -436,51 +433,9 @@ fn decide_drive(
     DriveFinding {
         drive: DriveModel::Project,
         reason: format!(
-            "the project's drive reproduces every travel's torque at standstill within {DRIVE_MISMATCH_DB} dB and \
-             its speed loop's gains within a factor {SPEED_LAW_MISMATCH_RATIO}"
+            "the project's drive reproduces every travel's torque at standstill within {DRIVE_MISMATCH_DB} dB"
         ),
     }
-}
-
-/// Largest ratio (either way) between the rig drive's speed-loop gains and
-/// the project's drive's on the same travel for the rig's drive to count as
-/// the project's.
-pub const SPEED_LAW_MISMATCH_RATIO: f64 = 1.3;
-
-/// The speed loop's law (PI on the speed error over the constant-speed
-/// stage, [`drive_law`]) of a travel's chain signals.
-fn speed_law(signals: &ChainSignals) -> Option<drive_law::SpeedController> {
-    let torque = signals.channel(signals::Channel::Torque)?;
-    let speed = signals.channel(signals::Channel::Speed)?;
-    let constant_speed = signals.phases.iter().find(|(p, _)| *p == signals::Phase::Constant)?.1.clone();
-    let data = drive_law::ControllerData {
-        torque_nm: torque,
-        shaft_angle_rad: &signals.angle_rad,
-        speed_estimate_radps: speed,
-        reference_radps: None,
-        motion: driven::motion_from_angle(&signals.angle_rad, signals.sample_rate_hz),
-        constant_speed,
-        sample_rate_hz: signals.sample_rate_hz,
-    };
-    drive_law::identify_speed_controller(&data).ok()
-}
-
-/// Why the rig's drive of travel `stem` is not the project's, when its
-/// speed law (from `measured`) and the project's in closed loop (`closed`)
-/// differ by more than [`SPEED_LAW_MISMATCH_RATIO`] in a gain; `None` when
-/// they agree or either cannot be identified.
-fn other_speed_law(stem: &str, measured: &ChainSignals, closed: &ChainSignals) -> Option<String> {
-    let (rig, project) = (speed_law(measured)?, speed_law(closed)?);
-    let ratio = |a: f64, b: f64| if a > 0.0 && b > 0.0 { (a / b).max(b / a) } else { f64::INFINITY };
-    let (kp, ki) = (ratio(rig.kp_nms_per_rad, project.kp_nms_per_rad), ratio(rig.ki_nm_per_rad, project.ki_nm_per_rad));
-    (kp.max(ki) > SPEED_LAW_MISMATCH_RATIO).then(|| {
-        format!(
-            "the speed loop of travel `{stem}` answers its speed error with Kp {:.2} N m s/rad and Ki {:.1} N m/rad, \
-             the project's drive on the same travel with Kp {:.2} and Ki {:.1} (more than a factor \
-             {SPEED_LAW_MISMATCH_RATIO} apart): another speed controller",
-            rig.kp_nms_per_rad, rig.ki_nm_per_rad, project.kp_nms_per_rad, project.ki_nm_per_rad
-        )
-    })
 }
 
 /// The model's counterpart of a measured recording, with its two
