@@ -1,4 +1,4 @@
-//! The commands under bad input and odd data (issue 16): each case either
+//! The commands under bad input and odd data: each case either
 //! gives the right answer or stops with an error that names the recording,
 //! the flag or the field and what would be accepted; nothing is overwritten
 //! without `--force`, a failed run leaves no file, a closed standard output

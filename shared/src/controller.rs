@@ -303,7 +303,7 @@ impl Controller {
     }
 
     /// Installs ripple compensation `strategy` for the orders of `table`
-    /// (strategy 1's table, N m) on the drive's chain model `chain`, with the
+    /// (the `Strategy::Table` table, N m) on the drive's chain model `chain`, with the
     /// chain observer when the strategy is [`Strategy::CarObserver`];
     /// [`Strategy::Off`] removes both. The one setup the chip (PIL) and the
     /// host share.
@@ -324,7 +324,7 @@ impl Controller {
     }
 
     /// Installs the chain observer, or removes it (between travels). With
-    /// an observer installed, strategy 4 of the compensation learns from its
+    /// an observer installed, `Strategy::CarObserver` learns from its
     /// car acceleration.
     pub fn set_observer(&mut self, observer: Option<ChainObserver>) {
         self.observer = observer;

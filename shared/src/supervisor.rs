@@ -28,31 +28,31 @@
 
 use crate::fixed::Q16;
 
-/// Time constant of the low-passed phase-current sum (fault 8), s.
+/// Time constant of the low-passed phase-current sum (`Fault::CurrentSensorOffset`), s.
 pub const CURRENT_SUM_TAU_S: f32 = 0.002;
 /// Level of the low-passed phase-current sum, as a fraction of the
-/// instantaneous limit `current_sum_a` (fault 8), dimensionless.
+/// instantaneous limit `current_sum_a` (`Fault::CurrentSensorOffset`), dimensionless.
 pub const CURRENT_SUM_LEVEL_FRACTION: f32 = 1.0 / 3.0;
-/// Time constant of the low-passed current tracking error (fault 9), s.
+/// Time constant of the low-passed current tracking error (`Fault::CurrentTracking`), s.
 pub const TRACKING_TAU_S: f32 = 0.004;
 /// Level of the current tracking error as a fraction of the q-current limit
-/// `max_current_a` (fault 9), dimensionless.
+/// `max_current_a` (`Fault::CurrentTracking`), dimensionless.
 pub const TRACKING_LIMIT_FRACTION: f32 = 0.15;
 /// Smallest measured current `|i_d| + |i_q|` at which the current-loop
 /// checks (faults 9 and 10) run, as a fraction of `max_current_a`: with no
 /// current measured at all (a machine that is not connected, or a bench with
-/// no machine) they hold, and the speed-following check (fault 11) is the
+/// no machine) they hold, and the speed-following check (`Fault::SpeedFollowing`) is the
 /// one that sees a drive that produces no torque. Dimensionless.
 pub const MIN_CURRENT_FRACTION: f32 = 0.05;
-/// Time constant of the low-passed back-EMF residual (fault 10), s.
+/// Time constant of the low-passed back-EMF residual (`Fault::BackEmfMismatch`), s.
 pub const BACK_EMF_TAU_S: f32 = 0.004;
 /// Level of the back-EMF residual as a fraction of the back-EMF at the rated
-/// shaft speed `p w_rated psi` (fault 10), dimensionless.
+/// shaft speed `p w_rated psi` (`Fault::BackEmfMismatch`), dimensionless.
 pub const BACK_EMF_LIMIT_FRACTION: f32 = 0.25;
-/// Time constant of the low-passed speed-following error (fault 11), s.
+/// Time constant of the low-passed speed-following error (`Fault::SpeedFollowing`), s.
 pub const FOLLOWING_TAU_S: f32 = 0.02;
 /// Level of the speed-following error as a fraction of the rated shaft speed
-/// (fault 11), dimensionless.
+/// (`Fault::SpeedFollowing`), dimensionless.
 pub const FOLLOWING_LIMIT_FRACTION: f32 = 0.15;
 
 /// Why the drive tripped. The discriminant is the reason code reported in
@@ -162,13 +162,13 @@ pub struct SupervisorLimits {
 pub struct MonitorLimits {
     /// Speed-loop period, s.
     pub period_s: f32,
-    /// Low-passed |phase-current sum| level, A (fault 8).
+    /// Low-passed |phase-current sum| level, A (`Fault::CurrentSensorOffset`).
     pub current_sum_level_a: f32,
-    /// Low-passed current tracking error level, A (fault 9).
+    /// Low-passed current tracking error level, A (`Fault::CurrentTracking`).
     pub tracking_level_a: f32,
-    /// Low-passed back-EMF residual level, V (fault 10).
+    /// Low-passed back-EMF residual level, V (`Fault::BackEmfMismatch`).
     pub back_emf_level_v: f32,
-    /// Low-passed speed-following error level, rad/s (fault 11).
+    /// Low-passed speed-following error level, rad/s (`Fault::SpeedFollowing`).
     pub following_level_radps: f32,
     /// Smallest measured `|i_d| + |i_q|` for faults 9 and 10, A.
     pub min_current_a: f32,
@@ -221,7 +221,7 @@ impl MonitorLimits {
 pub struct MonitorSample {
     /// The PWM was on for the latest current-loop step (faults 9 and 10 run only then).
     pub pwm_enabled: bool,
-    /// The brake is released (fault 11 runs only then).
+    /// The brake is released (`Fault::SpeedFollowing` is checked only then).
     pub brake_released: bool,
     /// Sum of the measured phase currents, A.
     pub current_sum_a: f32,
@@ -246,13 +246,13 @@ pub struct MonitorSample {
 /// The low-passed quantities of the consistency checks, in their units.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct MonitorLevels {
-    /// Low-passed |phase-current sum|, A (fault 8).
+    /// Low-passed |phase-current sum|, A (`Fault::CurrentSensorOffset`).
     pub current_sum_a: f32,
-    /// Low-passed `|i_d| + |i_q - i_q,ref|`, A (fault 9).
+    /// Low-passed `|i_d| + |i_q - i_q,ref|`, A (`Fault::CurrentTracking`).
     pub tracking_a: f32,
-    /// Low-passed back-EMF residual `|r_d| + |r_q|`, V (fault 10).
+    /// Low-passed back-EMF residual `|r_d| + |r_q|`, V (`Fault::BackEmfMismatch`).
     pub back_emf_residual_v: f32,
-    /// Low-passed `|w_ref - w|`, rad/s (fault 11).
+    /// Low-passed `|w_ref - w|`, rad/s (`Fault::SpeedFollowing`).
     pub following_radps: f32,
 }
 
@@ -378,13 +378,13 @@ impl Supervisor {
 
     /// The consistency checks (faults 8 to 11), once per speed-loop period.
     ///
-    /// - fault 8: the low-passed `|i_a + i_b + i_c|`;
-    /// - fault 9 (PWM on, measured current above [`MIN_CURRENT_FRACTION`]): the low-passed `|i_d| + |i_q - i_q,ref|`;
-    /// - fault 10 (PWM on, the same current): the residual of the dq voltage equations of the
+    /// - `Fault::CurrentSensorOffset`: the low-passed `|i_a + i_b + i_c|`;
+    /// - `Fault::CurrentTracking` (PWM on, measured current above [`MIN_CURRENT_FRACTION`]): the low-passed `|i_d| + |i_q - i_q,ref|`;
+    /// - `Fault::BackEmfMismatch` (PWM on, the same current): the residual of the dq voltage equations of the
     ///   machine at the encoder speed, `r_d = v_d - (R i_d - w_e L_q i_q)`,
     ///   `r_q = v_q - (R i_q + w_e (L_d i_d + psi))`, low-passed `|r_d| + |r_q|`
     ///   (the `L di/dt` terms average out over the filter);
-    /// - fault 11 (brake released): the low-passed `|w_ref - w|`.
+    /// - `Fault::SpeedFollowing` (brake released): the low-passed `|w_ref - w|`.
     ///
     /// A filter whose condition does not hold decays to zero.
     pub fn check_consistency(&mut self, sample: &MonitorSample) {

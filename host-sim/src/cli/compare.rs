@@ -83,7 +83,7 @@ pub fn run(rig: &RigConfig, args: &CompareArgs) -> anyhow::Result<()> {
     let out = output_dir(&args.out, args.force)?;
     out.refuse_existing(OUTPUTS)?;
     let started = Instant::now();
-    let table = calibrate_table(rig).context("calibration travel for strategy 1's table")?;
+    let table = calibrate_table(rig).context("calibration travel for the `Strategy::Table` table")?;
     let cases: Vec<(usize, _)> = all_cases(rig)
         .into_iter()
         .enumerate()

@@ -1,4 +1,4 @@
-//! `host-sim faults`: the drive under faults. Every fault kind of issue 7 at
+//! `host-sim faults`: the drive under faults. Every fault kind at
 //! several instants of a travel (acceleration, rated speed, deceleration),
 //! car up and down, or the faults given with `--fault` / `--faults-file`
 //! (several at once); a table of detection time, reason, peak current, peak

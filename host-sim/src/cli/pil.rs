@@ -42,8 +42,8 @@ pub struct PilArgs {
     /// QEMU `-icount shift`: 2^shift ns of virtual time per instruction.
     #[arg(long = "icount-shift", default_value_t = 5, allow_negative_numbers = true)]
     pub icount_shift: u32,
-    /// Ripple compensation on the target (strategy 1's table: the rig's
-    /// `[[ripple]]` negated; strategy 4 adds the chain observer). Learning
+    /// Ripple compensation on the target (the `Strategy::Table` table: the rig's
+    /// `[[ripple]]` negated; `Strategy::CarObserver` adds the chain observer). Learning
     /// runs at rated speed: give `--steps 60000` to reach it.
     #[arg(long, value_enum, default_value_t = StrategyArg::Off)]
     pub compensation: StrategyArg,

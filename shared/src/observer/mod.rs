@@ -1,4 +1,4 @@
-//! The reduced 5-DOF observer (issue 5): estimates the car acceleration, the
+//! The reduced 5-DOF observer: estimates the car acceleration, the
 //! dynamic rope forces and the shaft disturbance torque from the encoder and
 //! the machine torque `Kt i_q`, at the speed-loop rate (2 kHz), in `f32`.
 //!

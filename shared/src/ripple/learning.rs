@@ -1,4 +1,4 @@
-//! Iterative learning across travels (strategy 3): harmonic coefficients
+//! Iterative learning across travels (`Strategy::Learning`): harmonic coefficients
 //! stored per revolution of the shaft, by absolute position, and corrected
 //! after each travel by the residual measured over that revolution.
 //!

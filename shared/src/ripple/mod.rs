@@ -63,13 +63,13 @@ use crate::trig::{sin_cos, Angle};
 pub enum Strategy {
     /// No compensation.
     Off,
-    /// Strategy 1: offline harmonic table.
+    /// offline harmonic table.
     Table,
-    /// Strategy 2: adaptive angle-indexed harmonics (LMS) during the travel.
+    /// adaptive angle-indexed harmonics (LMS) during the travel.
     Adaptive,
-    /// Strategy 3: iterative learning across travels, by position.
+    /// iterative learning across travels, by position.
     Learning,
-    /// Strategy 4: adaptive harmonics driven by the observer's car acceleration.
+    /// adaptive harmonics driven by the observer's car acceleration.
     CarObserver,
 }
 
@@ -126,7 +126,7 @@ pub const UNOBSERVABLE_FRACTION: f32 = 0.3;
 pub const CAR_RESPONSE_FLOOR: f32 = 0.05;
 /// Time a harmonic takes to fade in at the start of a travel or out when it backs off, s.
 pub const FADE_S: f32 = 0.05;
-/// Highest frequency strategy 4 learns at, Hz: the reduced observer's
+/// Highest frequency `Strategy::CarObserver` learns at, Hz: the reduced observer's
 /// car estimate is good around the first two elastic modes (10-24 Hz).
 pub const CAR_OBSERVER_MAX_HZ: f32 = 25.0;
 /// Largest inductive voltage `L_q n w_rated |U| / Kt` one harmonic may ask
@@ -174,7 +174,7 @@ pub struct LearningInput {
     pub speed_radps: f32,
     /// Speed-loop error `speed_ref - speed` (position loop included), rad/s.
     pub speed_error_radps: f32,
-    /// The observer's car acceleration, m/s^2 (strategy 4), if available.
+    /// The observer's car acceleration, m/s^2 (`Strategy::CarObserver`), if available.
     pub car_acceleration_mps2: Option<f32>,
     /// The observer's identified rope `EA`, N, if available: the response
     /// model uses it instead of the nominal.
@@ -194,11 +194,11 @@ pub struct RippleCompensator {
     /// The drive's model of the chain (phase correction).
     chain: ChainModel,
     strategy: Strategy,
-    /// Strategy 1's table, N m.
+    /// the `Strategy::Table` table, N m.
     table: HarmonicTable,
     /// Strategies 2 and 4: coefficients learned this travel, N m.
     adaptive: HarmonicTable,
-    /// Strategy 3: coefficients by position.
+    /// coefficients by position.
     learning: LearningTable,
     /// What is applied now, N m.
     applied: HarmonicTable,
@@ -267,7 +267,7 @@ impl RippleCompensator {
         self.strategy = strategy;
     }
 
-    /// Sets strategy 1's table (N m); its orders become the compensator's.
+    /// Sets the `Strategy::Table` table (N m); its orders become the compensator's.
     pub fn set_table(&mut self, table: HarmonicTable) {
         self.table = table;
         self.limit_nm = harmonic_limits_nm(&self.config, &table.orders[..table.len.min(MAX_HARMONICS)]);
@@ -276,13 +276,13 @@ impl RippleCompensator {
         self.learning = LearningTable::default();
     }
 
-    /// Strategy 1's table.
+    /// the `Strategy::Table` table.
     pub fn table(&self) -> HarmonicTable {
         self.table
     }
 
-    /// The coefficients learned by strategy 2 or 4 in the last travel: what
-    /// a calibration travel gives strategy 1.
+    /// The coefficients learned by `Strategy::Adaptive` or `Strategy::CarObserver` in the last travel: what
+    /// a calibration travel gives `Strategy::Table`.
     pub fn learned_table(&self) -> HarmonicTable {
         self.adaptive
     }
@@ -321,7 +321,7 @@ impl RippleCompensator {
         self.current = HarmonicCurrent::default();
     }
 
-    /// End of a travel: strategy 3 learns from it.
+    /// End of a travel: `Strategy::Learning` learns from it.
     pub fn end_travel(&mut self) {
         if self.strategy == Strategy::Learning {
             // At least a quarter revolution of samples at the learning speed.
@@ -518,7 +518,7 @@ struct TickLearning {
     /// Fast enough, every response refreshed, and an error to learn from.
     learns: bool,
     /// The error the harmonics learn from: speed error, rad/s, or the
-    /// observer's car acceleration, m/s^2 (strategy 4).
+    /// observer's car acceleration, m/s^2 (`Strategy::CarObserver`).
     error: f32,
     /// Response below which an order learns slower, in the error's unit per N m.
     floor: f32,

@@ -52,7 +52,7 @@ pub fn rig_ripple_table(rig: &RigConfig) -> HarmonicTable {
 }
 
 /// A compensator of the rig's ripple orders with `strategy`, and `table` as
-/// strategy 1's table if given.
+/// the `Strategy::Table` table if given.
 pub fn compensator(rig: &RigConfig, strategy: Strategy, table: Option<HarmonicTable>) -> RippleCompensator {
     let drive = rig.drive_config();
     let mut compensator = RippleCompensator::new(&drive, &rig.observer_model(), &ripple_orders(rig), strategy);
@@ -334,7 +334,7 @@ pub fn all_cases(rig: &RigConfig) -> Vec<Case> {
 }
 
 /// Runs every strategy on `case` and returns one row each (`Off` first).
-/// `table` is strategy 1's calibrated table; iterative learning runs
+/// `table` is the calibrated `Strategy::Table` table; iterative learning runs
 /// `learning_travels` travels before the measured one.
 pub fn run_case(
     rig: &RigConfig,
@@ -393,7 +393,7 @@ pub fn run_case(
     Ok(rows)
 }
 
-/// Strategy 1's table: what strategy 2 learns in a calibration travel of the
+/// the `Strategy::Table` table: what `Strategy::Adaptive` learns in a calibration travel of the
 /// nominal rig (the heaviest car, up).
 pub fn calibrate_table(rig: &RigConfig) -> Result<HarmonicTable, SimError> {
     let m_car = rig.mechanics.m_car_kg.iter().copied().fold(f64::MIN, f64::max);

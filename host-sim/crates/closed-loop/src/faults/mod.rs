@@ -1,4 +1,4 @@
-//! Fault injection in the closed loop (issue 7): what can go wrong with the
+//! Fault injection in the closed loop: what can go wrong with the
 //! sensors, the power stage, the bus, the control timing, the link, the load
 //! and the brake, injected between the plant and the controller or in the
 //! plant, several at once; and the runs of `host-sim faults`.
