@@ -8,7 +8,8 @@
 //! What the paper's procedures must find there (the sample's README): EA
 //! 1.0e6 N from every free decay (within 2 %), guide damping 148 kg/s
 //! (within 15 %), sheave damping 3 N m s/rad from every travel (within
-//! 10 %), a machine torque that lifts the car going up. And whatever a
+//! 10 %), a machine torque that lifts the car going up, the verdict
+//! `nominal`. And whatever a
 //! recording holds, the diagnosis and the identification give a result for
 //! the rest.
 
@@ -16,7 +17,7 @@ use std::path::PathBuf;
 
 use diagnosis::calibrate::DECAY_MAX_FREQUENCY_HZ;
 use diagnosis::identify_dataset::identify_dataset;
-use diagnosis::{diagnose, DriveModel, GapOptions};
+use diagnosis::{diagnose, DriveModel, GapOptions, Verdict};
 use recording::read::read_dataset;
 use recording::{Recording, RecordingKind, I_A, I_B, I_C};
 use rig_config::RigConfig;
@@ -83,6 +84,8 @@ fn the_diagnosis_measures_every_foreign_recording_without_assuming_the_projects_
     assert_eq!(report.drive.drive, DriveModel::Foreign, "{}", report.drive.reason);
     let c = &report.calibration;
     assert!((c.rope_ea_n / 1.0e6 - 1.0).abs() < 0.02 && (c.sheave_damping_nms_per_rad / 3.0 - 1.0).abs() < 0.1);
+    // The sample's README: the rig is the nominal one, no unmodelled effect.
+    assert_eq!(report.verdict, Verdict::Nominal, "excess {:.3} dB", report.nominal_excess_db);
 }
 
 /// A travel whose phase currents read zero (a probe unplugged): nothing

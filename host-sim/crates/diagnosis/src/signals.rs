@@ -9,8 +9,10 @@ use std::ops::Range;
 
 use crate::error::{Context, Result};
 
+use crate::identify::release_index;
 use crate::travel_signals::travel_torque;
 use dsp::{decimate, travel_phases, welch_psd};
+use plant::free_decay::eqn9_first_frequency_hz;
 use recording::{Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
 use rig_config::RigConfig;
 
@@ -19,6 +21,16 @@ use rig_config::RigConfig;
 /// decimation filter is flat up to the top band (1 kHz). Covers the rope
 /// and car-frame modes with room to spare.
 pub const ANALYSIS_RATE_HZ: f64 = 4000.0;
+
+/// Cycles of the first mode (Eqn 9, at the rig's EA) after a free decay's
+/// release before its comparison starts. How the hold lets go (a latch, a
+/// cut wire, a force ramped off, the rope's own masses released out of
+/// their static shape) is the test's, not the rig's, and every rig does it
+/// its own way; the release's transient is over within a cycle or two,
+/// the free ringing that follows is the chain's. The comparison's first
+/// segment opens there (its window is zero at the start), so neither the
+/// release's step nor the pre-trigger before it enters the spectra.
+pub const DECAY_SETTLE_CYCLES: f64 = 2.0;
 
 /// One signal of the chain, in signal-chain order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
@@ -177,6 +189,23 @@ pub fn noise_density(signal: &[f64], sample_rate_hz: f64) -> Result<f64> {
     Ok(*median)
 }
 
+/// The sample (at the recording's rate) where a free decay's comparison
+/// starts: [`DECAY_SETTLE_CYCLES`] of the first mode after the release
+/// (0 without a car acceleration to find it in).
+fn decay_comparison_start(
+    rig: &RigConfig,
+    car_mps2: &[f64],
+    sample_rate_hz: f64,
+    mass_kg: f64,
+    length_m: f64,
+) -> usize {
+    let Ok(release) = release_index(car_mps2) else { return 0 };
+    let m = &rig.mechanics;
+    let f1 = eqn9_first_frequency_hz(m.rope_ea_n, m.rope_mass_per_length_kg_per_m, length_m, mass_kg);
+    let settle = if f1.is_finite() && f1 > 0.0 { (DECAY_SETTLE_CYCLES / f1 * sample_rate_hz).round() } else { 0.0 };
+    (release + settle as usize).min(car_mps2.len())
+}
+
 /// The chain signals of `recording` (`stem` names it in errors): currents
 /// turned into the machine torque with the rig's machine, every channel
 /// decimated by `factor`, the phases found on the decimated speed; with
@@ -207,12 +236,20 @@ pub fn chain_signals(
             full.push((channel, c.values.clone()));
         }
     }
+    let compared_from = match recording.meta.kind {
+        RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
+            let car = full.iter().find(|(c, _)| *c == Channel::CarAcceleration).map(|(_, v)| v.as_slice());
+            decay_comparison_start(rig, car.unwrap_or(&[]), fs, mass_kg, rope_length_m)
+        }
+        RecordingKind::Travel { .. } => 0,
+    };
     let mut noise = Vec::new();
     if measured {
         for (channel, values) in &full {
+            let compared = &values[compared_from.min(values.len())..];
             noise.push((
                 *channel,
-                noise_density(values, fs).with_context(|| format!("`{stem}`: noise of {}", channel.name()))?,
+                noise_density(compared, fs).with_context(|| format!("`{stem}`: noise of {}", channel.name()))?,
             ));
         }
     }
@@ -239,7 +276,7 @@ pub fn chain_signals(
             (Phase::Stop, p.stop),
         ]
     } else {
-        vec![(Phase::Decay, 0..len)]
+        vec![(Phase::Decay, compared_from.div_ceil(factor).min(len)..len)]
     };
     Ok(ChainSignals { sample_rate_hz: rate, channels, phases, noise_density: noise, angle_rad })
 }
