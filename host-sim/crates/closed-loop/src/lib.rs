@@ -39,7 +39,7 @@ use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelComma
 use indicatif::ProgressBar;
 
 use plant::effects::Effects;
-use plant::{Plant, PlantInputs, PlantObservation};
+use plant::{Integrator, Plant, PlantInputs, PlantObservation};
 use recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta};
 use rig_config::RigConfig;
 
@@ -81,6 +81,9 @@ pub struct SimOptions {
     pub max_control_steps: Option<u64>,
     /// The library's effects on the simulated plant (none: the nominal plant).
     pub effects: Effects,
+    /// How the plant integrates (default [`Integrator::Fast`];
+    /// [`Integrator::Reference`] is the yardstick of its accuracy).
+    pub integrator: Integrator,
 }
 
 impl SimOptions {
@@ -93,6 +96,7 @@ impl SimOptions {
             tail_s: 0.5,
             max_control_steps: None,
             effects: Effects::none(),
+            integrator: Integrator::Fast,
         }
     }
 }
@@ -320,6 +324,7 @@ pub fn simulate_travel_faulted(
         log.command = Some(command);
     }
     let mut plant = Plant::with_effects(rig, spec.m_car_kg, spec.lw_start_m, &options.effects);
+    plant.set_integrator(options.integrator);
 
     let ts = 1.0 / rig.control.current_loop_hz;
     // Generous bound: the profile plus the sequence plus the tail, doubled.
@@ -354,8 +359,7 @@ pub fn simulate_travel_faulted(
             hook.after_step(t_k, &plant, &output);
         }
 
-        let o = plant.observe();
-        if !(o.car_acceleration_mps2.is_finite() && inside_rope(o.counterweight_side_length_m, total)) {
+        if !plant.in_valid_range() {
             return Err(SimError::Diverged(plant.time_s()));
         }
         if output.state == DriveState::Idle && k > 0 && finished_at.is_none() {
