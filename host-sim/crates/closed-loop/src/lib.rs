@@ -334,8 +334,13 @@ pub fn simulate_travel_faulted(
         bar.set_length(expected_steps);
     }
     let mut run = TravelRun { sample_rate_hz: options.sample_rate_hz, ..TravelRun::default() };
-    let mut acquisition =
-        Acquisition { ts, sample_period: 1.0 / options.sample_rate_hz, next_sample: 0, max_step_s: options.max_step_s };
+    let mut acquisition = Acquisition {
+        ts,
+        sample_period: 1.0 / options.sample_rate_hz,
+        next_sample: 0,
+        max_step_s: options.max_step_s,
+        sample_times: Vec::new(),
+    };
     let mut finished_at: Option<f64> = None;
     let mut k: u64 = 0;
     // Outputs in force (what the timer holds when a step does not run).
@@ -521,22 +526,24 @@ struct Acquisition {
     next_sample: u64,
     /// Longest integration step of the plant, s.
     max_step_s: f64,
+    /// Sample times inside the interval being advanced, s (reused).
+    sample_times: Vec<f64>,
 }
 
 impl Acquisition {
     /// Advances `plant` to `t_end` (s), recording into `run` every sample
     /// instant on the way with the drive's `output`.
     fn advance_to(&mut self, plant: &mut Plant, t_end: f64, run: &mut TravelRun, output: &ControlOutput) {
+        self.sample_times.clear();
         loop {
             let t_sample = self.next_sample as f64 * self.sample_period;
             if t_sample >= t_end {
                 break;
             }
-            plant.advance(t_sample - plant.time_s(), self.max_step_s);
-            record(run, t_sample, &plant.observe(), output);
+            self.sample_times.push(t_sample);
             self.next_sample += 1;
         }
-        plant.advance(t_end - plant.time_s(), self.max_step_s);
+        plant.advance_until(t_end, self.max_step_s, &self.sample_times, |t, o| record(run, t, o, output));
     }
 
     /// PWM period `k`: the brake output acts at once, `applied_first_half`

@@ -62,6 +62,11 @@ fn add_cos_series(coefficients: &mut [f64; DEGREE + 1], scale: f64, n: f64, phas
     }
 }
 
+/// The binomial coefficient `C(n, k)`.
+fn binomial(n: usize, k: usize) -> f64 {
+    (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
+}
+
 /// `sum_j coefficients[j] x^j` by Horner's rule.
 fn horner(coefficients: &[f64; DEGREE + 1], x: f64) -> f64 {
     coefficients.iter().rev().fold(0.0, |acc, &c| acc * x + c)
@@ -93,6 +98,24 @@ impl AngleSeries {
         let electrical = pole_pairs * theta_rad;
         add_cos_series(&mut self.cos_p, 1.0, pole_pairs, electrical);
         add_cos_series(&mut self.sin_p, 1.0, pole_pairs, electrical - 0.5 * std::f64::consts::PI);
+    }
+
+    /// Taylor coefficients of the ripple torque about `theta_rad` (rad):
+    /// `R(theta + d) = sum_m c_m d^m + O(d^4)`, N m / rad^m, from the
+    /// polynomial (the reference's re-expanded at `theta_rad`; call
+    /// [`AngleSeries::ensure`] first so that it holds there).
+    pub fn ripple_taylor(&self, theta_rad: f64) -> [f64; 4] {
+        let delta = theta_rad - self.theta_ref_rad;
+        let mut out = [0.0; 4];
+        for (m, o) in out.iter_mut().enumerate() {
+            // sum_{j >= m} C(j, m) c_j delta^(j - m), by Horner.
+            let mut acc = 0.0;
+            for j in (m..=DEGREE).rev() {
+                acc = acc * delta + binomial(j, m) * self.ripple_nm[j];
+            }
+            *o = acc;
+        }
+        out
     }
 
     /// Ripple torque (N m), `cos(p theta)` and `sin(p theta)` at shaft

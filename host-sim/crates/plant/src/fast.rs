@@ -106,7 +106,7 @@ impl Plant {
     /// True when the fixed-size nominal path applies: the 5-DOF layout, no
     /// mechanical effect beyond the lumped values (dry friction, the brake
     /// clamp, the eccentric sheave), no dead time, no open phase.
-    fn nominal_path(&self) -> bool {
+    pub(crate) fn nominal_path(&self) -> bool {
         let e = &self.effects;
         self.line.layout.nodes == DOF
             && self.line.layout.body == CAR

@@ -27,6 +27,7 @@
 
 pub mod angle;
 pub mod effects;
+pub mod exact;
 mod fast;
 pub mod free_decay;
 pub mod inverter;
@@ -180,6 +181,8 @@ pub struct Plant {
     integrator: Integrator,
     /// Taylor polynomials of the angle-locked terms ([`Integrator::Fast`]).
     angle: AngleSeries,
+    /// The nominal chain's exact half-period discretisation ([`Integrator::Fast`]).
+    exact: exact::ExactStep,
 }
 
 /// What the drive's sensors hand to whichever controller closes the loop,
@@ -240,6 +243,7 @@ impl Plant {
             time_s: 0.0,
             integrator: Integrator::Fast,
             angle: AngleSeries::default(),
+            exact: exact::ExactStep::default(),
         }
     }
 
@@ -527,6 +531,42 @@ impl Plant {
             self.short_current_a = settled + (self.short_current_a - settled) * decay;
         }
         self.time_s += duration_s;
+    }
+
+    /// Advances to the time `t_end_s` (s) with the inputs held and hands
+    /// `on_sample(t, observation)` the plant's observation at each time of
+    /// `sample_times_s` (s, ascending, from now and before `t_end_s`).
+    ///
+    /// With [`Integrator::Fast`] on the nominal plant the whole interval is
+    /// one exact step ([`exact`]: the chain's linear part discretised
+    /// exactly, the samples from interpolants); otherwise, and with
+    /// [`Integrator::Reference`], it is [`Plant::advance`] (steps of at most
+    /// `max_step_s`, s) to each sample time, [`Plant::observe`] there, and
+    /// [`Plant::advance`] to the end.
+    pub fn advance_until(
+        &mut self,
+        t_end_s: f64,
+        max_step_s: f64,
+        sample_times_s: &[f64],
+        mut on_sample: impl FnMut(f64, &PlantObservation),
+    ) {
+        let h = t_end_s - self.time_s;
+        // At most 8 samples per interval (two at 16384 Hz in a half PWM period).
+        let mut offsets = [0.0; 8];
+        if self.integrator == Integrator::Fast && sample_times_s.len() <= offsets.len() && self.exact_ready(h) {
+            for (o, t) in offsets.iter_mut().zip(sample_times_s) {
+                *o = t - self.time_s;
+            }
+            let mut call = |i: usize, o: &PlantObservation| on_sample(sample_times_s[i], o);
+            self.advance_exact(h, &offsets[..sample_times_s.len()], &mut call);
+            self.time_s += h;
+            return;
+        }
+        for &t in sample_times_s {
+            self.advance(t - self.time_s, max_step_s);
+            on_sample(t, &self.observe());
+        }
+        self.advance(t_end_s - self.time_s, max_step_s);
     }
 
     /// The sensor readings a drive takes now (with the transducer errors
