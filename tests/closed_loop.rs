@@ -132,6 +132,9 @@ fn halving_the_integration_step_changes_the_car_acceleration_by_less_than_1e4_of
     assert!(relative < 1e-4, "{relative}");
 }
 
+/// One recorded signal of a run.
+type Signal = fn(&TravelRun) -> &[f64];
+
 /// RMS of `a - b` as a fraction of the RMS of `b`, and the largest
 /// difference as the same fraction.
 fn relative_difference(a: &[f64], b: &[f64]) -> (f64, f64) {
@@ -157,7 +160,7 @@ fn fast_against_reference_at_half_step(m_car: f64, direction: Direction, effects
     let fast = simulate_travel(&rig, &spec, &fast_options, None).unwrap();
     let reference = simulate_travel(&rig, &spec, &reference_options, None).unwrap();
     assert_eq!(fast.time_s.len(), reference.time_s.len());
-    let signals: [(&str, fn(&TravelRun) -> &[f64]); 5] = [
+    let signals: [(&str, Signal); 5] = [
         ("car acceleration", |r| &r.acc_car_mps2),
         ("counterweight acceleration", |r| &r.acc_cw_mps2),
         ("phase current a", |r| &r.phase_currents_a[0]),

@@ -8,18 +8,18 @@
 //! The polynomials have degree [`DEGREE`] and are used while the fastest
 //! harmonic (order `n_max`, or the pole pairs `p` if more) has turned by at
 //! most [`MAX_PHASE_RAD`] from the reference: the truncation error is then
-//! at most `sum |A_n| x^9 / 9!` with `x = 0.1`, below `3e-15` of the ripple's
-//! summed amplitude (and of the unit Park vector), a few ulps. Outside that
-//! interval the terms are computed directly.
+//! at most `sum |A_n| x^13 / 13!` with `x = 0.3`, below `3e-17` of the
+//! ripple's summed amplitude (and of the unit Park vector), below an ulp.
+//! Outside that interval the terms are computed directly.
 
 use crate::ripple::RippleTorque;
 
 /// Degree of the Taylor polynomials.
-pub const DEGREE: usize = 8;
+pub const DEGREE: usize = 12;
 
 /// Largest phase change, rad, of the fastest angle-locked term over which
 /// the polynomials are used (either side of the reference angle).
-pub const MAX_PHASE_RAD: f64 = 0.1;
+pub const MAX_PHASE_RAD: f64 = 0.3;
 
 /// Taylor polynomials of the ripple torque and the Park rotation about a
 /// reference shaft angle.
@@ -82,7 +82,9 @@ impl AngleSeries {
     /// interval to spare (for the stages of a step from there): refreshes
     /// them about `theta_rad` for `ripple` and `pole_pairs` otherwise.
     pub fn ensure(&mut self, theta_rad: f64, ripple: &RippleTorque, pole_pairs: f64) {
-        if !((theta_rad - self.theta_ref_rad).abs() <= 0.5 * self.half_width_rad) {
+        // A NaN reference (no polynomial yet) compares false: refresh.
+        let inside = (theta_rad - self.theta_ref_rad).abs() <= 0.5 * self.half_width_rad;
+        if !inside {
             self.refresh(theta_rad, ripple, pole_pairs);
         }
     }

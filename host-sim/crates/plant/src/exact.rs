@@ -44,7 +44,8 @@ const MECH: usize = 2 * DOF;
 /// anew (half of it either side of the reference position).
 pub const REFRESH_DISTANCE_M: f64 = 0.5e-3;
 
-/// Terms of the Taylor series of `Phi` and `Gamma_j`.
+/// Terms of the Taylor series of `Phi` and `Gamma_j` (`rho(A h) <= 0.5`:
+/// the first term left out is below `0.5^16 / 16! = 7e-19`).
 const TERMS: usize = 16;
 
 /// Terms of the currents' Taylor series in time (degree 6: the first term
@@ -129,24 +130,17 @@ impl Coefficients {
         out
     }
 
-    /// The dense `A` of `x' = A x + ...`.
-    fn matrix(&self) -> [[f64; MECH]; MECH] {
-        let mut a = [[0.0; MECH]; MECH];
-        for i in 0..DOF {
-            let mut u = [0.0; DOF];
-            u[i] = 1.0;
-            let column = self.accel(&u, &[0.0; DOF], -self.out_of_balance_n, 0.0);
-            let damping = self.respond([0.0; DOF], &u);
-            for r in 0..DOF {
-                a[DOF + r][i] = column[r];
-                a[DOF + r][DOF + i] = damping[r];
-            }
-            a[i][DOF + i] = 1.0;
-        }
+    /// `A x` for the mechanical state `x` (positions m, velocities m/s),
+    /// from the chain's structure (no dense matrix).
+    fn apply(&self, x: &[f64; MECH]) -> [f64; MECH] {
+        let mut out = [0.0; MECH];
+        out[..DOF].copy_from_slice(&x[DOF..]);
         if self.held {
-            a[SHEAVE] = [0.0; MECH];
+            out[SHEAVE] = 0.0;
         }
-        a
+        let a = self.accel(&x[..DOF], &x[DOF..], -self.out_of_balance_n, 0.0);
+        out[DOF..].copy_from_slice(&a);
+        out
     }
 }
 
@@ -179,43 +173,31 @@ fn mat_vec(m: &[[f64; MECH]; MECH], x: &[f64; MECH]) -> [f64; MECH] {
 }
 
 /// `e^{Ah}` and `int_0^h e^{As} ds` (its velocity-input columns) by their
-/// Taylor series.
-fn transition(a: &[[f64; MECH]; MECH], h: f64) -> ([[f64; MECH]; MECH], [[f64; DOF]; MECH]) {
+/// Taylor series, column by column.
+fn transition(co: &Coefficients, h: f64) -> ([[f64; MECH]; MECH], [[f64; DOF]; MECH]) {
     let mut phi = [[0.0; MECH]; MECH];
     let mut psi = [[0.0; DOF]; MECH];
-    let mut term = [[0.0; MECH]; MECH];
-    for i in 0..MECH {
-        term[i][i] = 1.0;
-    }
-    for k in 0..TERMS {
-        let factor = h / (k + 1) as f64;
-        for i in 0..MECH {
-            for j in 0..MECH {
-                phi[i][j] += term[i][j];
-            }
-            for j in 0..DOF {
-                psi[i][j] += term[i][DOF + j] * factor;
-            }
-        }
-        let mut next = [[0.0; MECH]; MECH];
-        for i in 0..MECH {
-            for l in 0..MECH {
-                let t = term[i][l] * factor;
-                if t != 0.0 {
-                    for j in 0..MECH {
-                        next[i][j] += t * a[l][j];
-                    }
+    for j in 0..MECH {
+        // term = (A h)^k e_j / k!
+        let mut term = [0.0; MECH];
+        term[j] = 1.0;
+        for k in 0..TERMS {
+            let factor = h / (k + 1) as f64;
+            for i in 0..MECH {
+                phi[i][j] += term[i];
+                if j >= DOF {
+                    psi[i][j - DOF] += term[i] * factor;
                 }
             }
+            term = co.apply(&term).map(|x| x * factor);
         }
-        term = next;
     }
     (phi, psi)
 }
 
 /// `Gamma_j = int_0^h e^{A(h-s)} b s^j ds` (j = 0..=3) by the Taylor
 /// series of `e^{A(h-s)}`: `sum_k A^k b h^(k+j+1) j! / (k+j+1)!`.
-fn input_responses(a: &[[f64; MECH]; MECH], b: &[f64; MECH], h: f64) -> [[f64; MECH]; 4] {
+fn input_responses(co: &Coefficients, b: &[f64; MECH], h: f64) -> [[f64; MECH]; 4] {
     let mut gamma = [[0.0; MECH]; 4];
     // w = A^k b h^(k+1) / (k+1)!
     let mut w: [f64; MECH] = b.map(|x| x * h);
@@ -229,7 +211,7 @@ fn input_responses(a: &[[f64; MECH]; MECH], b: &[f64; MECH], h: f64) -> [[f64; M
                 g[i] += w[i] * scale;
             }
         }
-        w = mat_vec(a, &w).map(|x| x * h / (k + 2) as f64);
+        w = co.apply(&w).map(|x| x * h / (k + 2) as f64);
     }
     gamma
 }
@@ -287,22 +269,21 @@ impl Plant {
         let ahead = if v.abs() * 1000.0 * h > REFRESH_DISTANCE_M { 0.5 * REFRESH_DISTANCE_M * v.signum() } else { 0.0 };
         let u_ref = u + ahead;
         let c = self.coefficients_at(u_ref, held);
-        let a = c.matrix();
         let mut b = [0.0; MECH];
         if !held {
             b[DOF + SHEAVE] = c.inv_mass[SHEAVE];
         }
         let mut b_car = [0.0; MECH];
         b_car[DOF + CAR] = c.inv_mass[CAR];
-        let (phi, psi) = transition(&a, h);
+        let (phi, psi) = transition(&c, h);
         self.exact = ExactStep {
             valid: h * self.line.omega_max_radps(&self.chain, u_ref, false) <= 0.5,
             h,
             u_ref_m: u_ref,
             coefficients: c,
             phi,
-            gamma: input_responses(&a, &b, h),
-            gamma_car: input_responses(&a, &b_car, h)[0],
+            gamma: input_responses(&c, &b, h),
+            gamma_car: input_responses(&c, &b_car, h)[0],
             psi,
         };
     }
@@ -339,8 +320,9 @@ impl Plant {
     /// Taylor coefficients (t^0..t^6) of the machine currents `(i_d, i_q)`
     /// (A / s^k) over the half period: the voltage equations differentiated
     /// term by term, for the electrical speed `w(t) = w[0] + w[1] t + w[2]
-    /// t^2` (rad/s) and `cos`, `sin` of the electrical angle at the start.
-    fn current_series(&self, w: [f64; 3], c: f64, s: f64) -> ([f64; SERIES], [f64; SERIES]) {
+    /// t^2` (rad/s) and `cos`, `sin` of the electrical angle at the start;
+    /// the first `terms` (at most [`SERIES`]), the others zero.
+    fn current_series(&self, w: [f64; 3], c: f64, s: f64, terms: usize) -> ([f64; SERIES], [f64; SERIES]) {
         let n = STATE_LEN - 2;
         let mut id = [0.0; SERIES];
         let mut iq = [0.0; SERIES];
@@ -354,15 +336,21 @@ impl Plant {
         let mut vd = [0.0; SERIES];
         let mut vq = [0.0; SERIES];
         (vd[0], vq[0]) = (va * c + vb * s, -va * s + vb * c);
-        // (w y)[k] = sum_j w[j] y[k - j].
-        let times_w = |y: &[f64; SERIES], k: usize| (0..3.min(k + 1)).map(|j| w[j] * y[k - j]).sum::<f64>();
-        for k in 0..SERIES - 1 {
+        for k in 0..terms - 1 {
+            // (w y)[k] = sum_j w[j] y[k - j].
+            let (mut w_id, mut w_iq, mut w_vd, mut w_vq) = (w[0] * id[k], w[0] * iq[k], w[0] * vd[k], w[0] * vq[k]);
+            for j in 1..3.min(k + 1) {
+                w_id += w[j] * id[k - j];
+                w_iq += w[j] * iq[k - j];
+                w_vd += w[j] * vd[k - j];
+                w_vq += w[j] * vq[k - j];
+            }
             let scale = 1.0 / (k + 1) as f64;
             let psi_w = if k < 3 { psi * w[k] } else { 0.0 };
-            id[k + 1] = (vd[k] - r * id[k] + lq * times_w(&iq, k)) / ld * scale;
-            iq[k + 1] = (vq[k] - r * iq[k] - ld * times_w(&id, k) - psi_w) / lq * scale;
-            vd[k + 1] = times_w(&vq, k) * scale;
-            vq[k + 1] = -times_w(&vd, k) * scale;
+            id[k + 1] = (vd[k] - r * id[k] + lq * w_iq) / ld * scale;
+            iq[k + 1] = (vq[k] - r * iq[k] - ld * w_id - psi_w) / lq * scale;
+            vd[k + 1] = w_vq * scale;
+            vq[k + 1] = -w_vd * scale;
         }
         (id, iq)
     }
@@ -420,19 +408,19 @@ impl Plant {
         let correction = co.variation(du, &stretch, &frozen);
         let a0: [f64; DOF] = std::array::from_fn(|i| frozen[i] + correction[i]);
         let (omega, alpha) = (v0[SHEAVE] / r, a0[SHEAVE] / r);
-        // The shaft's jerk needs the torque's rate, which needs the currents' first terms.
-        let (id, iq) = self.current_series([p * omega, p * alpha, 0.0], c, s);
+        // The shaft's jerk needs the torque's rate, which needs the currents'
+        // first terms (the series' first two terms depend on `w[0]` alone).
+        let (id, iq) = self.current_series([p * omega, 0.0, 0.0], c, s, 2);
         let rate = self.torque_cubic(&id, &iq, &q, [omega, alpha, 0.0])[1];
         let jerk = co.jerk(v0, &a0, rate / r)[SHEAVE] / r;
-        let (id, iq) = self.current_series([p * omega, p * alpha, 0.5 * p * jerk], c, s);
+        let (id, iq) = self.current_series([p * omega, p * alpha, 0.5 * p * jerk], c, s, SERIES);
         let force = self.torque_cubic(&id, &iq, &q, [omega, alpha, jerk]).map(|x| x / r);
         let e = &self.exact;
         let mut x1 = mat_vec(&e.phi, &x0);
         let f0 = force[0] + co.out_of_balance_n;
-        for i in 0..MECH {
-            x1[i] +=
-                e.gamma[0][i] * f0 + e.gamma[1][i] * force[1] + e.gamma[2][i] * force[2] + e.gamma[3][i] * force[3];
-            x1[i] += e.gamma_car[i] * f_car + (0..DOF).map(|j| e.psi[i][j] * correction[j]).sum::<f64>();
+        for (i, x) in x1.iter_mut().enumerate() {
+            *x += e.gamma[0][i] * f0 + e.gamma[1][i] * force[1] + e.gamma[2][i] * force[2] + e.gamma[3][i] * force[3];
+            *x += e.gamma_car[i] * f_car + (0..DOF).map(|j| e.psi[i][j] * correction[j]).sum::<f64>();
         }
         if co.held {
             x1[SHEAVE] = x0[SHEAVE];
