@@ -71,7 +71,9 @@ impl TravelSpec {
 /// Numerical settings of a simulation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimOptions {
-    /// Longest integration step, s (default: a quarter of a PWM period).
+    /// Longest RK4 step, s (default: a quarter of a PWM period). The
+    /// nominal plant with [`Integrator::Fast`] takes each PWM half period in
+    /// one exact step instead ([`plant::exact`]) and does not use it.
     pub max_step_s: f64,
     /// Data-acquisition sample rate, Hz.
     pub sample_rate_hz: f64,

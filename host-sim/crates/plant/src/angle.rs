@@ -62,11 +62,6 @@ fn add_cos_series(coefficients: &mut [f64; DEGREE + 1], scale: f64, n: f64, phas
     }
 }
 
-/// The binomial coefficient `C(n, k)`.
-fn binomial(n: usize, k: usize) -> f64 {
-    (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
-}
-
 /// `sum_j coefficients[j] x^j` by Horner's rule.
 fn horner(coefficients: &[f64; DEGREE + 1], x: f64) -> f64 {
     coefficients.iter().rev().fold(0.0, |acc, &c| acc * x + c)
@@ -108,16 +103,15 @@ impl AngleSeries {
     /// [`AngleSeries::ensure`] first so that it holds there).
     pub fn ripple_taylor(&self, theta_rad: f64) -> [f64; 4] {
         let delta = theta_rad - self.theta_ref_rad;
-        let mut out = [0.0; 4];
-        for (m, o) in out.iter_mut().enumerate() {
-            // sum_{j >= m} C(j, m) c_j delta^(j - m), by Horner.
-            let mut acc = 0.0;
-            for j in (m..=DEGREE).rev() {
-                acc = acc * delta + binomial(j, m) * self.ripple_nm[j];
+        // Taylor shift by repeated synthetic division: after pass m,
+        // c[m] is the m-th coefficient about theta_rad.
+        let mut c = self.ripple_nm;
+        for m in 0..4 {
+            for j in (m..DEGREE).rev() {
+                c[j] += delta * c[j + 1];
             }
-            *o = acc;
         }
-        out
+        [c[0], c[1], c[2], c[3]]
     }
 
     /// Ripple torque (N m), `cos(p theta)` and `sin(p theta)` at shaft
@@ -167,6 +161,23 @@ mod tests {
                 assert!((r - direct).abs() < 1e-12, "ripple at {theta}: {r} vs {direct}");
                 assert!((c - (p * theta).cos()).abs() < 1e-13 && (s - (p * theta).sin()).abs() < 1e-13);
             }
+            // The re-expanded coefficients against finite differences of the direct terms.
+            let at = theta0 + 0.4 * half;
+            let q = series.ripple_taylor(at);
+            let direct = |t: f64| {
+                ripple
+                    .harmonics
+                    .iter()
+                    .map(|h| h.amplitude_nm * (h.mechanical_order * t + h.phase_rad).cos())
+                    .sum::<f64>()
+            };
+            let d = 1e-6;
+            let first = (direct(at + d) - direct(at - d)) / (2.0 * d);
+            let d = 1e-5;
+            let second = (direct(at + d) - 2.0 * direct(at) + direct(at - d)) / (d * d);
+            assert!((q[0] - direct(at)).abs() < 1e-12, "{} vs {}", q[0], direct(at));
+            assert!((q[1] - first).abs() < 1e-6 * first.abs().max(1.0), "{} vs {first}", q[1]);
+            assert!((2.0 * q[2] - second).abs() < 1e-5 * second.abs().max(1.0), "{} vs {second}", 2.0 * q[2]);
             assert!(!series.covers(theta0 + 1.01 * half));
             let mut moved = series;
             moved.ensure(theta0 + 0.6 * half, &ripple, p);

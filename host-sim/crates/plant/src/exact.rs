@@ -52,6 +52,9 @@ const TERMS: usize = 16;
 /// left out, `(R/L)^6 (V/L) h^7 / 7!`, is below 1e-20 A).
 const SERIES: usize = 7;
 
+/// `1 / (k + 1)` for the series' recursion.
+const INVERSE: [f64; SERIES] = [1.0, 1.0 / 2.0, 1.0 / 3.0, 1.0 / 4.0, 1.0 / 5.0, 1.0 / 6.0, 1.0 / 7.0];
+
 /// The chain's coefficients frozen at a reference sheave position.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Coefficients {
@@ -332,6 +335,7 @@ impl Plant {
         }
         let m = &self.pmsm;
         let (r, ld, lq, psi) = (m.resistance_ohm, m.ld_h, m.lq_h, m.flux_linkage_wb);
+        let (inv_ld, inv_lq) = (1.0 / ld, 1.0 / lq);
         let (va, vb) = self.v_alpha_beta;
         let mut vd = [0.0; SERIES];
         let mut vq = [0.0; SERIES];
@@ -345,10 +349,10 @@ impl Plant {
                 w_vd += w[j] * vd[k - j];
                 w_vq += w[j] * vq[k - j];
             }
-            let scale = 1.0 / (k + 1) as f64;
+            let scale = INVERSE[k];
             let psi_w = if k < 3 { psi * w[k] } else { 0.0 };
-            id[k + 1] = (vd[k] - r * id[k] + lq * w_iq) / ld * scale;
-            iq[k + 1] = (vq[k] - r * iq[k] - ld * w_id - psi_w) / lq * scale;
+            id[k + 1] = (vd[k] - r * id[k] + lq * w_iq) * (inv_ld * scale);
+            iq[k + 1] = (vq[k] - r * iq[k] - ld * w_id - psi_w) * (inv_lq * scale);
             vd[k + 1] = w_vq * scale;
             vq[k + 1] = -w_vd * scale;
         }
