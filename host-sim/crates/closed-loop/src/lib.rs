@@ -39,7 +39,7 @@ use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelComma
 use indicatif::ProgressBar;
 
 use plant::effects::Effects;
-use plant::{Plant, PlantInputs, PlantObservation};
+use plant::{Integrator, Plant, PlantInputs, PlantObservation};
 use recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta};
 use rig_config::RigConfig;
 
@@ -71,7 +71,9 @@ impl TravelSpec {
 /// Numerical settings of a simulation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimOptions {
-    /// Longest integration step, s (default: a quarter of a PWM period).
+    /// Longest RK4 step, s (default: a quarter of a PWM period). The
+    /// nominal plant with [`Integrator::Fast`] takes each PWM half period in
+    /// one exact step instead ([`plant::exact`]) and does not use it.
     pub max_step_s: f64,
     /// Data-acquisition sample rate, Hz.
     pub sample_rate_hz: f64,
@@ -81,6 +83,9 @@ pub struct SimOptions {
     pub max_control_steps: Option<u64>,
     /// The library's effects on the simulated plant (none: the nominal plant).
     pub effects: Effects,
+    /// How the plant integrates (default [`Integrator::Fast`];
+    /// [`Integrator::Reference`] is the yardstick of its accuracy).
+    pub integrator: Integrator,
 }
 
 impl SimOptions {
@@ -93,6 +98,7 @@ impl SimOptions {
             tail_s: 0.5,
             max_control_steps: None,
             effects: Effects::none(),
+            integrator: Integrator::Fast,
         }
     }
 }
@@ -320,6 +326,7 @@ pub fn simulate_travel_faulted(
         log.command = Some(command);
     }
     let mut plant = Plant::with_effects(rig, spec.m_car_kg, spec.lw_start_m, &options.effects);
+    plant.set_integrator(options.integrator);
 
     let ts = 1.0 / rig.control.current_loop_hz;
     // Generous bound: the profile plus the sequence plus the tail, doubled.
@@ -329,8 +336,13 @@ pub fn simulate_travel_faulted(
         bar.set_length(expected_steps);
     }
     let mut run = TravelRun { sample_rate_hz: options.sample_rate_hz, ..TravelRun::default() };
-    let mut acquisition =
-        Acquisition { ts, sample_period: 1.0 / options.sample_rate_hz, next_sample: 0, max_step_s: options.max_step_s };
+    let mut acquisition = Acquisition {
+        ts,
+        sample_period: 1.0 / options.sample_rate_hz,
+        next_sample: 0,
+        max_step_s: options.max_step_s,
+        sample_times: Vec::new(),
+    };
     let mut finished_at: Option<f64> = None;
     let mut k: u64 = 0;
     // Outputs in force (what the timer holds when a step does not run).
@@ -354,8 +366,7 @@ pub fn simulate_travel_faulted(
             hook.after_step(t_k, &plant, &output);
         }
 
-        let o = plant.observe();
-        if !(o.car_acceleration_mps2.is_finite() && inside_rope(o.counterweight_side_length_m, total)) {
+        if !plant.in_valid_range() {
             return Err(SimError::Diverged(plant.time_s()));
         }
         if output.state == DriveState::Idle && k > 0 && finished_at.is_none() {
@@ -517,22 +528,24 @@ struct Acquisition {
     next_sample: u64,
     /// Longest integration step of the plant, s.
     max_step_s: f64,
+    /// Sample times inside the interval being advanced, s (reused).
+    sample_times: Vec<f64>,
 }
 
 impl Acquisition {
     /// Advances `plant` to `t_end` (s), recording into `run` every sample
     /// instant on the way with the drive's `output`.
     fn advance_to(&mut self, plant: &mut Plant, t_end: f64, run: &mut TravelRun, output: &ControlOutput) {
+        self.sample_times.clear();
         loop {
             let t_sample = self.next_sample as f64 * self.sample_period;
             if t_sample >= t_end {
                 break;
             }
-            plant.advance(t_sample - plant.time_s(), self.max_step_s);
-            record(run, t_sample, &plant.observe(), output);
+            self.sample_times.push(t_sample);
             self.next_sample += 1;
         }
-        plant.advance(t_end - plant.time_s(), self.max_step_s);
+        plant.advance_until(t_end, self.max_step_s, &self.sample_times, |t, o| record(run, t, o, output));
     }
 
     /// PWM period `k`: the brake output acts at once, `applied_first_half`

@@ -25,7 +25,10 @@
 
 #![warn(missing_docs)]
 
+pub mod angle;
 pub mod effects;
+pub mod exact;
+mod fast;
 pub mod free_decay;
 pub mod inverter;
 pub mod line;
@@ -39,10 +42,11 @@ pub mod sensors;
 pub use mechanics::{Chain, ChainState};
 pub use rope::ChainParams;
 
+use angle::AngleSeries;
 use effects::Effects;
 use inverter::{alpha_beta_v, phase_voltages_v};
 use line::{BrakeAction, Line, MAX_NODES};
-use pmsm::{park_v, phase_currents_a, PmsmParams};
+use pmsm::{park_v, phase_currents_a, phase_currents_cs_a, PmsmParams};
 use rig_config::RigConfig;
 use ripple::RippleTorque;
 use rope::{CAR, CW, DOF, ROPE_CAR, ROPE_CW, SHEAVE};
@@ -123,6 +127,23 @@ pub struct PlantFaults {
     pub car_extra_force_n: f64,
 }
 
+/// How [`Plant::advance`] integrates: both are classical RK4 in equal steps
+/// no longer than the step asked for and [`Plant::stable_step_s`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Integrator {
+    /// The default: masses, springs and the out-of-balance torque evaluated
+    /// once per step at the step's predicted midpoint (second order in the
+    /// slow change of the rope lengths), the angle-locked terms from Taylor
+    /// polynomials ([`angle::AngleSeries`]), and for the nominal 5-DOF line
+    /// a fixed-size path without the general line's loops.
+    #[default]
+    Fast,
+    /// The plant as it was first written: every stage re-evaluates masses
+    /// and springs at its own sheave position and the angle-locked terms
+    /// with `sin_cos`. The yardstick of the fast one's accuracy (tests).
+    Reference,
+}
+
 /// The whole plant: chain, machine, ripple, inverter and sensors.
 #[derive(Clone, Debug)]
 pub struct Plant {
@@ -156,6 +177,12 @@ pub struct Plant {
     phase_v: [f64; 3],
     short_current_a: f64,
     time_s: f64,
+    /// How [`Plant::advance`] integrates.
+    integrator: Integrator,
+    /// Taylor polynomials of the angle-locked terms ([`Integrator::Fast`]).
+    angle: AngleSeries,
+    /// The nominal chain's exact half-period discretisation ([`Integrator::Fast`]).
+    exact: exact::ExactStep,
 }
 
 /// What the drive's sensors hand to whichever controller closes the loop,
@@ -214,7 +241,22 @@ impl Plant {
             phase_v: [0.0; 3],
             short_current_a: 0.0,
             time_s: 0.0,
+            integrator: Integrator::Fast,
+            angle: AngleSeries::default(),
+            exact: exact::ExactStep::default(),
         }
+    }
+
+    /// Chooses how [`Plant::advance`] integrates from now on.
+    pub fn set_integrator(&mut self, integrator: Integrator) {
+        self.integrator = integrator;
+        let theta = self.shaft_angle_rad(&self.state);
+        self.angle.refresh(theta, &self.ripple, self.pmsm.pole_pairs);
+    }
+
+    /// How [`Plant::advance`] integrates.
+    pub fn integrator(&self) -> Integrator {
+        self.integrator
     }
 
     /// The effects switched on.
@@ -360,8 +402,20 @@ impl Plant {
     fn machine_v_alpha_beta(&self, id: f64, iq: f64, theta_e: f64) -> (f64, f64) {
         match &self.effects.dead_time {
             None => self.v_alpha_beta,
+            Some(_) => {
+                let (s, c) = theta_e.sin_cos();
+                self.machine_v_alpha_beta_cs(id, iq, c, s)
+            }
+        }
+    }
+
+    /// [`Self::machine_v_alpha_beta`] with `cos` and `sin` of the
+    /// electrical angle given, V.
+    fn machine_v_alpha_beta_cs(&self, id: f64, iq: f64, c: f64, s: f64) -> (f64, f64) {
+        match &self.effects.dead_time {
+            None => self.v_alpha_beta,
             Some(d) => {
-                let errors = d.phase_voltage_errors_v(phase_currents_a(id, iq, theta_e), self.dc_bus_v, self.pwm_hz);
+                let errors = d.phase_voltage_errors_v(phase_currents_cs_a(id, iq, c, s), self.dc_bus_v, self.pwm_hz);
                 let (ea, eb) = alpha_beta_v(errors);
                 (self.v_alpha_beta.0 + ea, self.v_alpha_beta.1 + eb)
             }
@@ -458,13 +512,18 @@ impl Plant {
         let steps = (duration_s / step).ceil();
         let steps = if steps.is_nan() { 1 } else { steps.clamp(1.0, 1.0e7) as usize };
         let h = duration_s / steps as f64;
-        let len = self.state_len();
-        let mut state = self.state;
-        let mut scratch = Rk4Scratch::new();
-        for _ in 0..steps {
-            scratch.step(&mut state[..len], h, |y, dy| self.derivative(y, dy));
+        match self.integrator {
+            Integrator::Fast => self.advance_fast(steps, h),
+            Integrator::Reference => {
+                let len = self.state_len();
+                let mut state = self.state;
+                let mut scratch = Rk4Scratch::new();
+                for _ in 0..steps {
+                    scratch.step(&mut state[..len], h, |y, dy| self.derivative(y, dy));
+                }
+                self.state = state;
+            }
         }
-        self.state = state;
         if let (Some(short), true) = (self.faults.phase_short, self.inputs.pwm_enabled) {
             let r = short.resistance_ohm.max(1e-6);
             let settled = (self.phase_v[short.from.min(2)] - self.phase_v[short.to.min(2)]) / r;
@@ -474,17 +533,54 @@ impl Plant {
         self.time_s += duration_s;
     }
 
+    /// Advances to the time `t_end_s` (s) with the inputs held and hands
+    /// `on_sample(t, observation)` the plant's observation at each time of
+    /// `sample_times_s` (s, ascending, from now and before `t_end_s`).
+    ///
+    /// With [`Integrator::Fast`] on the nominal plant the whole interval is
+    /// one exact step ([`exact`]: the chain's linear part discretised
+    /// exactly, the samples from interpolants); otherwise, and with
+    /// [`Integrator::Reference`], it is [`Plant::advance`] (steps of at most
+    /// `max_step_s`, s) to each sample time, [`Plant::observe`] there, and
+    /// [`Plant::advance`] to the end.
+    pub fn advance_until(
+        &mut self,
+        t_end_s: f64,
+        max_step_s: f64,
+        sample_times_s: &[f64],
+        mut on_sample: impl FnMut(f64, &PlantObservation),
+    ) {
+        let h = t_end_s - self.time_s;
+        // At most 8 samples per interval (two at 16384 Hz in a half PWM period).
+        let mut offsets = [0.0; 8];
+        if self.integrator == Integrator::Fast && sample_times_s.len() <= offsets.len() && self.exact_ready(h) {
+            for (o, t) in offsets.iter_mut().zip(sample_times_s) {
+                *o = t - self.time_s;
+            }
+            let mut call = |i: usize, o: &PlantObservation| on_sample(sample_times_s[i], o);
+            self.advance_exact(h, &offsets[..sample_times_s.len()], &mut call);
+            self.time_s += h;
+            return;
+        }
+        for &t in sample_times_s {
+            self.advance(t - self.time_s, max_step_s);
+            on_sample(t, &self.observe());
+        }
+        self.advance(t_end_s - self.time_s, max_step_s);
+    }
+
     /// The sensor readings a drive takes now (with the transducer errors
     /// of `current_sensor_error` and the encoder's of `encoder_error`).
     pub fn sensor_readings(&self) -> SensorReadings {
-        let o = self.observe();
+        let shaft_angle_rad = self.shaft_angle_rad(&self.state);
+        let phase_currents_a = self.leg_currents_a(self.machine_phase_currents_a());
         let currents = match &self.effects.current_sensor_error {
-            None => o.phase_currents_a,
-            Some(e) => e.measured_a(o.phase_currents_a),
+            None => phase_currents_a,
+            Some(e) => e.measured_a(phase_currents_a),
         };
         let angle = match &self.effects.encoder_error {
-            None => o.shaft_angle_rad,
-            Some(e) => e.measured_angle_rad(o.shaft_angle_rad),
+            None => shaft_angle_rad,
+            Some(e) => e.measured_angle_rad(shaft_angle_rad),
         };
         SensorReadings {
             phase_current_codes: currents.map(|i| self.sensors.current_code(i)),
@@ -492,6 +588,30 @@ impl Plant {
             dc_bus_code: self.sensors.dc_bus_code(self.dc_bus_v),
             time_us: Sensors::time_us(self.time_s),
         }
+    }
+
+    /// The machine's phase currents now, A.
+    fn machine_phase_currents_a(&self) -> [f64; 3] {
+        let n = self.nodes();
+        let (id, iq) = (self.state[2 * n], self.state[2 * n + 1]);
+        let theta_m = self.shaft_angle_rad(&self.state);
+        match self.integrator {
+            Integrator::Fast => {
+                let (_, c, s) = self.angle.eval(theta_m, &self.ripple, self.pmsm.pole_pairs);
+                phase_currents_cs_a(id, iq, c, s)
+            }
+            Integrator::Reference => phase_currents_a(id, iq, self.pmsm.pole_pairs * theta_m),
+        }
+    }
+
+    /// True when every state value is finite and the counterweight-side
+    /// rope length lies inside the rope (ends excluded): the plant is in
+    /// its valid range.
+    pub fn in_valid_range(&self) -> bool {
+        let lw = self.line.counterweight_side_length_m(&self.chain, self.state[self.line.layout.sheave]);
+        self.state[..self.state_len()].iter().all(|x| x.is_finite())
+            && lw > 0.0
+            && lw < self.chain.params.rope_total_length_m
     }
 
     /// Currents in the inverter legs (what the phase-current sensors
@@ -507,6 +627,9 @@ impl Plant {
     /// What the rig's instruments see now (the car's accelerometer is on
     /// the car body: the frame's body with `car_frame_mode`).
     pub fn observe(&self) -> PlantObservation {
+        if self.integrator == Integrator::Fast {
+            return self.observe_fast();
+        }
         let n = self.nodes();
         let layout = &self.line.layout;
         let (id, iq) = (self.state[2 * n], self.state[2 * n + 1]);

@@ -241,11 +241,39 @@ impl Line {
         car_extra_force_n: f64,
         accel: &mut [f64],
     ) {
+        let lumped = self.lumped(chain, position_m[self.layout.sheave]);
+        self.accelerations_of(
+            chain,
+            &lumped,
+            position_m,
+            velocity_mps,
+            shaft_torque_nm,
+            brake,
+            car_extra_force_n,
+            accel,
+        );
+    }
+
+    /// [`Line::accelerations`] with the masses, springs and damping
+    /// `lumped` given (m/s^2 into `accel`): the plant's integrator evaluates
+    /// them once per step, at the step's midpoint, instead of at every
+    /// stage.
+    #[allow(clippy::too_many_arguments)]
+    pub fn accelerations_of(
+        &self,
+        chain: &Chain,
+        lumped: &Lumped,
+        position_m: &[f64],
+        velocity_mps: &[f64],
+        shaft_torque_nm: f64,
+        brake: BrakeAction,
+        car_extra_force_n: f64,
+        accel: &mut [f64],
+    ) {
         let p = &chain.params;
         let layout = &self.layout;
         let nodes = layout.nodes;
         let sheave = layout.sheave;
-        let lumped = self.lumped(chain, position_m[sheave]);
         let k = &lumped.springs_n_per_m;
         let r = p.sheave_radius_m;
         // Spring end positions: the rope at the sheave sits at g(theta).

@@ -53,6 +53,11 @@ impl PmsmParams {
 /// inverse Park then inverse Clarke (amplitude invariant).
 pub fn phase_currents_a(id_a: f64, iq_a: f64, theta_e_rad: f64) -> [f64; 3] {
     let (s, c) = theta_e_rad.sin_cos();
+    phase_currents_cs_a(id_a, iq_a, c, s)
+}
+
+/// [`phase_currents_a`] with `cos` and `sin` of the electrical angle given, A.
+pub fn phase_currents_cs_a(id_a: f64, iq_a: f64, c: f64, s: f64) -> [f64; 3] {
     let alpha = id_a * c - iq_a * s;
     let beta = id_a * s + iq_a * c;
     let half_sqrt3 = 0.5 * 3f64.sqrt();

@@ -1,0 +1,187 @@
+//! The plant's angle-locked terms, the ripple torque
+//! `sum_n A_n cos(n theta + phi_n)` (N m) and the Park rotation
+//! `(cos p theta, sin p theta)`, as Taylor polynomials of the shaft angle
+//! `theta` (rad) about a reference angle, so that an integration stage
+//! costs a few multiply-adds instead of a `sin_cos` and the harmonics'
+//! powers.
+//!
+//! The polynomials have degree [`DEGREE`] and are used while the fastest
+//! harmonic (order `n_max`, or the pole pairs `p` if more) has turned by at
+//! most [`MAX_PHASE_RAD`] from the reference: the truncation error is then
+//! at most `sum |A_n| x^13 / 13!` with `x = 0.3`, below `3e-17` of the
+//! ripple's summed amplitude (and of the unit Park vector), below an ulp.
+//! Outside that interval the terms are computed directly.
+
+use crate::ripple::RippleTorque;
+
+/// Degree of the Taylor polynomials.
+pub const DEGREE: usize = 12;
+
+/// Largest phase change, rad, of the fastest angle-locked term over which
+/// the polynomials are used (either side of the reference angle).
+pub const MAX_PHASE_RAD: f64 = 0.3;
+
+/// Taylor polynomials of the ripple torque and the Park rotation about a
+/// reference shaft angle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AngleSeries {
+    /// Reference shaft angle, rad (NaN: no polynomial yet).
+    theta_ref_rad: f64,
+    /// Half width of the interval around the reference where the
+    /// polynomials hold, rad.
+    half_width_rad: f64,
+    /// Coefficients of `delta^j` of the ripple torque, N m / rad^j.
+    ripple_nm: [f64; DEGREE + 1],
+    /// Coefficients of `delta^j` of `cos(p theta)`, 1 / rad^j.
+    cos_p: [f64; DEGREE + 1],
+    /// Coefficients of `delta^j` of `sin(p theta)`, 1 / rad^j.
+    sin_p: [f64; DEGREE + 1],
+}
+
+impl Default for AngleSeries {
+    fn default() -> Self {
+        Self {
+            theta_ref_rad: f64::NAN,
+            half_width_rad: 0.0,
+            ripple_nm: [0.0; DEGREE + 1],
+            cos_p: [0.0; DEGREE + 1],
+            sin_p: [0.0; DEGREE + 1],
+        }
+    }
+}
+
+/// Adds `scale d^j/dtheta^j cos(n theta + phase) / j!` at `theta = 0`
+/// shifted by `phase` (rad) to `coefficients[j]`, for a term of order `n`.
+fn add_cos_series(coefficients: &mut [f64; DEGREE + 1], scale: f64, n: f64, phase: f64) {
+    let (s, c) = phase.sin_cos();
+    let cycle = [c, -s, -c, s];
+    let mut factor = scale;
+    for (j, coefficient) in coefficients.iter_mut().enumerate() {
+        *coefficient += factor * cycle[j % 4];
+        factor *= n / (j + 1) as f64;
+    }
+}
+
+/// `sum_j coefficients[j] x^j` by Horner's rule.
+fn horner(coefficients: &[f64; DEGREE + 1], x: f64) -> f64 {
+    coefficients.iter().rev().fold(0.0, |acc, &c| acc * x + c)
+}
+
+impl AngleSeries {
+    /// True when the polynomials hold at shaft angle `theta_rad` (rad).
+    pub fn covers(&self, theta_rad: f64) -> bool {
+        (theta_rad - self.theta_ref_rad).abs() <= self.half_width_rad
+    }
+
+    /// Makes sure the polynomials hold at `theta_rad` (rad) with half their
+    /// interval to spare (for the stages of a step from there): refreshes
+    /// them about `theta_rad` for `ripple` and `pole_pairs` otherwise.
+    pub fn ensure(&mut self, theta_rad: f64, ripple: &RippleTorque, pole_pairs: f64) {
+        // A NaN reference (no polynomial yet) compares false: refresh.
+        let inside = (theta_rad - self.theta_ref_rad).abs() <= 0.5 * self.half_width_rad;
+        if !inside {
+            self.refresh(theta_rad, ripple, pole_pairs);
+        }
+    }
+
+    /// The polynomials about `theta_rad` (rad) for `ripple` and `pole_pairs`.
+    pub fn refresh(&mut self, theta_rad: f64, ripple: &RippleTorque, pole_pairs: f64) {
+        let fastest = ripple.harmonics.iter().map(|h| h.mechanical_order.abs()).fold(pole_pairs.abs(), f64::max);
+        *self = Self { theta_ref_rad: theta_rad, half_width_rad: MAX_PHASE_RAD / fastest.max(1.0), ..Self::default() };
+        for h in &ripple.harmonics {
+            let n = h.mechanical_order;
+            add_cos_series(&mut self.ripple_nm, h.amplitude_nm, n, n * theta_rad + h.phase_rad);
+        }
+        let electrical = pole_pairs * theta_rad;
+        add_cos_series(&mut self.cos_p, 1.0, pole_pairs, electrical);
+        add_cos_series(&mut self.sin_p, 1.0, pole_pairs, electrical - 0.5 * std::f64::consts::PI);
+    }
+
+    /// Taylor coefficients of the ripple torque about `theta_rad` (rad):
+    /// `R(theta + d) = sum_m c_m d^m + O(d^4)`, N m / rad^m, from the
+    /// polynomial (the reference's re-expanded at `theta_rad`; call
+    /// [`AngleSeries::ensure`] first so that it holds there).
+    pub fn ripple_taylor(&self, theta_rad: f64) -> [f64; 4] {
+        let delta = theta_rad - self.theta_ref_rad;
+        // Taylor shift by repeated synthetic division: after pass m,
+        // c[m] is the m-th coefficient about theta_rad.
+        let mut c = self.ripple_nm;
+        for m in 0..4 {
+            for j in (m..DEGREE).rev() {
+                c[j] += delta * c[j + 1];
+            }
+        }
+        [c[0], c[1], c[2], c[3]]
+    }
+
+    /// Ripple torque (N m), `cos(p theta)` and `sin(p theta)` at shaft
+    /// angle `theta_rad` (rad): from the polynomials where they hold, else
+    /// computed directly from `ripple` and `pole_pairs`.
+    pub fn eval(&self, theta_rad: f64, ripple: &RippleTorque, pole_pairs: f64) -> (f64, f64, f64) {
+        let delta = theta_rad - self.theta_ref_rad;
+        if delta.abs() <= self.half_width_rad {
+            (horner(&self.ripple_nm, delta), horner(&self.cos_p, delta), horner(&self.sin_p, delta))
+        } else {
+            let (s, c) = (pole_pairs * theta_rad).sin_cos();
+            (ripple.torque_nm(theta_rad), c, s)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ripple::RippleHarmonic;
+
+    /// The polynomials agree with the direct terms over their interval, at
+    /// angles near zero and far into a travel, and are refreshed outside.
+    #[test]
+    fn polynomials_match_the_direct_terms() {
+        let ripple = RippleTorque {
+            harmonics: [(1.0, 2.0, 0.0), (6.0, 0.3, 0.4), (12.0, 3.5, -1.0), (36.0, 0.3, 2.0), (72.0, 0.5, 0.1)]
+                .iter()
+                .map(|&(n, a, phi)| RippleHarmonic { mechanical_order: n, amplitude_nm: a, phase_rad: phi })
+                .collect(),
+        };
+        let p = 6.0;
+        let mut series = AngleSeries::default();
+        assert!(!series.covers(0.0));
+        for theta0 in [0.0, -3.7, 101.3] {
+            series.refresh(theta0, &ripple, p);
+            let half = MAX_PHASE_RAD / 72.0;
+            for k in -20..=20 {
+                let theta = theta0 + 0.999 * half * k as f64 / 20.0;
+                assert!(series.covers(theta));
+                let (r, c, s) = series.eval(theta, &ripple, p);
+                let direct: f64 = ripple
+                    .harmonics
+                    .iter()
+                    .map(|h| h.amplitude_nm * (h.mechanical_order * theta + h.phase_rad).cos())
+                    .sum();
+                assert!((r - direct).abs() < 1e-12, "ripple at {theta}: {r} vs {direct}");
+                assert!((c - (p * theta).cos()).abs() < 1e-13 && (s - (p * theta).sin()).abs() < 1e-13);
+            }
+            // The re-expanded coefficients against finite differences of the direct terms.
+            let at = theta0 + 0.4 * half;
+            let q = series.ripple_taylor(at);
+            let direct = |t: f64| {
+                ripple
+                    .harmonics
+                    .iter()
+                    .map(|h| h.amplitude_nm * (h.mechanical_order * t + h.phase_rad).cos())
+                    .sum::<f64>()
+            };
+            let d = 1e-6;
+            let first = (direct(at + d) - direct(at - d)) / (2.0 * d);
+            let d = 1e-5;
+            let second = (direct(at + d) - 2.0 * direct(at) + direct(at - d)) / (d * d);
+            assert!((q[0] - direct(at)).abs() < 1e-12, "{} vs {}", q[0], direct(at));
+            assert!((q[1] - first).abs() < 1e-6 * first.abs().max(1.0), "{} vs {first}", q[1]);
+            assert!((2.0 * q[2] - second).abs() < 1e-5 * second.abs().max(1.0), "{} vs {second}", 2.0 * q[2]);
+            assert!(!series.covers(theta0 + 1.01 * half));
+            let mut moved = series;
+            moved.ensure(theta0 + 0.6 * half, &ripple, p);
+            assert_ne!(moved, series, "refreshed beyond half the interval");
+        }
+    }
+}
