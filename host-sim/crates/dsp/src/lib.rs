@@ -52,7 +52,10 @@ pub(crate) mod test_signals {
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
 pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::highpass_zero_phase;
-pub use iso2631::{wk_digital_gain, wk_gain, wk_weighting};
+pub use iso2631::{
+    wd_digital_gain, wd_gain, wd_weighting, weighting, weighting_digital_gain, weighting_gain, wk_digital_gain, wk_gain,
+    wk_weighting, Weighting,
+};
 pub use ride_quality::{ride_quality, RideQuality, RideQualityReport, TravelDirection};
 pub use spectrogram::{stft_spectrogram, Spectrogram};
 pub use spectrum::{amplitude_spectrum, AmplitudeSpectrum, SpectralPeak};
