@@ -40,7 +40,7 @@ use super::iso2631::{check_wk_sample_rate, weighting, Weighting};
 use super::ride_quality::{
     a95_nearest_rank, half_cycle_peaks_indexed, jerk_window_len, lowpass_acceleration, sliding_slopes, MPS2_PER_MG,
 };
-use super::ride_regions::{velocity_from_acceleration, RideRegions};
+use super::ride_regions::{standstill_offsets, velocity_from_acceleration, RideRegions};
 use super::{check_signal, AnalysisError};
 
 /// An axis of the car: z vertical, x and y horizontal.
@@ -240,6 +240,22 @@ fn region_figures(weighted: &[(Axis, Vec<f64>)], sound: Option<&[f64]>, region: 
     }
 }
 
+/// `lowpassed` minus the offset of the standstills of the raw acceleration
+/// `acc` ([`standstill_offsets`]), interpolated over `motion` and held
+/// outside it.
+fn without_offset(lowpassed: &[f64], acc: &[f64], fs: f64, motion: Range<usize>) -> Vec<f64> {
+    let (b0, b1) = standstill_offsets(acc, fs, motion.clone(), 0.0);
+    let span = motion.len().saturating_sub(1).max(1) as f64;
+    lowpassed
+        .iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let u = (k.saturating_sub(motion.start) as f64 / span).min(1.0);
+            v - (b0 + (b1 - b0) * u)
+        })
+        .collect()
+}
+
 /// Largest magnitude of `x` over `range` (0 for an empty range).
 fn max_abs(x: &[f64], range: Range<usize>) -> f64 {
     x[range].iter().fold(0.0, |m, v| m.max(v.abs()))
@@ -274,11 +290,14 @@ pub fn ride_report(input: &RideInput<'_>, regions: Option<&RideRegions>) -> Resu
     let slopes = sliding_slopes(&lowpassed, jerk_window_len(fs));
     let max_jerk_mps3 = slopes.iter().fold(0.0_f64, |m, s| m.max(s.abs())) * fs;
     let velocity = regions.map(|r| velocity_from_acceleration(input.z_mps2, fs, r.motion(), 0.0));
-    let motion = regions.zip(velocity.as_ref()).map(|(r, v)| MotionFigures {
-        max_acceleration_mg: max_abs(&lowpassed, r.acceleration.clone()) / MPS2_PER_MG,
-        max_deceleration_mg: max_abs(&lowpassed, r.deceleration.clone()) / MPS2_PER_MG,
-        max_velocity_mps: max_abs(v, 0..n),
-        distance_m: v.iter().map(|x| x.abs()).sum::<f64>() / fs,
+    let motion = regions.zip(velocity.as_ref()).map(|(r, v)| {
+        let level = without_offset(&lowpassed, input.z_mps2, fs, r.motion());
+        MotionFigures {
+            max_acceleration_mg: max_abs(&level, r.acceleration.clone()) / MPS2_PER_MG,
+            max_deceleration_mg: max_abs(&level, r.deceleration.clone()) / MPS2_PER_MG,
+            max_velocity_mps: max_abs(v, 0..n),
+            distance_m: v.iter().map(|x| x.abs()).sum::<f64>() / fs,
+        }
     });
     let report = RideReport {
         sample_rate_hz: fs,
@@ -370,8 +389,8 @@ mod tests {
     #[test]
     fn motion_figures_of_a_run_from_its_acceleration() {
         // 1 m/s, 0.8 m/s^2, 1 m/s^3 run with 2 s rest: plateaus of
-        // 0.8 m/s^2 = 81.6 mg; distance = v (t_ramp + t_cruise) for a
-        // symmetric S-curve: ramp 0.8 + 1.25 - ... computed from the samples.
+        // 0.8 m/s^2 = 81.6 mg; distance v (t_ramp + t_cruise) for a
+        // symmetric S-curve.
         let fs = 256.0;
         let (v, a, j) = (1.0, 0.8, 1.0);
         let (tj, ta) = (a / j, v / a - a / j);
@@ -392,7 +411,8 @@ mod tests {
         let z: Vec<f64> = (0..(total * fs) as usize)
             .map(|k| {
                 let t = k as f64 / fs;
-                acc_at(t - rest) - acc_at(t - rest - ramp - cruise)
+                // A 4 mg sensor offset, which the figures take off.
+                acc_at(t - rest) - acc_at(t - rest - ramp - cruise) + 4.0 * MPS2_PER_MG
             })
             .collect();
         let (regions, _) = regions_from_acceleration(&z, fs).unwrap();

@@ -242,18 +242,27 @@ fn motion_from_acceleration(acc: &[f64], fs: f64) -> Result<(Range<usize>, f64),
     Ok((first.saturating_sub(half)..(last + half).min(acc.len()), median))
 }
 
-/// Vertical velocity, m/s, of a run whose acceleration `acc` (m/s^2) is
-/// sampled at `fs` Hz and whose motion is `motion`: rules 2 and 3 of the
-/// module documentation (offset from the standstills, running sum, drift
-/// removed). Zero outside the motion. `fallback_offset` (m/s^2) is used for
-/// a standstill shorter than [`MIN_STANDSTILL_S`].
-pub fn velocity_from_acceleration(acc: &[f64], fs: f64, motion: Range<usize>, fallback_offset: f64) -> Vec<f64> {
-    let n = acc.len();
+/// Offset of the acceleration `acc` (m/s^2) at every sample of `motion`:
+/// rule 2 of the module documentation, the mean of the standstill before
+/// and of the one after, linearly interpolated over the motion (each
+/// standstill used when it lasts [`MIN_STANDSTILL_S`], the other's mean or
+/// `fallback_offset` when not). Returns the offsets at the motion's first
+/// and last samples, m/s^2.
+pub fn standstill_offsets(acc: &[f64], fs: f64, motion: Range<usize>, fallback_offset: f64) -> (f64, f64) {
     let min_len = samples(MIN_STANDSTILL_S, fs);
     let mean = |r: Range<usize>| (r.len() >= min_len).then(|| acc[r.clone()].iter().sum::<f64>() / r.len() as f64);
-    let (before, after) = (mean(0..motion.start), mean(motion.end..n));
-    let b0 = before.or(after).unwrap_or(fallback_offset);
-    let b1 = after.or(before).unwrap_or(fallback_offset);
+    let (before, after) = (mean(0..motion.start), mean(motion.end..acc.len()));
+    (before.or(after).unwrap_or(fallback_offset), after.or(before).unwrap_or(fallback_offset))
+}
+
+/// Vertical velocity, m/s, of a run whose acceleration `acc` (m/s^2) is
+/// sampled at `fs` Hz and whose motion is `motion`: rules 2 and 3 of the
+/// module documentation (offset from the standstills by
+/// [`standstill_offsets`], running sum, drift removed). Zero outside the
+/// motion.
+pub fn velocity_from_acceleration(acc: &[f64], fs: f64, motion: Range<usize>, fallback_offset: f64) -> Vec<f64> {
+    let n = acc.len();
+    let (b0, b1) = standstill_offsets(acc, fs, motion.clone(), fallback_offset);
     let mut v = vec![0.0; n];
     if motion.is_empty() {
         return v;
