@@ -20,7 +20,8 @@
 //!   none), the maximum jerk the largest magnitude of the 0.5 s
 //!   least-squares slope over the whole run; the largest velocity and the
 //!   distance travelled from the integrated acceleration
-//!   ([`super::ride_regions::velocity_from_acceleration`]).
+//!   ([`super::ride_regions::velocity_from_acceleration`]), the offset
+//!   taken off the acceleration being the one that integration takes off.
 //! * **Sound**, when recorded, whole run and constant-speed region: the
 //!   largest sample level and the A95 level (nearest rank, as for the
 //!   vibration: the `ceil(0.95 N)`-th of the `N` sorted sample levels), in
@@ -40,7 +41,7 @@ use super::iso2631::{check_wk_sample_rate, weighting, Weighting};
 use super::ride_quality::{
     a95_nearest_rank, half_cycle_peaks_indexed, jerk_window_len, lowpass_acceleration, sliding_slopes, MPS2_PER_MG,
 };
-use super::ride_regions::{standstill_offsets, velocity_from_acceleration, RideRegions};
+use super::ride_regions::{motion_offset, smoothed_speed, velocity_from_acceleration, RideRegions};
 use super::{check_signal, AnalysisError};
 
 /// An axis of the car: z vertical, x and y horizontal.
@@ -81,7 +82,7 @@ pub struct RideInput<'a> {
     pub sample_rate_hz: f64,
     /// Vertical acceleration, m/s^2 (positive up; a constant offset such as
     /// a sensor bias does not change the vibration, and the motion figures
-    /// take the offset of the standstills off).
+    /// take it off: [`super::ride_regions::motion_offset`]).
     pub z_mps2: &'a [f64],
     /// Horizontal acceleration x, m/s^2, if recorded.
     pub x_mps2: Option<&'a [f64]>,
@@ -136,9 +137,11 @@ pub struct MotionFigures {
     pub max_acceleration_mg: f64,
     /// Largest magnitude of it in the deceleration region, mg.
     pub max_deceleration_mg: f64,
-    /// Largest magnitude of the vertical velocity, m/s.
+    /// Largest magnitude of the vertical velocity averaged over 0.25 s
+    /// ([`super::ride_regions::smoothed_speed`]), m/s.
     pub max_velocity_mps: f64,
-    /// Distance travelled (integral of the velocity's magnitude), m.
+    /// Distance travelled: the magnitude of the displacement (integral of
+    /// the velocity; a lift run goes one way), m.
     pub distance_m: f64,
 }
 
@@ -240,22 +243,6 @@ fn region_figures(weighted: &[(Axis, Vec<f64>)], sound: Option<&[f64]>, region: 
     }
 }
 
-/// `lowpassed` minus the offset of the standstills of the raw acceleration
-/// `acc` ([`standstill_offsets`]), interpolated over `motion` and held
-/// outside it.
-fn without_offset(lowpassed: &[f64], acc: &[f64], fs: f64, motion: Range<usize>) -> Vec<f64> {
-    let (b0, b1) = standstill_offsets(acc, fs, motion.clone(), 0.0);
-    let span = motion.len().saturating_sub(1).max(1) as f64;
-    lowpassed
-        .iter()
-        .enumerate()
-        .map(|(k, v)| {
-            let u = (k.saturating_sub(motion.start) as f64 / span).min(1.0);
-            v - (b0 + (b1 - b0) * u)
-        })
-        .collect()
-}
-
 /// Largest magnitude of `x` over `range` (0 for an empty range).
 fn max_abs(x: &[f64], range: Range<usize>) -> f64 {
     x[range].iter().fold(0.0, |m, v| m.max(v.abs()))
@@ -289,14 +276,15 @@ pub fn ride_report(input: &RideInput<'_>, regions: Option<&RideRegions>) -> Resu
     let lowpassed = lowpass_acceleration(input.z_mps2, fs);
     let slopes = sliding_slopes(&lowpassed, jerk_window_len(fs));
     let max_jerk_mps3 = slopes.iter().fold(0.0_f64, |m, s| m.max(s.abs())) * fs;
-    let velocity = regions.map(|r| velocity_from_acceleration(input.z_mps2, fs, r.motion(), 0.0));
+    let velocity = regions.map(|r| velocity_from_acceleration(input.z_mps2, fs, r.motion()));
     let motion = regions.zip(velocity.as_ref()).map(|(r, v)| {
-        let level = without_offset(&lowpassed, input.z_mps2, fs, r.motion());
+        let offset = motion_offset(input.z_mps2, fs, r.motion());
+        let level: Vec<f64> = lowpassed.iter().map(|v| v - offset).collect();
         MotionFigures {
             max_acceleration_mg: max_abs(&level, r.acceleration.clone()) / MPS2_PER_MG,
             max_deceleration_mg: max_abs(&level, r.deceleration.clone()) / MPS2_PER_MG,
-            max_velocity_mps: max_abs(v, 0..n),
-            distance_m: v.iter().map(|x| x.abs()).sum::<f64>() / fs,
+            max_velocity_mps: max_abs(&smoothed_speed(v, fs), 0..n),
+            distance_m: (v.iter().sum::<f64>() / fs).abs(),
         }
     });
     let report = RideReport {
