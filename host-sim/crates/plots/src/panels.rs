@@ -12,8 +12,11 @@ use super::{
     FONT_FAMILY, PLOT_WIDTH_PX,
 };
 
-/// Height in pixels of one panel of [`stacked_plot`].
+/// Height in pixels of one panel of [`stacked_plot`] when there are three or
+/// more; fewer panels share [`PANELS_MIN_HEIGHT_PX`].
 pub const PANEL_HEIGHT_PX: u32 = 260;
+/// Height in pixels that one or two panels share.
+pub const PANELS_MIN_HEIGHT_PX: u32 = 620;
 
 /// A region shaded across every panel, from `x0` to `x1` (x-axis units),
 /// named in the top panel.
@@ -69,7 +72,8 @@ const BAND_COLOURS: [RGBColor; 4] =
     [RGBColor(255, 236, 179), RGBColor(200, 230, 201), RGBColor(187, 222, 251), RGBColor(225, 190, 231)];
 
 /// Panels stacked vertically over one x axis into a PNG of width
-/// [`PLOT_WIDTH_PX`] and height `title + panels x PANEL_HEIGHT_PX`.
+/// [`PLOT_WIDTH_PX`] and height `title + max(panels x PANEL_HEIGHT_PX,
+/// PANELS_MIN_HEIGHT_PX)`.
 ///
 /// * `path`: output file, must end in `.png`.
 /// * `title`: drawn at the top (put the recording's name in it).
@@ -105,7 +109,7 @@ pub fn stacked_plot(
         bounds(prepared.iter().flatten().flatten().flatten()).ok_or(PlotError::NoFinitePoints)?;
     let x_range = padded_range("x", x_min, x_max, 0.0)?;
     let title_px = 50;
-    let height = title_px + PANEL_HEIGHT_PX * panels.len() as u32 + 30;
+    let height = title_px + (PANEL_HEIGHT_PX * panels.len() as u32).max(PANELS_MIN_HEIGHT_PX) + 30;
     render_sized(path, PLOT_WIDTH_PX, height, |root| {
         let (head, body) = root.split_vertically(title_px);
         head.titled(title, (FONT_FAMILY, 24)).map_err(draw_err)?;
@@ -218,7 +222,7 @@ pub(crate) fn draw_trace(
     runs: &[Vec<(f64, f64)>],
     colour: RGBColor,
 ) -> Result<(), PlotError> {
-    let line = ShapeStyle::from(colour).stroke_width(1);
+    let line = ShapeStyle::from(colour).stroke_width(2);
     if series.x.len() <= super::MAX_POINTS_PER_SERIES {
         for (j, run) in runs.iter().enumerate() {
             let drawn = chart.draw_series(LineSeries::new(run.iter().copied(), line)).map_err(draw_err)?;
@@ -318,7 +322,7 @@ mod tests {
         let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
         let reader = decoder.read_info().unwrap();
         assert_eq!(reader.info().width, PLOT_WIDTH_PX);
-        assert_eq!(reader.info().height, 50 + 2 * PANEL_HEIGHT_PX + 30);
+        assert_eq!(reader.info().height, 50 + PANELS_MIN_HEIGHT_PX + 30);
         assert!(matches!(stacked_plot(&path, "t", "x", &[], &[]), Err(PlotError::NoSeries)));
     }
 }
