@@ -12,6 +12,12 @@ use super::{
     FONT_FAMILY, PLOT_WIDTH_PX,
 };
 
+/// A series longer than [`super::MAX_POINTS_PER_SERIES`] is drawn as the
+/// min/max envelope of this many buckets of consecutive samples (about four
+/// pixels each across a plot), so that a vibration faster than a bucket
+/// shows as a band rather than a block of zigzags.
+pub const ENVELOPE_BUCKETS: usize = 300;
+
 /// Height in pixels of one panel of [`stacked_plot`] when there are three or
 /// more; fewer panels share [`PANELS_MIN_HEIGHT_PX`].
 pub const PANEL_HEIGHT_PX: u32 = 260;
@@ -214,8 +220,8 @@ fn draw_levels_and_marks(chart: &mut Chart<'_, '_>, panel: &Panel) -> Result<(),
 
 /// Draws one prepared series: as a line when it has at most
 /// [`super::MAX_POINTS_PER_SERIES`] samples, otherwise as its min/max
-/// envelope (see [`envelope`]): a band filled in a light shade of `colour`,
-/// edged in `colour`.
+/// envelope of [`ENVELOPE_BUCKETS`] buckets (see [`envelope`]): a band
+/// filled in a light shade of `colour`, edged in `colour`.
 pub(crate) fn draw_trace(
     chart: &mut Chart<'_, '_>,
     series: &Series,
@@ -234,19 +240,20 @@ pub(crate) fn draw_trace(
         }
         return Ok(());
     }
-    let bucket = series.x.len().div_ceil(super::MAX_POINTS_PER_SERIES / 2);
+    let bucket = series.x.len().div_ceil(ENVELOPE_BUCKETS);
+    let fill = colour.mix(0.35).filled();
     for (j, band) in envelope(series, bucket).into_iter().enumerate() {
-        let mut outline: Vec<(f64, f64)> = band.iter().map(|&(x, _, hi)| (x, hi)).collect();
-        outline.extend(band.iter().rev().map(|&(x, lo, _)| (x, lo)));
-        let fill = colour.mix(0.75).filled();
-        // The band, then its edges in the full colour.
-        chart.draw_series(std::iter::once(Polygon::new(outline.clone(), fill))).map_err(draw_err)?;
-        outline.push(outline[0]);
-        let drawn = chart.draw_series(LineSeries::new(outline, line)).map_err(draw_err)?;
+        // One filled column per bucket, then the upper and lower edges.
+        let columns = band.windows(2).map(|w| Rectangle::new([(w[0].0, w[0].1), (w[1].0, w[0].2)], fill));
+        chart.draw_series(columns).map_err(draw_err)?;
+        let upper: Vec<(f64, f64)> = band.iter().map(|&(x, _, hi)| (x, hi)).collect();
+        let lower: Vec<(f64, f64)> = band.iter().map(|&(x, lo, _)| (x, lo)).collect();
+        chart.draw_series(LineSeries::new(lower, line)).map_err(draw_err)?;
+        let drawn = chart.draw_series(LineSeries::new(upper, line)).map_err(draw_err)?;
         if j == 0 {
             drawn
-                .label(series.name.as_str())
-                .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], colour.mix(0.75).filled()));
+                .label(format!("{} (min/max envelope)", series.name))
+                .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], colour.mix(0.35).filled()));
         }
     }
     Ok(())
