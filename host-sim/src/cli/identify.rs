@@ -4,7 +4,7 @@
 //! tension, and the sheave damping (Eqn 13) from every travel.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::output_dir;
 use diagnosis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
-use plots::{line_plot, Series};
+use plots::{stacked_plot, Level, Mark, Panel, Series};
 use recording::read::read_dataset;
 use recording::{Recording, RecordingKind};
 use rig_config::RigConfig;
@@ -141,6 +141,36 @@ struct Report {
     left_out: Vec<LeftOut>,
 }
 
+/// Half-width of the band drawn around the rig's EA in `ea_vs_tension.png`,
+/// as a fraction: the axis spans at least this much, so that scatter of a
+/// few 0.01 % does not read as a trend.
+const EA_BAND_FRACTION: f64 = 0.01;
+
+/// `ea_vs_tension.png`: each free decay's EA (Eqn 9) as a point labelled
+/// with its recording, the rig's EA (`[mechanics].rope_ea_n`) as a line and
+/// +-1 % around it (the axis spans at least that band).
+fn ea_plot(path: &Path, dataset: &Path, points: &[(f64, f64, String)], rig_ea_n: f64) -> anyhow::Result<()> {
+    let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let pad = 0.1 * (hi - lo).max(1.0);
+    let (x0, x1) = (lo - pad, hi + pad);
+    let level = |f: f64, label: String| Level { y: rig_ea_n * f, x0, x1, label };
+    let panel = Panel {
+        y_label: "EA [N]".to_string(),
+        series: vec![Series::new("rig EA", vec![x0, x1], vec![rig_ea_n, rig_ea_n])],
+        marks: points.iter().map(|(t, ea, name)| Mark { x: *t, y: *ea, label: name.clone() }).collect(),
+        levels: vec![
+            level(1.0 + EA_BAND_FRACTION, format!("rig EA + {:.0} %", 100.0 * EA_BAND_FRACTION)),
+            level(
+                1.0 - EA_BAND_FRACTION,
+                format!("rig EA - {:.0} % (rig EA {rig_ea_n:.4e} N)", 100.0 * EA_BAND_FRACTION),
+            ),
+        ],
+    };
+    let title = format!("{}: rope EA from free decays (Eqn 9) against tension", dataset.display());
+    stacked_plot(path, &title, "tension m g [N]", &[panel], &[])?;
+    Ok(())
+}
+
 /// Runs `identify`.
 pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     super::check_open_range("--max-frequency", args.max_frequency_hz, 1.0, 1.0e6)?;
@@ -222,16 +252,9 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     }
     csv.flush()?;
     if report.free_decays.len() >= 2 {
-        let mut points: Vec<(f64, f64)> = report.free_decays.iter().map(|d| (d.tension_n, d.rope_ea_n)).collect();
-        points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (x, y) = points.into_iter().unzip();
-        line_plot(
-            &out.path(OUTPUTS[2]),
-            "Rope EA from free decays (Eqn 9) against rope tension",
-            "tension m g [N]",
-            "EA [N]",
-            &[Series::new("EA", x, y)],
-        )?;
+        let points: Vec<(f64, f64, String)> =
+            report.free_decays.iter().map(|d| (d.tension_n, d.rope_ea_n, d.recording.clone())).collect();
+        ea_plot(&out.path(OUTPUTS[2]), &args.dataset, &points, rig.mechanics.rope_ea_n)?;
     }
 
     let (json, csv_path) = (out.published(&json), out.published(&csv_path));
