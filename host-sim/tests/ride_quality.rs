@@ -212,3 +212,42 @@ fn a_travel_recording_takes_its_regions_from_its_speed_and_keeps_its_direction()
         close(f(&r["motion"]["max_velocity_mps"]), 0.4, 0.01, "max velocity");
     }
 }
+
+/// The figures the EVA analyzer printed for the public export
+/// `assets/sample/2024F1447R01.txt` of github.com/westone-hq/OTIS (commit
+/// 0e0a8a7e186f81666fa00df9ce54f8b0e9fbbf1a), as that repository's
+/// `docs/domain_knowledge.md` quotes the report: A95 peak-to-peak over the
+/// constant-speed region X, Y, Z (mg), maximum sound (dB(A)), maximum
+/// velocity (m/s), distance (m).
+const EVA_REPORT: [(&str, f64); 6] = [
+    ("x_a95_pp_mg", 8.2),
+    ("y_a95_pp_mg", 12.9),
+    ("z_a95_pp_mg", 22.2),
+    ("sound_max_dba", 71.7),
+    ("max_velocity_mps", 1.50),
+    ("distance_m", 20.0),
+];
+
+/// Against the analyzer: the export has no licence, so it is not in this
+/// repository; give its path in `EVA_SAMPLE_EVIMP` and run
+/// `cargo test -p host-sim --test host-sim ride_quality:: -- --ignored`.
+#[test]
+#[ignore = "needs the analyzer export (no licence to copy it here): EVA_SAMPLE_EVIMP=<path>"]
+fn the_public_eva_export_agrees_with_its_analyzer_report_within_5_percent() {
+    let path = std::env::var("EVA_SAMPLE_EVIMP").expect("EVA_SAMPLE_EVIMP names the export 2024F1447R01.txt");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("eva");
+    let o = host_sim(&[], Path::new(&path), &out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    println!("{}", String::from_utf8_lossy(&o.stdout));
+    let csv = fs::read_to_string(out.join("ride_quality.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let value = |row: usize, name: &str| rows[row][header.iter().position(|h| *h == name).unwrap()].parse::<f64>();
+    for (name, printed) in EVA_REPORT {
+        // Vibration and sound over the constant-speed row, motion on the whole-run row.
+        let row = if name.ends_with("_mg") || name.starts_with("sound") { 1 } else { 0 };
+        let got = value(row, name).unwrap_or_else(|e| panic!("{name}: {e}"));
+        close(got, printed, 0.05, name);
+    }
+}
