@@ -274,7 +274,7 @@ fn analyze_travel(
         let hp_png = out.join(format!("{name}_hp.png"));
         line_plot(
             &hp_png,
-            &format!("{label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
+            &format!("{stem}: {label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
             "time [s]",
             "acceleration [m/s^2]",
             &[Series::new(label, time.clone(), filtered.clone())],
@@ -293,9 +293,13 @@ fn analyze_travel(
             let png = out.join(format!("{name}_spectrogram_{method}.png"));
             spectrogram_plot(
                 &png,
-                &format!("{label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, model modes traced"),
+                &format!("{stem}: {label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, modes and orders traced"),
                 spectrogram,
-                &mode_overlays(&chain, &lw, fs, spectrogram, band_hi),
+                &[
+                    mode_overlays(&chain, &lw, fs, spectrogram, band_hi),
+                    order_overlays(rig, &speed, fs, spectrogram, band_hi),
+                ]
+                .concat(),
                 None,
             )?;
             files.push(published(&png));
@@ -415,6 +419,26 @@ fn torque_psd_plot(path: &std::path::Path, title: &str, psd: &Psd, lines: &[Ripp
     };
     stacked_plot(path, title, "frequency [Hz]", &[panel], &[])?;
     Ok(())
+}
+
+/// The ripple orders of the rig (`[[ripple]]`) n x f_mech at each
+/// spectrogram time, f_mech from the encoder speed `speed` (rad/s), as
+/// overlay curves inside the band.
+fn order_overlays(rig: &RigConfig, speed: &[f64], fs: f64, spectrogram: &Spectrogram, band_hi: f64) -> Vec<Series> {
+    let at = |t: f64| ((t.max(0.0) * fs) as usize).min(speed.len() - 1);
+    rig.ripple
+        .iter()
+        .map(|r| {
+            let y: Vec<f64> = spectrogram
+                .times_s
+                .iter()
+                .map(|&t| r.mechanical_order as f64 * speed[at(t)].abs() / std::f64::consts::TAU)
+                .map(|f| if f > 0.5 && f <= band_hi { f } else { f64::NAN })
+                .collect();
+            Series::new(format!("{}x f_mech", r.mechanical_order), spectrogram.times_s.clone(), y)
+        })
+        .filter(|s| s.y.iter().any(|f| f.is_finite()))
+        .collect()
 }
 
 /// The model's elastic natural frequencies (Eqn 10) at the rope length of
