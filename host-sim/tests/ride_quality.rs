@@ -216,16 +216,20 @@ fn a_travel_recording_takes_its_regions_from_its_speed_and_keeps_its_direction()
 /// The figures the EVA analyzer printed for the public export
 /// `assets/sample/2024F1447R01.txt` of github.com/westone-hq/OTIS (commit
 /// 0e0a8a7e186f81666fa00df9ce54f8b0e9fbbf1a), as that repository's
-/// `docs/domain_knowledge.md` quotes the report: A95 peak-to-peak over the
-/// constant-speed region X, Y, Z (mg), maximum sound (dB(A)), maximum
-/// velocity (m/s), distance (m).
-const EVA_REPORT: [(&str, f64); 6] = [
-    ("x_a95_pp_mg", 8.2),
-    ("y_a95_pp_mg", 12.9),
-    ("z_a95_pp_mg", 22.2),
-    ("sound_max_dba", 71.7),
-    ("max_velocity_mps", 1.50),
-    ("distance_m", 20.0),
+/// `docs/domain_knowledge.md` quotes the report, with the column of
+/// `ride_quality.csv` each is held against and its row (0 whole run, 1
+/// constant speed). The repository labels the X, Y, Z figures "A95
+/// peak-to-peak"; they agree with this command's maximum peak-to-peak over
+/// the constant-speed region (within 3.3 %), not with its A95 (7.3, 9.1,
+/// 15.7 mg): docs/analysis.md discusses it. Sound: the maximum over the
+/// constant-speed region; velocity and distance from the integrated z.
+const EVA_REPORT: [(&str, usize, f64); 6] = [
+    ("x_max_pp_mg", 1, 8.2),
+    ("y_max_pp_mg", 1, 12.9),
+    ("z_max_pp_mg", 1, 22.2),
+    ("sound_max_dba", 1, 71.7),
+    ("max_velocity_mps", 0, 1.50),
+    ("distance_m", 0, 20.0),
 ];
 
 /// Against the analyzer: the export has no licence, so it is not in this
@@ -244,10 +248,13 @@ fn the_public_eva_export_agrees_with_its_analyzer_report_within_5_percent() {
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
     let value = |row: usize, name: &str| rows[row][header.iter().position(|h| *h == name).unwrap()].parse::<f64>();
-    for (name, printed) in EVA_REPORT {
-        // Vibration and sound over the constant-speed row, motion on the whole-run row.
-        let row = if name.ends_with("_mg") || name.starts_with("sound") { 1 } else { 0 };
+    for (name, row, printed) in EVA_REPORT {
         let got = value(row, name).unwrap_or_else(|e| panic!("{name}: {e}"));
+        println!("{name}: {got:.3} (analyzer {printed})");
         close(got, printed, 0.05, name);
     }
+    // The analyzer's constant-speed region, 11.6-22.0 s, within 0.25 s.
+    let r = json(&out);
+    let cs = &r["regions"]["constant_speed_s"];
+    assert!((f(&cs[0]) - 11.6).abs() < 0.25 && (f(&cs[1]) - 22.0).abs() < 0.25, "{cs}");
 }
