@@ -7,4 +7,5 @@ mod doc_commands;
 mod foreign_rig;
 mod input_fuzz;
 mod recording_read;
+mod ride_quality;
 mod rig_sample;

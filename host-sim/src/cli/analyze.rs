@@ -15,10 +15,10 @@ use serde::Serialize;
 
 use super::{check_count, check_open_range, output_dir};
 use diagnosis::travel_signals::{counterweight_side_length_m, travel_torque, TravelTorque};
-use dsp::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Spectrogram};
+use dsp::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Psd, Spectrogram};
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, DOF};
-use plots::{line_plot, spectrogram_plot, Series};
+use plots::{line_plot, spectrogram_plot, stacked_plot, Mark, Panel, Series};
 use recording::{read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
 use rig_config::RigConfig;
 
@@ -59,6 +59,29 @@ const LINE_EDGE_BINS: f64 = 3.0;
 /// lobes of the Hann window and a bin between them).
 const LINE_SEPARATION_BINS: f64 = 5.0;
 
+/// A line is found when its peak PSD stands at least this far above the
+/// local floor: the median PSD of the [`FLOOR_HALF_BINS`] bins on each side
+/// of the peak, the [`FLOOR_GAP_BINS`] nearest bins left out (the line's own
+/// main lobe). Below it, what the line's search window holds is the floor
+/// (a mode sweeping past, noise), not the line: it is reported as not found,
+/// without an amplitude. dB.
+const LINE_ABOVE_FLOOR_DB: f64 = 10.0;
+/// Bins on each side of a line's peak over which its local floor is taken.
+const FLOOR_HALF_BINS: usize = 16;
+/// Bins on each side of a line's peak left out of its local floor.
+const FLOOR_GAP_BINS: usize = 4;
+
+/// An order of the ripple list whose line does not stand above the local
+/// floor of the torque PSD.
+#[derive(Debug, Serialize)]
+struct MissingLine {
+    source: String,
+    mechanical_order: u32,
+    expected_frequency_hz: f64,
+    /// Peak PSD over the local floor, dB (below [`LINE_ABOVE_FLOOR_DB`]).
+    above_floor_db: f64,
+}
+
 /// A labelled line of the torque ripple.
 #[derive(Debug, Serialize)]
 struct RippleLine {
@@ -82,6 +105,8 @@ struct TravelAnalysis {
     /// Orders whose line the Welch segment cannot resolve (too close to 0 Hz,
     /// the Nyquist frequency or another line): not reported.
     unresolved_orders: Vec<u32>,
+    /// Orders whose line is not above the local floor of the PSD.
+    not_found: Vec<MissingLine>,
     files: Vec<String>,
 }
 
@@ -151,6 +176,14 @@ pub fn run(rig: &RigConfig, args: &AnalyzeArgs) -> anyhow::Result<()> {
                 line.source
             );
         }
+        for m in &t.not_found {
+            outln!(
+                "  {:>3}x {:>8.3} Hz  not found: {:.1} dB above the local floor (a line needs {LINE_ABOVE_FLOOR_DB} dB)",
+                m.mechanical_order,
+                m.expected_frequency_hz,
+                m.above_floor_db
+            );
+        }
         if !t.unresolved_orders.is_empty() {
             outln!(
                 "  not resolved with --welch-segment {} s (lines too close to 0 Hz or to each other): orders {:?}",
@@ -209,40 +242,7 @@ fn analyze_travel(
     }
     let segment = (args.welch_segment_s * fs).round() as usize;
     let psd = welch_psd(stage_torque, fs, segment, 0.5).context("torque PSD (--welch-segment)")?;
-    let mut ripple_lines = Vec::new();
-    let mut unresolved_orders = Vec::new();
-    let sources = ripple_sources(pole_pairs);
-    let bins = psd.bin_width_hz();
-    for (order, source) in &sources {
-        let (order, source) = (*order, source.clone());
-        let expected = order as f64 * f_mech;
-        if expected >= 0.5 * fs {
-            continue;
-        }
-        let nearest = sources
-            .iter()
-            .filter(|(o, _)| *o != order)
-            .map(|(o, _)| (*o as f64 * f_mech - expected).abs())
-            .fold(f64::INFINITY, f64::min);
-        let resolved = expected >= LINE_EDGE_BINS * bins
-            && expected <= 0.5 * fs - LINE_EDGE_BINS * bins
-            && nearest >= LINE_SEPARATION_BINS * bins;
-        if !resolved {
-            unresolved_orders.push(order);
-            continue;
-        }
-        if let Some((frequency_hz, amplitude_nm)) =
-            psd.line_amplitude(expected, (0.03 * expected).max(2.0 * psd.bin_width_hz()))
-        {
-            ripple_lines.push(RippleLine {
-                source,
-                mechanical_order: order,
-                expected_frequency_hz: expected,
-                frequency_hz,
-                amplitude_nm,
-            });
-        }
-    }
+    let (ripple_lines, unresolved_orders, not_found) = find_ripple_lines(&psd, f_mech, fs, pole_pairs);
     let psd_csv = out.join("torque_psd.csv");
     let mut csv = std::io::BufWriter::new(std::fs::File::create(&psd_csv)?);
     writeln!(csv, "frequency_hz,torque_psd_nm2_per_hz")?;
@@ -251,22 +251,14 @@ fn analyze_travel(
     }
     csv.flush()?;
     files.push(published(&psd_csv));
-    let band: Vec<(f64, f64)> = psd
-        .frequency_hz
-        .iter()
-        .zip(&psd.density)
-        .filter(|(f, _)| **f <= 100.0)
-        .map(|(f, d)| (*f, 10.0 * d.max(1e-30).log10()))
-        .collect();
-    let (x, y): (Vec<f64>, Vec<f64>) = band.into_iter().unzip();
     let psd_png = out.join("torque_psd.png");
-    line_plot(
-        &psd_png,
-        &format!("Torque ripple PSD over the constant-speed stage (Welch, {} s segments)", args.welch_segment_s),
-        "frequency [Hz]",
-        "PSD [dB re 1 (N m)^2/Hz]",
-        &[Series::new("machine torque (dq0)", x, y)],
-    )?;
+    let title = format!(
+        "{stem}: torque ripple PSD, constant-speed stage {:.2}-{:.2} s (Welch, {} s segments)",
+        stage.start as f64 / fs,
+        stage.end as f64 / fs,
+        args.welch_segment_s
+    );
+    torque_psd_plot(&psd_png, &title, &psd, &ripple_lines)?;
     files.push(published(&psd_png));
 
     // Accelerations: 1 Hz zero-phase high-pass, spectrograms with the model's modes.
@@ -282,7 +274,7 @@ fn analyze_travel(
         let hp_png = out.join(format!("{name}_hp.png"));
         line_plot(
             &hp_png,
-            &format!("{label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
+            &format!("{stem}: {label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
             "time [s]",
             "acceleration [m/s^2]",
             &[Series::new(label, time.clone(), filtered.clone())],
@@ -301,9 +293,13 @@ fn analyze_travel(
             let png = out.join(format!("{name}_spectrogram_{method}.png"));
             spectrogram_plot(
                 &png,
-                &format!("{label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, model modes traced"),
+                &format!("{stem}: {label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, modes and orders traced"),
                 spectrogram,
-                &mode_overlays(&chain, &lw, fs, spectrogram, band_hi),
+                &[
+                    mode_overlays(&chain, &lw, fs, spectrogram, band_hi),
+                    order_overlays(rig, &speed, fs, spectrogram, band_hi),
+                ]
+                .concat(),
                 None,
             )?;
             files.push(published(&png));
@@ -318,8 +314,131 @@ fn analyze_travel(
         mean_torque_nm: mean_torque,
         ripple_lines,
         unresolved_orders,
+        not_found,
         files,
     })
+}
+
+/// Peak PSD over the local floor at `frequency_hz`, dB: the largest density
+/// within the line's main lobe over the median of the surrounding bins (see
+/// [`LINE_ABOVE_FLOOR_DB`]).
+fn above_floor_db(psd: &Psd, frequency_hz: f64) -> f64 {
+    let n = psd.density.len();
+    let centre =
+        ((frequency_hz - psd.frequency_hz[0]) / psd.bin_width_hz()).round().clamp(0.0, (n - 1) as f64) as usize;
+    let lobe = centre.saturating_sub(2)..(centre + 3).min(n);
+    let peak = psd.density[lobe].iter().copied().fold(0.0, f64::max);
+    let mut floor: Vec<f64> = (centre.saturating_sub(FLOOR_HALF_BINS)..(centre + FLOOR_HALF_BINS + 1).min(n))
+        .filter(|k| k.abs_diff(centre) > FLOOR_GAP_BINS)
+        .map(|k| psd.density[k])
+        .collect();
+    if floor.is_empty() {
+        return f64::INFINITY;
+    }
+    let mid = floor.len() / 2;
+    let median = *floor.select_nth_unstable_by(mid, f64::total_cmp).1;
+    10.0 * (peak / median.max(f64::MIN_POSITIVE)).log10()
+}
+
+/// The ripple lines of the orders of [`ripple_sources`] in the torque PSD:
+/// found (with amplitude), unresolved (too close to 0 Hz, Nyquist or another
+/// line) and not found (not above the local floor).
+fn find_ripple_lines(
+    psd: &Psd,
+    f_mech: f64,
+    fs: f64,
+    pole_pairs: u32,
+) -> (Vec<RippleLine>, Vec<u32>, Vec<MissingLine>) {
+    let (mut found, mut unresolved, mut missing) = (Vec::new(), Vec::new(), Vec::new());
+    let sources = ripple_sources(pole_pairs);
+    let bins = psd.bin_width_hz();
+    for (order, source) in &sources {
+        let (order, source) = (*order, source.clone());
+        let expected = order as f64 * f_mech;
+        if expected >= 0.5 * fs {
+            continue;
+        }
+        let nearest = sources
+            .iter()
+            .filter(|(o, _)| *o != order)
+            .map(|(o, _)| (*o as f64 * f_mech - expected).abs())
+            .fold(f64::INFINITY, f64::min);
+        let resolved = expected >= LINE_EDGE_BINS * bins
+            && expected <= 0.5 * fs - LINE_EDGE_BINS * bins
+            && nearest >= LINE_SEPARATION_BINS * bins;
+        if !resolved {
+            unresolved.push(order);
+            continue;
+        }
+        let Some((frequency_hz, amplitude_nm)) = psd.line_amplitude(expected, (0.03 * expected).max(2.0 * bins)) else {
+            continue;
+        };
+        let above = above_floor_db(psd, frequency_hz);
+        if above < LINE_ABOVE_FLOOR_DB {
+            missing.push(MissingLine {
+                source,
+                mechanical_order: order,
+                expected_frequency_hz: expected,
+                above_floor_db: above,
+            });
+            continue;
+        }
+        found.push(RippleLine {
+            source,
+            mechanical_order: order,
+            expected_frequency_hz: expected,
+            frequency_hz,
+            amplitude_nm,
+        });
+    }
+    (found, unresolved, missing)
+}
+
+/// `torque_psd.png`: the PSD 0-100 Hz in dB, each found line marked with
+/// its order, source and amplitude.
+fn torque_psd_plot(path: &std::path::Path, title: &str, psd: &Psd, lines: &[RippleLine]) -> anyhow::Result<()> {
+    let db = |d: f64| 10.0 * d.max(1e-30).log10();
+    let (x, y): (Vec<f64>, Vec<f64>) =
+        psd.frequency_hz.iter().zip(&psd.density).filter(|(f, _)| **f <= 100.0).map(|(f, d)| (*f, db(*d))).unzip();
+    let marks = lines
+        .iter()
+        .filter(|l| l.frequency_hz <= 100.0)
+        .map(|l| {
+            let k = ((l.frequency_hz - psd.frequency_hz[0]) / psd.bin_width_hz()).round() as usize;
+            let lobe = k.saturating_sub(2)..(k + 3).min(psd.density.len());
+            let peak = psd.density[lobe].iter().copied().fold(0.0, f64::max);
+            let label = format!("{}x {} {:.3} N m", l.mechanical_order, l.source, l.amplitude_nm);
+            Mark { x: l.frequency_hz, y: db(peak), label }
+        })
+        .collect();
+    let panel = Panel {
+        y_label: "PSD [dB re 1 (N m)^2/Hz]".to_string(),
+        series: vec![Series::new("machine torque (dq0)", x, y)],
+        marks,
+        levels: vec![],
+    };
+    stacked_plot(path, title, "frequency [Hz]", &[panel], &[])?;
+    Ok(())
+}
+
+/// The ripple orders of the rig (`[[ripple]]`) n x f_mech at each
+/// spectrogram time, f_mech from the encoder speed `speed` (rad/s), as
+/// overlay curves inside the band.
+fn order_overlays(rig: &RigConfig, speed: &[f64], fs: f64, spectrogram: &Spectrogram, band_hi: f64) -> Vec<Series> {
+    let at = |t: f64| ((t.max(0.0) * fs) as usize).min(speed.len() - 1);
+    rig.ripple
+        .iter()
+        .map(|r| {
+            let y: Vec<f64> = spectrogram
+                .times_s
+                .iter()
+                .map(|&t| r.mechanical_order as f64 * speed[at(t)].abs() / std::f64::consts::TAU)
+                .map(|f| if f > 0.5 && f <= band_hi { f } else { f64::NAN })
+                .collect();
+            Series::new(format!("{}x f_mech", r.mechanical_order), spectrogram.times_s.clone(), y)
+        })
+        .filter(|s| s.y.iter().any(|f| f.is_finite()))
+        .collect()
 }
 
 /// The model's elastic natural frequencies (Eqn 10) at the rope length of

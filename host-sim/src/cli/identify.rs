@@ -4,7 +4,7 @@
 //! tension, and the sheave damping (Eqn 13) from every travel.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::output_dir;
 use diagnosis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
-use plots::{line_plot, Series};
+use plots::{stacked_plot, Level, Mark, Panel, Series};
 use recording::read::read_dataset;
 use recording::{Recording, RecordingKind};
 use rig_config::RigConfig;
@@ -34,7 +34,7 @@ pub struct IdentifyArgs {
 }
 
 /// Files `identify` writes.
-const OUTPUTS: [&str; 3] = ["identify.json", "free_decays.csv", "ea_vs_tension.png"];
+const OUTPUTS: [&str; 4] = ["identify.json", "free_decays.csv", "ea_vs_tension.png", "free_decays.png"];
 
 /// Refuses a dataset of which a kind of recording gives nothing: every free
 /// decay (or every travel) left out. The error lists each one's reason and,
@@ -141,6 +141,86 @@ struct Report {
     left_out: Vec<LeftOut>,
 }
 
+/// Half-width of the band drawn around the rig's EA in `ea_vs_tension.png`,
+/// as a fraction: the axis spans at least this much, so that scatter of a
+/// few 0.01 % does not read as a trend.
+const EA_BAND_FRACTION: f64 = 0.01;
+
+/// `ea_vs_tension.png`: each free decay's EA (Eqn 9) as a point labelled
+/// with its recording, the rig's EA (`[mechanics].rope_ea_n`) as a line and
+/// +-1 % around it (the axis spans at least that band).
+fn ea_plot(path: &Path, dataset: &Path, points: &[(f64, f64, String)], rig_ea_n: f64) -> anyhow::Result<()> {
+    let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let pad = 0.1 * (hi - lo).max(1.0);
+    let (x0, x1) = (lo - pad, hi + pad);
+    let level = |f: f64, label: String| Level { y: rig_ea_n * f, x0, x1, label };
+    let panel = Panel {
+        y_label: "EA [N]".to_string(),
+        series: vec![Series::new("rig EA", vec![x0, x1], vec![rig_ea_n, rig_ea_n])],
+        marks: points.iter().map(|(t, ea, name)| Mark { x: *t, y: *ea, label: name.clone() }).collect(),
+        levels: vec![
+            level(1.0 + EA_BAND_FRACTION, format!("rig EA + {:.0} %", 100.0 * EA_BAND_FRACTION)),
+            level(
+                1.0 - EA_BAND_FRACTION,
+                format!("rig EA - {:.0} % (rig EA {rig_ea_n:.4e} N)", 100.0 * EA_BAND_FRACTION),
+            ),
+        ],
+    };
+    let title = format!("{}: rope EA from free decays (Eqn 9) against tension", dataset.display());
+    stacked_plot(path, &title, "tension m g [N]", &[panel], &[])?;
+    Ok(())
+}
+
+/// Free decays drawn in `free_decays.png`, at most (one panel each).
+const MAX_DECAY_PANELS: usize = 8;
+
+/// `free_decays.png`: each identified free decay's car acceleration with the
+/// envelope of its identification, `+-A exp(-zeta 2 pi f1 (t - t_A))`
+/// (zeta and f1 as identified, Eqn 11; anchored at the largest magnitude
+/// `A`, at `t_A`), from the largest magnitude on.
+fn decays_plot(
+    path: &Path,
+    dataset_dir: &Path,
+    dataset: &[(String, Recording)],
+    id: &DatasetIdentification,
+) -> anyhow::Result<()> {
+    let mut panels = Vec::new();
+    for (stem, d) in id.decays.iter().take(MAX_DECAY_PANELS) {
+        let Some((_, rec)) = dataset.iter().find(|(s, _)| s == stem) else { continue };
+        let Some(acc) = rec.column(recording::ACC_CAR) else { continue };
+        let fs = rec.meta.sample_rate_hz;
+        let time: Vec<f64> = (0..acc.values.len()).map(|i| i as f64 / fs).collect();
+        let (k, peak) =
+            acc.values.iter().enumerate().fold((0, 0.0_f64), |m, (i, v)| if v.abs() > m.1 { (i, v.abs()) } else { m });
+        let rate = d.damping_ratio * std::f64::consts::TAU * d.first_frequency_hz;
+        let envelope = |sign: f64| -> Vec<f64> {
+            time.iter()
+                .map(|&t| if t >= time[k] { sign * peak * (-rate * (t - time[k])).exp() } else { f64::NAN })
+                .collect()
+        };
+        panels.push(Panel {
+            y_label: format!("{stem} [m/s^2]"),
+            series: vec![
+                Series::new("car acceleration", time.clone(), acc.values.clone()),
+                Series::new(
+                    format!("envelope: f1 {:.3} Hz, zeta {:.4}", d.first_frequency_hz, d.damping_ratio),
+                    time.clone(),
+                    envelope(1.0),
+                ),
+                Series::new("envelope (lower)", time.clone(), envelope(-1.0)),
+            ],
+            ..Panel::default()
+        });
+    }
+    if panels.is_empty() {
+        return Ok(());
+    }
+    let title =
+        format!("{}: free decays with the envelope of their identified damping (Eqn 11)", dataset_dir.display());
+    stacked_plot(path, &title, "time [s]", &panels, &[])?;
+    Ok(())
+}
+
 /// Runs `identify`.
 pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     super::check_open_range("--max-frequency", args.max_frequency_hz, 1.0, 1.0e6)?;
@@ -194,7 +274,7 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
             })
             .collect(),
         mean_sheave_damping_nms_per_rad: id.sheave_damping_nms_per_rad,
-        left_out: id.left_out,
+        left_out: id.left_out.clone(),
     };
 
     let json = out.path(OUTPUTS[0]);
@@ -222,16 +302,12 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     }
     csv.flush()?;
     if report.free_decays.len() >= 2 {
-        let mut points: Vec<(f64, f64)> = report.free_decays.iter().map(|d| (d.tension_n, d.rope_ea_n)).collect();
-        points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (x, y) = points.into_iter().unzip();
-        line_plot(
-            &out.path(OUTPUTS[2]),
-            "Rope EA from free decays (Eqn 9) against rope tension",
-            "tension m g [N]",
-            "EA [N]",
-            &[Series::new("EA", x, y)],
-        )?;
+        let points: Vec<(f64, f64, String)> =
+            report.free_decays.iter().map(|d| (d.tension_n, d.rope_ea_n, d.recording.clone())).collect();
+        ea_plot(&out.path(OUTPUTS[2]), &args.dataset, &points, rig.mechanics.rope_ea_n)?;
+    }
+    if !id.decays.is_empty() {
+        decays_plot(&out.path(OUTPUTS[3]), &args.dataset, &dataset, &id)?;
     }
 
     let (json, csv_path) = (out.published(&json), out.published(&csv_path));

@@ -9,7 +9,7 @@ use clap::Args;
 use super::{check_open_range, default_car_mass_kg, output_dir, sweep_points};
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, COORDINATE_NAMES, DOF};
-use plots::{line_plot, Series};
+use plots::{line_plot, stacked_plot, Band, Level, Panel, Series};
 use rig_config::RigConfig;
 
 /// Options of `modes`.
@@ -35,8 +35,35 @@ pub struct ModesArgs {
     pub force: bool,
 }
 
-/// Runs `modes`: writes `modes.csv`, `mode_shapes.csv`, `modes.png` and
-/// `modes_0-128hz.png`.
+/// The travel of the rig (`[travel]` `lw_low_m` to `lw_high_m`), shaded.
+fn travel_band(rig: &RigConfig) -> Band {
+    let t = &rig.travel;
+    Band { x0: t.lw_low_m, x1: t.lw_high_m, label: format!("travel, lw {} -> {} m", t.lw_low_m, t.lw_high_m) }
+}
+
+/// The natural frequencies `series` (0-`band_hz`) with the torque-ripple
+/// excitation lines of the rig (`[[ripple]]`, n x f_mech at the rated speed)
+/// drawn across.
+fn annotated(rig: &RigConfig, series: Vec<Series>, band_hz: f64) -> Panel {
+    let f_mech = rig.travel.rated_speed_mps / (2.0 * std::f64::consts::PI * rig.mechanics.sheave_radius_m);
+    let (x0, x1) = series
+        .iter()
+        .flat_map(|s| s.x.iter())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+    let levels = rig
+        .ripple
+        .iter()
+        .map(|r| (r, r.mechanical_order as f64 * f_mech))
+        .filter(|(_, f)| *f <= band_hz)
+        .map(|(r, f)| Level { y: f, x0, x1, label: format!("{}x f_mech = {f:.2} Hz ({})", r.mechanical_order, r.name) })
+        .collect();
+    Panel { y_label: "frequency [Hz]".to_string(), series, marks: vec![], levels }
+}
+
+/// Runs `modes`: writes `modes.csv`, `mode_shapes.csv`, `modes.png` (0 to
+/// the spectrogram band, the ripple excitation lines at the rated speed and
+/// the travel marked) and `modes_0-128hz.png` (the curves alone, as the
+/// paper's Fig. 5); `modes.csv` holds every mode.
 pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     let total = rig.mechanics.rope_total_length_m;
     let m_car = args.m_car_kg.unwrap_or_else(|| default_car_mass_kg(rig));
@@ -95,20 +122,15 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
             .collect()
     };
     let title = format!("Natural frequencies (Eqn 10), m_car = {m_car} kg, m_cw = {} kg", rig.mechanics.m_cw_kg);
-    line_plot(
+    let lw_label = "counterweight-side rope length lw [m]";
+    stacked_plot(
         &out.path("modes.png"),
-        &title,
-        "counterweight-side rope length lw [m]",
-        "frequency [Hz]",
-        &series(f64::INFINITY),
-    )?;
-    line_plot(
-        &out.path(&band_png),
         &format!("{title}, 0-{band} Hz"),
-        "counterweight-side rope length lw [m]",
-        "frequency [Hz]",
-        &series(band),
+        lw_label,
+        &[annotated(rig, series(band), band)],
+        &[travel_band(rig)],
     )?;
+    line_plot(&out.path(&band_png), &format!("{title}, 0-{band} Hz"), lw_label, "frequency [Hz]", &series(band))?;
 
     outln!("m_car = {m_car} kg: natural frequencies at {} rope lengths from {lw_from} to {lw_to} m", lengths.len());
     outln!("{:>8} {:>9} {:>9} {:>9} {:>9} {:>9}", "lw [m]", "f1 [Hz]", "f2 [Hz]", "f3 [Hz]", "f4 [Hz]", "f5 [Hz]");

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::{check_open_range, default_car_mass_kg, output_dir};
 use closed_loop::compensation::{compensator, rig_ripple_table};
 use closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
-use dsp::{highpass_zero_phase, stft_spectrogram};
+use dsp::{highpass_zero_phase, stft_spectrogram, Spectrogram};
 use plant::effects::Effects;
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, DOF};
@@ -178,6 +178,21 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// STFT spectrogram (90 % overlap, 0-`band_hi` Hz) of the whole record,
+/// stop included: the signal is extended by half a window of zeros at each
+/// end, so that the first and last frames are centred on its first and last
+/// samples; times in s from the record's start.
+fn whole_record_spectrogram(x: &[f64], fs: f64, window_s: f64, band_hi: f64) -> anyhow::Result<Spectrogram> {
+    let pad = (0.5 * window_s * fs).round() as usize;
+    let mut padded = vec![0.0; pad];
+    padded.extend_from_slice(x);
+    padded.extend(std::iter::repeat_n(0.0, pad));
+    let mut spectrogram = stft_spectrogram(&padded, fs, window_s, 0.9, band_hi)?;
+    let shift = pad as f64 / fs;
+    spectrogram.times_s.iter_mut().for_each(|t| *t -= shift);
+    Ok(spectrogram)
+}
+
 /// The plots of a travel: `<stem>_<suffix>.png`.
 const PLOTS: [&str; 3] = ["acc_car_hp", "spectrogram", "drive"];
 
@@ -196,34 +211,48 @@ fn plots(
     let hp_path = out.path(format!("{stem}_{}.png", PLOTS[0]));
     line_plot(
         &hp_path,
-        &format!("Car acceleration, high-passed at {highpass_hz} Hz (paper Fig. 7), m_car = {} kg", spec.m_car_kg),
+        &format!(
+            "{stem}: car acceleration, high-passed at {highpass_hz} Hz (paper Fig. 7), m_car = {} kg",
+            spec.m_car_kg
+        ),
         "time [s]",
         "acceleration [m/s^2]",
         &[Series::new("car (simulated)", run.time_s.clone(), filtered.clone())],
     )?;
 
     let [band_lo, band_hi] = rig.measurement.spectrogram_band_hz;
-    let spectrogram = stft_spectrogram(&filtered, fs, args.spectrogram_window_s, 0.9, band_hi)?;
+    let spectrogram = whole_record_spectrogram(&filtered, fs, args.spectrogram_window_s, band_hi)?;
     let chain = ChainParams::from_rig(rig, spec.m_car_kg);
-    let modes_over_time: Vec<[f64; DOF]> = spectrogram
-        .times_s
-        .iter()
-        .map(|t| {
-            let index = ((t * fs) as usize).min(run.lw_m.len() - 1);
-            natural_modes(&chain, run.lw_m[index]).frequencies_hz
-        })
-        .collect();
-    let overlays: Vec<Series> = (1..DOF)
+    let at = |t: f64| ((t.max(0.0) * fs) as usize).min(run.lw_m.len() - 1);
+    let modes_over_time: Vec<[f64; DOF]> =
+        spectrogram.times_s.iter().map(|&t| natural_modes(&chain, run.lw_m[at(t)]).frequencies_hz).collect();
+    let mut overlays: Vec<Series> = (1..DOF)
         .filter(|&k| modes_over_time.iter().any(|f| f[k] >= band_lo && f[k] <= band_hi))
         .map(|k| {
             let y = modes_over_time.iter().map(|f| if f[k] <= band_hi { f[k] } else { f64::NAN }).collect();
             Series::new(format!("model f{}", k + 1), spectrogram.times_s.clone(), y)
         })
         .collect();
+    // The ripple orders n x f_mech, f_mech from the encoder speed.
+    for order in rig.ripple.iter().map(|r| r.mechanical_order) {
+        let y: Vec<f64> = spectrogram
+            .times_s
+            .iter()
+            .map(|&t| order as f64 * run.speed_radps[at(t)].abs() / std::f64::consts::TAU)
+            .map(|f| if f > 0.5 && f <= band_hi { f } else { f64::NAN })
+            .collect();
+        if y.iter().any(|f| f.is_finite()) {
+            overlays.push(Series::new(format!("{order}x f_mech"), spectrogram.times_s.clone(), y));
+        }
+    }
+    let (lw0, lw1) = (run.lw_m[0], run.lw_m[run.lw_m.len() - 1]);
     let spectrogram_path = out.path(format!("{stem}_{}.png", PLOTS[1]));
     spectrogram_plot(
         &spectrogram_path,
-        &format!("Car acceleration spectrogram (STFT, {} s window), dB re 1 (m/s^2)^2/Hz", args.spectrogram_window_s),
+        &format!(
+            "{stem}: car acceleration (STFT, {} s), lw {lw0:.2} -> {lw1:.2} m, dB re 1 (m/s^2)^2/Hz",
+            args.spectrogram_window_s
+        ),
         &spectrogram,
         &overlays,
         None,
@@ -233,7 +262,7 @@ fn plots(
     let r = rig.mechanics.sheave_radius_m;
     line_plot(
         &drive_path,
-        "Drive: reference and estimated sheave-edge speed",
+        &format!("{stem}: drive, reference and estimated sheave-edge speed"),
         "time [s]",
         "speed [m/s]",
         &[

@@ -1,4 +1,13 @@
-//! ISO 2631-1 frequency weighting Wk (vertical whole-body vibration).
+//! ISO 2631-1 frequency weightings Wk (vertical whole-body vibration) and Wd
+//! (horizontal whole-body vibration).
+//!
+//! [`wd_weighting`], [`wd_gain`] and [`wd_digital_gain`] are the same for Wd
+//! (ISO 2631-1:1997 Annex A, Table A.2: band limiting as for Wk,
+//! acceleration-velocity transition `f3 = f4 = 2 Hz`, `Q4 = 0.63`, no upward
+//! step, `K = 1`); its factors reproduce ISO 2631-1 Table 3 (column Wd) to
+//! within the table's rounding, and the realisation below (sections,
+//! interpolation, decimation) is the same as for Wk, with the transition
+//! pre-warped at 2 Hz. [`weighting`] takes either by [`Weighting`].
 //!
 //! [`wk_weighting`] filters an acceleration signal with the weighting Wk of
 //! ISO 2631-1:1997 Annex A (the same parameters are in ISO 8041:2005,
@@ -76,6 +85,34 @@ pub const WK_F6_HZ: f64 = 3.35;
 /// Quality factor of the upward-step poles, dimensionless (Wk: Q6).
 pub const WK_Q6: f64 = 0.91;
 
+/// Zero of the acceleration-velocity transition of Wd, Hz (ISO 2631-1
+/// Table A.2, Wd: f3).
+pub const WD_F3_HZ: f64 = 2.0;
+/// Pole frequency of the acceleration-velocity transition of Wd, Hz (Wd: f4).
+pub const WD_F4_HZ: f64 = 2.0;
+/// Quality factor of the acceleration-velocity transition of Wd,
+/// dimensionless (Wd: Q4).
+pub const WD_Q4: f64 = 0.63;
+
+/// A frequency weighting of ISO 2631-1 (Annex A).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Weighting {
+    /// Wk: vertical (z) whole-body vibration, seated, standing or lying.
+    Wk,
+    /// Wd: horizontal (x, y) whole-body vibration.
+    Wd,
+}
+
+impl Weighting {
+    /// The name used in reports: `Wk` or `Wd`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Weighting::Wk => "Wk",
+            Weighting::Wd => "Wd",
+        }
+    }
+}
+
 /// Smallest sample rate, Hz, that [`wk_weighting`] and [`wk_digital_gain`]
 /// accept. It bounds the internal interpolation factor (at most 82); a
 /// signal sampled this slowly cannot represent most of the Wk band anyway
@@ -94,26 +131,60 @@ const INTERP_HALF_TAPS: usize = 16;
 /// (dimensionless; about 80 dB image rejection).
 const INTERP_KAISER_BETA: f64 = 8.0;
 
-/// Analog Wk sections as `(numerator, denominator, pre-warp frequency Hz)`
-/// with coefficients `[c0, c1, c2]` of `c0 + c1 s + c2 s^2`, s in rad/s.
-fn analog_sections() -> [([f64; 3], [f64; 3], f64); 4] {
+/// An analog section `(numerator, denominator, pre-warp frequency Hz)` with
+/// coefficients `[c0, c1, c2]` of `c0 + c1 s + c2 s^2`, s in rad/s.
+type AnalogSection = ([f64; 3], [f64; 3], f64);
+
+/// The band-limiting high-pass and low-pass shared by every weighting
+/// (ISO 2631-1 A.2.1), then the weighting's own sections.
+fn analog_sections(weighting: Weighting) -> Vec<AnalogSection> {
     let w = |f: f64| 2.0 * PI * f;
-    let (w1, w2, w3, w4, w5, w6) = (w(WK_F1_HZ), w(WK_F2_HZ), w(WK_F3_HZ), w(WK_F4_HZ), w(WK_F5_HZ), w(WK_F6_HZ));
-    let step_gain = (w5 / w6) * (w5 / w6);
-    [
+    let (w1, w2) = (w(WK_F1_HZ), w(WK_F2_HZ));
+    let mut sections = vec![
         // High-pass s^2 / (s^2 + sqrt(2) w1 s + w1^2).
         ([0.0, 0.0, 1.0], [w1 * w1, SQRT_2 * w1, 1.0], WK_F1_HZ),
         // Low-pass 1 / (1 + sqrt(2) s / w2 + s^2 / w2^2).
         ([1.0, 0.0, 0.0], [1.0, SQRT_2 / w2, 1.0 / (w2 * w2)], WK_F2_HZ),
-        // Acceleration-velocity transition.
-        ([1.0, 1.0 / w3, 0.0], [1.0, 1.0 / (WK_Q4 * w4), 1.0 / (w4 * w4)], WK_F4_HZ),
-        // Upward step.
-        (
-            [step_gain, step_gain / (WK_Q5 * w5), step_gain / (w5 * w5)],
-            [1.0, 1.0 / (WK_Q6 * w6), 1.0 / (w6 * w6)],
-            WK_F6_HZ,
-        ),
-    ]
+    ];
+    match weighting {
+        Weighting::Wk => {
+            let (w3, w4, w5, w6) = (w(WK_F3_HZ), w(WK_F4_HZ), w(WK_F5_HZ), w(WK_F6_HZ));
+            let step_gain = (w5 / w6) * (w5 / w6);
+            // Acceleration-velocity transition.
+            sections.push(([1.0, 1.0 / w3, 0.0], [1.0, 1.0 / (WK_Q4 * w4), 1.0 / (w4 * w4)], WK_F4_HZ));
+            // Upward step.
+            sections.push((
+                [step_gain, step_gain / (WK_Q5 * w5), step_gain / (w5 * w5)],
+                [1.0, 1.0 / (WK_Q6 * w6), 1.0 / (w6 * w6)],
+                WK_F6_HZ,
+            ));
+        }
+        Weighting::Wd => {
+            let (w3, w4) = (w(WD_F3_HZ), w(WD_F4_HZ));
+            // Acceleration-velocity transition (Wd has no upward step).
+            sections.push(([1.0, 1.0 / w3, 0.0], [1.0, 1.0 / (WD_Q4 * w4), 1.0 / (w4 * w4)], WD_F4_HZ));
+        }
+    }
+    sections
+}
+
+/// Magnitude of the analog weighting `weighting` at `frequency_hz` (Hz),
+/// dimensionless: the product of the sections of ISO 2631-1 Annex A,
+/// band limiting included. Even in `frequency_hz`, 0 at 0 Hz, NaN for a NaN
+/// frequency.
+pub fn weighting_gain(weighting: Weighting, frequency_hz: f64) -> f64 {
+    let s = Complex64::new(0.0, 2.0 * PI * frequency_hz);
+    analog_sections(weighting)
+        .iter()
+        .map(|(n, d, _)| (n[0] + n[1] * s + n[2] * s * s) / (d[0] + d[1] * s + d[2] * s * s))
+        .fold(Complex64::new(1.0, 0.0), |acc, h| acc * h)
+        .norm()
+}
+
+/// Magnitude of the analog ISO 2631-1 Wd weighting (horizontal axes) at
+/// `frequency_hz` (Hz), dimensionless; see [`weighting_gain`].
+pub fn wd_gain(frequency_hz: f64) -> f64 {
+    weighting_gain(Weighting::Wd, frequency_hz)
 }
 
 /// Magnitude of the analog ISO 2631-1 Wk weighting at `frequency_hz` (Hz),
@@ -123,12 +194,7 @@ fn analog_sections() -> [([f64; 3], [f64; 3], f64); 4] {
 /// module documentation, band-limiting included. The magnitude is even in
 /// `frequency_hz`; it is 0 at 0 Hz and NaN for a NaN frequency.
 pub fn wk_gain(frequency_hz: f64) -> f64 {
-    let s = Complex64::new(0.0, 2.0 * PI * frequency_hz);
-    analog_sections()
-        .iter()
-        .map(|(n, d, _)| (n[0] + n[1] * s + n[2] * s * s) / (d[0] + d[1] * s + d[2] * s * s))
-        .fold(Complex64::new(1.0, 0.0), |acc, h| acc * h)
-        .norm()
+    weighting_gain(Weighting::Wk, frequency_hz)
 }
 
 /// Checks a sample rate for the Wk filter (finite, >= the minimum).
@@ -161,7 +227,7 @@ fn bessel_i0(x: f64) -> f64 {
     sum
 }
 
-/// The Wk filter designed for one input sample rate.
+/// A weighting filter designed for one input sample rate.
 #[derive(Debug, Clone)]
 struct WkFilter {
     /// Input sample rate, Hz.
@@ -170,8 +236,8 @@ struct WkFilter {
     upsample: usize,
     /// Internal sample rate `L * sample_rate_hz`, Hz.
     internal_rate_hz: f64,
-    /// The four Wk sections, designed at the internal rate.
-    sections: [Biquad; 4],
+    /// The weighting's sections, designed at the internal rate.
+    sections: Vec<Biquad>,
     /// Interpolation taps: `phases[p - 1][j]` weights input sample
     /// `n + j - (INTERP_HALF_TAPS - 1)` for the value at time `n + p / L`
     /// (input samples), `p = 1..L`. Phase 0 is the input sample itself.
@@ -182,9 +248,18 @@ impl WkFilter {
     /// Designs the filter; `sample_rate_hz` must have passed
     /// [`check_wk_sample_rate`].
     fn new(sample_rate_hz: f64) -> Self {
+        Self::with(Weighting::Wk, sample_rate_hz)
+    }
+
+    /// Designs the filter of `weighting`; `sample_rate_hz` must have passed
+    /// [`check_wk_sample_rate`].
+    fn with(weighting: Weighting, sample_rate_hz: f64) -> Self {
         let upsample = ((WK_INTERNAL_MIN_RATE_HZ / sample_rate_hz).ceil() as usize).max(1);
         let internal_rate_hz = sample_rate_hz * upsample as f64;
-        let sections = analog_sections().map(|(n, d, fp)| Biquad::bilinear(n, d, fp, internal_rate_hz));
+        let sections = analog_sections(weighting)
+            .into_iter()
+            .map(|(n, d, fp)| Biquad::bilinear(n, d, fp, internal_rate_hz))
+            .collect();
         let half = INTERP_HALF_TAPS as f64;
         let i0_beta = bessel_i0(INTERP_KAISER_BETA);
         let phases = (1..upsample)
@@ -212,8 +287,8 @@ impl WkFilter {
     fn apply(&self, signal: &[f64]) -> Vec<f64> {
         let n = signal.len();
         let level = signal[0];
-        let mut state = [[0.0; 2]; 4];
-        let run = |x: f64, state: &mut [[f64; 2]; 4]| {
+        let mut state = vec![[0.0; 2]; self.sections.len()];
+        let run = |x: f64, state: &mut [[f64; 2]]| {
             self.sections.iter().zip(state.iter_mut()).fold(x, |v, (section, st)| section.step(st, v))
         };
         if self.upsample == 1 {
@@ -326,6 +401,63 @@ pub fn wk_weighting(signal: &[f64], sample_rate_hz: f64) -> Result<Vec<f64>, Ana
     Ok(out)
 }
 
+/// Magnitude of the digital filter [`wd_weighting`] applies at
+/// `sample_rate_hz` (Hz), evaluated at `frequency_hz` (Hz); dimensionless.
+/// The Wd counterpart of [`wk_digital_gain`].
+///
+/// # Errors
+/// As [`wk_digital_gain`].
+pub fn wd_digital_gain(frequency_hz: f64, sample_rate_hz: f64) -> Result<f64, AnalysisError> {
+    weighting_digital_gain(Weighting::Wd, frequency_hz, sample_rate_hz)
+}
+
+/// Magnitude of the digital filter of `weighting` at `sample_rate_hz` (Hz),
+/// evaluated at `frequency_hz` (Hz); dimensionless.
+///
+/// # Errors
+/// As [`wk_digital_gain`].
+pub fn weighting_digital_gain(
+    weighting: Weighting,
+    frequency_hz: f64,
+    sample_rate_hz: f64,
+) -> Result<f64, AnalysisError> {
+    check_wk_sample_rate(sample_rate_hz)?;
+    if !frequency_hz.is_finite() {
+        return Err(AnalysisError::InvalidParameter {
+            name: "frequency_hz",
+            value: frequency_hz,
+            expected: "a finite frequency in Hz",
+        });
+    }
+    Ok(WkFilter::with(weighting, sample_rate_hz).response(frequency_hz).norm())
+}
+
+/// Applies the ISO 2631-1 Wd frequency weighting (horizontal axes x, y) to
+/// `signal`: as [`wk_weighting`] (causal, starting in the steady state of the
+/// first sample, same length and units, same realisation and errors), with
+/// the Wd sections.
+///
+/// # Errors
+/// As [`wk_weighting`].
+pub fn wd_weighting(signal: &[f64], sample_rate_hz: f64) -> Result<Vec<f64>, AnalysisError> {
+    weighting(Weighting::Wd, signal, sample_rate_hz)
+}
+
+/// Applies the weighting `weighting` (Wk or Wd) to `signal`; see
+/// [`wk_weighting`] for the conventions.
+///
+/// # Errors
+/// As [`wk_weighting`].
+pub fn weighting(weighting: Weighting, signal: &[f64], sample_rate_hz: f64) -> Result<Vec<f64>, AnalysisError> {
+    check_wk_sample_rate(sample_rate_hz)?;
+    check_signal(signal, 1, "frequency weighting")?;
+    let out = WkFilter::with(weighting, sample_rate_hz).apply(signal);
+    if out.iter().any(|v| !v.is_finite()) {
+        return Err(AnalysisError::NumericOverflow { what: "frequency weighting output" });
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -363,6 +495,86 @@ mod tests {
     /// Sample rates to check: ride-quality analyzers (256 to 2000 Hz) and
     /// the simulator's 16384 Hz.
     const RATES_HZ: [f64; 6] = [256.0, 300.0, 512.0, 1000.0, 2000.0, 16384.0];
+
+    /// ISO 2631-1:1997 Table 3, weighting Wd (horizontal): nominal
+    /// one-third-octave centre frequency (Hz) and weighting factor (the table
+    /// gives factor x 1000), 0.1 Hz to 80 Hz.
+    const ISO_2631_TABLE_3_WD: [(f64, f64); 30] = [
+        (0.1, 0.0624),
+        (0.125, 0.0973),
+        (0.16, 0.158),
+        (0.2, 0.243),
+        (0.25, 0.365),
+        (0.315, 0.530),
+        (0.4, 0.713),
+        (0.5, 0.853),
+        (0.63, 0.944),
+        (0.8, 0.992),
+        (1.0, 1.011),
+        (1.25, 1.008),
+        (1.6, 0.968),
+        (2.0, 0.890),
+        (2.5, 0.776),
+        (3.15, 0.642),
+        (4.0, 0.512),
+        (5.0, 0.409),
+        (6.3, 0.323),
+        (8.0, 0.253),
+        (10.0, 0.202),
+        (12.5, 0.161),
+        (16.0, 0.125),
+        (20.0, 0.100),
+        (25.0, 0.080),
+        (31.5, 0.0632),
+        (40.0, 0.0494),
+        (50.0, 0.0388),
+        (63.0, 0.0295),
+        (80.0, 0.0211),
+    ];
+
+    #[test]
+    fn wd_analog_gain_reproduces_table_3_within_rounding() {
+        // Three significant digits in the table: relative rounding at most
+        // 0.5 / 62.4 = 0.8 % (0.1 Hz); asserted within one unit of the last
+        // printed digit.
+        for (f, w) in ISO_2631_TABLE_3_WD {
+            let unit = if w < 0.1 { 1e-4 } else { 1e-3 };
+            assert!((wd_gain(f) - w).abs() <= unit, "f = {f} Hz: analog {} vs table {w}", wd_gain(f));
+        }
+        // Wd differs from Wk: at 1 Hz Wd is about twice Wk (1.011 vs 0.482).
+        assert!((wd_gain(1.0) / wk_gain(1.0) - 1.011 / 0.482).abs() < 0.01);
+    }
+
+    #[test]
+    fn wd_digital_gain_matches_table_3_at_all_rates() {
+        // 1 % at every tabulated frequency from 0.5 Hz (as for Wk).
+        for fs in RATES_HZ {
+            for (f, w) in ISO_2631_TABLE_3_WD.iter().filter(|(f, _)| *f >= 0.5) {
+                let g = wd_digital_gain(*f, fs).unwrap();
+                assert!((g / w - 1.0).abs() < 0.01, "fs {fs} Hz, f {f} Hz: digital {g} vs table {w}");
+            }
+        }
+    }
+
+    #[test]
+    fn wd_sine_through_the_time_domain_filter_has_the_tabulated_amplitude() {
+        // A sine of 10 mg-equivalent amplitude at tabulated frequencies: the
+        // settled output amplitude (projection on sin/cos over whole periods)
+        // is the table's factor times the input amplitude.
+        for fs in [256.0, 16384.0] {
+            let n = (31.0 * fs) as usize;
+            let range = (20.0 * fs) as usize..(30.0 * fs) as usize;
+            for (f, w) in [(1.0, 1.011), (2.0, 0.890), (5.0, 0.409), (16.0, 0.125)] {
+                let x: Vec<f64> = (0..n).map(|k| 0.1 * (2.0 * PI * f * k as f64 / fs).sin()).collect();
+                let y = wd_weighting(&x, fs).unwrap();
+                let (a, b) = project(&y, fs, f, range.clone());
+                let amp = a.hypot(b) / 0.1;
+                assert!((amp / w - 1.0).abs() < 0.006, "fs {fs} f {f}: amplitude {amp} vs table {w}");
+            }
+        }
+        assert!(matches!(wd_weighting(&[], 256.0), Err(AnalysisError::EmptySignal)));
+        assert!(wd_digital_gain(1.0, 10.0).is_err());
+    }
 
     #[test]
     fn analog_gain_reproduces_table_3_within_rounding() {
@@ -445,7 +657,7 @@ mod tests {
     #[test]
     fn sections_match_analog_at_their_prewarp_frequencies() {
         let fs = 4096.0;
-        for (num, den, fp) in analog_sections() {
+        for (num, den, fp) in analog_sections(Weighting::Wk).into_iter().chain(analog_sections(Weighting::Wd)) {
             let q = Biquad::bilinear(num, den, fp, fs);
             let s = Complex64::new(0.0, 2.0 * PI * fp);
             let analog = (num[0] + num[1] * s + num[2] * s * s) / (den[0] + den[1] * s + den[2] * s * s);

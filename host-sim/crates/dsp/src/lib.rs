@@ -22,8 +22,10 @@ mod biquad;
 pub mod burg;
 pub mod dq0;
 pub mod filter;
+pub mod iso18738;
 pub mod iso2631;
 pub mod ride_quality;
+pub mod ride_regions;
 pub mod spectrogram;
 pub mod spectrum;
 pub mod stages;
@@ -52,8 +54,15 @@ pub(crate) mod test_signals {
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
 pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::highpass_zero_phase;
-pub use iso2631::{wk_digital_gain, wk_gain, wk_weighting};
+pub use iso18738::{ride_report, Axis, AxisFigures, MotionFigures, RegionFigures, RideInput, RideReport, SoundFigures};
+pub use iso2631::{
+    wd_digital_gain, wd_gain, wd_weighting, weighting, weighting_digital_gain, weighting_gain, wk_digital_gain,
+    wk_gain, wk_weighting, Weighting,
+};
 pub use ride_quality::{ride_quality, RideQuality, RideQualityReport, TravelDirection};
+pub use ride_regions::{
+    regions_from_acceleration, regions_from_speed, velocity_from_acceleration, RegionSource, RideRegions,
+};
 pub use spectrogram::{stft_spectrogram, Spectrogram};
 pub use spectrum::{amplitude_spectrum, AmplitudeSpectrum, SpectralPeak};
 pub use stages::{constant_speed_stage, travel_phases, TravelPhases};

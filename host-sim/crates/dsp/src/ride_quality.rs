@@ -231,14 +231,14 @@ pub fn ride_quality(
 
 /// Number of samples in the jerk fit window: `round(0.5 s * fs) + 1`, so
 /// that its first and last samples are [`JERK_FIT_WINDOW_S`] apart.
-fn jerk_window_len(sample_rate_hz: f64) -> usize {
+pub(crate) fn jerk_window_len(sample_rate_hz: f64) -> usize {
     (JERK_FIT_WINDOW_S * sample_rate_hz).round() as usize + 1
 }
 
 /// Acceleration low-passed at [`ACCELERATION_LOWPASS_HZ`] (causal
 /// 2nd-order Butterworth, starting in the steady state of the first sample).
 /// Requires a non-empty signal and `fs > 20 Hz`.
-fn lowpass_acceleration(signal: &[f64], sample_rate_hz: f64) -> Vec<f64> {
+pub(crate) fn lowpass_acceleration(signal: &[f64], sample_rate_hz: f64) -> Vec<f64> {
     let lp = Biquad::butterworth_lowpass(ACCELERATION_LOWPASS_HZ, sample_rate_hz);
     let mut state = lp.steady_state(signal[0]);
     signal.iter().map(|&x| lp.step(&mut state, x)).collect()
@@ -272,7 +272,7 @@ fn travel_direction(acceleration: &[f64]) -> TravelDirection {
 /// and `T(s) = sum_j j x[s+j]` are updated as the window moves
 /// (`S(s+1) = S(s) - x[s] + x[s+w]`, `T(s+1) = T(s) + w x[s+w] - S(s+1)`)
 /// and recomputed directly every `w` steps so that rounding cannot drift.
-fn sliding_slopes(x: &[f64], w: usize) -> Vec<f64> {
+pub(crate) fn sliding_slopes(x: &[f64], w: usize) -> Vec<f64> {
     let count = x.len() + 1 - w;
     let wf = w as f64;
     let mid = 0.5 * (wf - 1.0);
@@ -304,18 +304,23 @@ fn sliding_slopes(x: &[f64], w: usize) -> Vec<f64> {
 /// documentation): the stretches between consecutive sign changes, zeros
 /// ignored, without the first and last stretch.
 fn half_cycle_peaks(x: &[f64]) -> Vec<f64> {
+    half_cycle_peaks_indexed(x).into_iter().map(|(_, v)| v).collect()
+}
+
+/// [`half_cycle_peaks`] with the index into `x` of each peak.
+pub(crate) fn half_cycle_peaks_indexed(x: &[f64]) -> Vec<(usize, f64)> {
     let mut peaks = Vec::new();
     let mut sign = 0.0_f64;
-    let mut peak = 0.0_f64;
+    let mut peak = (0, 0.0_f64);
     let mut at_start = true;
-    for &v in x {
+    for (i, &v) in x.iter().enumerate() {
         if v == 0.0 {
             continue;
         }
         let s = v.signum();
         if s == sign {
-            if v.abs() > peak.abs() {
-                peak = v;
+            if v.abs() > peak.1.abs() {
+                peak = (i, v);
             }
         } else {
             // Zero crossing: the running stretch is complete unless it is
@@ -327,7 +332,7 @@ fn half_cycle_peaks(x: &[f64]) -> Vec<f64> {
                 at_start = false;
             }
             sign = s;
-            peak = v;
+            peak = (i, v);
         }
     }
     peaks
@@ -335,7 +340,7 @@ fn half_cycle_peaks(x: &[f64]) -> Vec<f64> {
 
 /// Nearest-rank 95th percentile of `sorted` (ascending, non-empty): the
 /// `ceil(0.95 N)`-th value.
-fn a95_nearest_rank(sorted: &[f64]) -> f64 {
+pub(crate) fn a95_nearest_rank(sorted: &[f64]) -> f64 {
     let rank = (95 * sorted.len()).div_ceil(100);
     sorted[rank.max(1) - 1]
 }

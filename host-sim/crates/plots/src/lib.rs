@@ -17,6 +17,10 @@
 
 #![warn(missing_docs)]
 
+pub mod panels;
+
+pub use panels::{envelope, stacked_plot, Band, Level, Mark, Panel};
+
 use std::fmt::Display;
 use std::fs;
 use std::ops::Range;
@@ -186,8 +190,10 @@ impl Series {
 /// Non-finite points are skipped and break the line. Series longer than
 /// [`MAX_POINTS_PER_SERIES`] points are reduced by keeping the minimum and
 /// maximum of each bucket of consecutive points, so peaks and the envelope
-/// survive while a 300 000-sample signal still draws quickly. A legend is
-/// drawn when there is more than one series.
+/// survive while a 300 000-sample signal still draws quickly; such a series
+/// is drawn as its min/max envelope (a filled band,
+/// [`panels::envelope`]) rather than as a zigzag line. A legend is drawn
+/// when there is more than one series.
 ///
 /// # Errors
 /// [`PlotError::NotPng`], [`PlotError::NoSeries`],
@@ -224,16 +230,7 @@ pub fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series:
             .draw()
             .map_err(draw_err)?;
         for (i, (s, runs)) in series.iter().zip(&prepared).enumerate() {
-            let color = palette(i);
-            let style = ShapeStyle::from(color).stroke_width(2);
-            for (j, run) in runs.iter().enumerate() {
-                let drawn = chart.draw_series(LineSeries::new(run.iter().copied(), style)).map_err(draw_err)?;
-                if j == 0 {
-                    drawn
-                        .label(s.name.as_str())
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
-                }
-            }
+            panels::draw_trace(&mut chart, s, runs, palette(i))?;
         }
         if series.len() > 1 {
             chart
@@ -534,8 +531,15 @@ fn render<F>(path: &Path, draw: F) -> Result<(), PlotError>
 where
     F: FnOnce(&DrawingArea<BitMapBackend<'_, RGBPixel>, Shift>) -> Result<(), PlotError>,
 {
+    render_sized(path, PLOT_WIDTH_PX, PLOT_HEIGHT_PX, draw)
+}
+
+/// [`render`] into a `w` x `h` pixel bitmap.
+fn render_sized<F>(path: &Path, w: u32, h: u32, draw: F) -> Result<(), PlotError>
+where
+    F: FnOnce(&DrawingArea<BitMapBackend<'_, RGBPixel>, Shift>) -> Result<(), PlotError>,
+{
     ensure_font()?;
-    let (w, h) = (PLOT_WIDTH_PX, PLOT_HEIGHT_PX);
     let mut pixels = vec![0u8; w as usize * h as usize * 3];
     {
         let backend = BitMapBackend::<RGBPixel>::with_buffer_and_format(&mut pixels, (w, h)).map_err(draw_err)?;
