@@ -44,7 +44,8 @@ pub struct TravelArgs {
     /// Counterweight-side rope length at the end, m (default: the rig's travel range).
     #[arg(long = "lw-end", value_name = "M", allow_negative_numbers = true)]
     pub lw_end_m: Option<f64>,
-    /// Longest integration step, s (default: a quarter of a PWM period).
+    /// Longest RK4 step, s, of plants with effects (default: a quarter of a PWM
+    /// period); the nominal plant takes one exact step per PWM half period.
     #[arg(long = "max-step", value_name = "S", allow_negative_numbers = true)]
     pub max_step_s: Option<f64>,
     /// Spectrogram window, s.
