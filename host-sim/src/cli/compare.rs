@@ -119,7 +119,8 @@ pub fn run(rig: &RigConfig, args: &CompareArgs) -> anyhow::Result<()> {
 }
 
 /// Files `compare` writes.
-const OUTPUTS: [&str; 5] = ["compare.csv", "compare.json", "compare.md", "compare_12x.png", "compare_a95.png"];
+const OUTPUTS: [&str; 6] =
+    ["compare.csv", "compare.json", "compare.md", "compare_summary.md", "compare_12x.png", "compare_a95.png"];
 
 /// Largest `compare.csv` that `--merge` reads, bytes (a full sweep's is
 /// about 100 kB).
@@ -142,6 +143,47 @@ fn read_rows(path: &Path) -> anyhow::Result<Vec<CompareRow>> {
         rows.push(row);
     }
     Ok(rows)
+}
+
+/// The summary per plant case and strategy, in the order the rows first
+/// name them: travels run, the order-12 change and the A95 change against
+/// no compensation (mean over the case's travels, the worst in brackets),
+/// the mean A95 and order-36 and order-72 amplitudes, the largest peak
+/// current, the median learning time, the travels where a harmonic backed off.
+fn summary_markdown(rows: &[CompareRow]) -> String {
+    let mut md = String::from(
+        "| plant | strategy | travels | car 12x vs off dB (worst) | A95 vs off dB (worst) | A95 mg mean | car 36x mean m/s^2 | car 72x mean m/s^2 | peak current A (max) | learning s (median) | backed off (travels) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut groups: Vec<(&str, &str)> = Vec::new();
+    for r in rows {
+        if !groups.contains(&(r.mismatch.as_str(), r.strategy.as_str())) {
+            groups.push((r.mismatch.as_str(), r.strategy.as_str()));
+        }
+    }
+    for (mismatch, strategy) in groups {
+        let g: Vec<&CompareRow> = rows.iter().filter(|r| r.mismatch == mismatch && r.strategy == strategy).collect();
+        let n = g.len() as f64;
+        let mean = |f: &dyn Fn(&CompareRow) -> f64| g.iter().map(|r| f(r)).sum::<f64>() / n;
+        let worst = |f: &dyn Fn(&CompareRow) -> f64| g.iter().map(|r| f(r)).fold(f64::NEG_INFINITY, f64::max);
+        let a95_db = |r: &CompareRow| 20.0 * (1.0 + r.a95_change_pct / 100.0).max(1e-12).log10();
+        let mut learning: Vec<f64> = g.iter().filter_map(|r| r.learning_time_s).collect();
+        learning.sort_by(f64::total_cmp);
+        let median = learning.get(learning.len() / 2).map_or("-".to_string(), |v| format!("{v:.1}"));
+        md += &format!(
+            "| {mismatch} | {strategy} | {} | {:+.1} ({:+.1}) | {:+.1} ({:+.1}) | {:.1} | {:.4} | {:.4} | {:.1} | {median} | {} |\n",
+            g.len(),
+            mean(&|r| r.car_12x_change_db),
+            worst(&|r| r.car_12x_change_db),
+            mean(&a95_db),
+            worst(&a95_db),
+            mean(&|r| r.a95_mg),
+            mean(&|r| r.car_36x_mps2),
+            mean(&|r| r.car_72x_mps2),
+            worst(&|r| r.peak_current_a),
+            g.iter().filter(|r| !r.backed_off_orders.is_empty()).count()
+        );
+    }
+    md
 }
 
 fn fmt_opt(v: Option<f64>) -> String {
@@ -198,6 +240,7 @@ fn write_outputs(
     }
     let md_path = out.join("compare.md");
     std::fs::write(&md_path, md)?;
+    std::fs::write(out.join("compare_summary.md"), summary_markdown(rows))?;
 
     // Per strategy: order-12 change and A95 change against the case index.
     let mut strategies: Vec<&str> = rows.iter().map(|r| r.strategy.as_str()).collect();
