@@ -278,3 +278,54 @@ fn write_outputs(
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(strategy: &str, change_db: f64, a95_pct: f64, learning: Option<f64>, backed_off: &str) -> CompareRow {
+        CompareRow {
+            case_index: 0,
+            strategy: strategy.into(),
+            m_car_kg: 70.5,
+            direction: "up".into(),
+            mismatch: "nominal".into(),
+            a95_mg: 10.0 * (1.0 + a95_pct / 100.0),
+            max_peak_to_peak_mg: 0.0,
+            car_12x_mps2: 0.0,
+            car_36x_mps2: 0.01,
+            car_72x_mps2: 0.002,
+            car_12x_change_db: change_db,
+            a95_change_pct: a95_pct,
+            peak_current_a: 5.0 - change_db / 10.0,
+            learning_time_s: learning,
+            travels: 1,
+            backed_off_orders: backed_off.into(),
+        }
+    }
+
+    #[test]
+    fn the_summary_takes_means_worst_cases_medians_and_counts_per_group() {
+        let rows = [
+            row("off", 0.0, 0.0, None, ""),
+            row("off", 0.0, 0.0, None, ""),
+            row("adaptive", -10.0, -50.0, Some(1.0), ""),
+            row("adaptive", -20.0, -75.0, Some(3.0), "12"),
+            row("adaptive", -30.0, -90.0, Some(2.0), ""),
+        ];
+        let md = summary_markdown(&rows);
+        let lines: Vec<&str> = md.lines().collect();
+        assert_eq!(lines.len(), 4, "{md}");
+        assert_eq!(
+            lines[2],
+            "| nominal | off | 2 | +0.0 (+0.0) | +0.0 (+0.0) | 10.0 | 0.0100 | 0.0020 | 5.0 | - | 0 |"
+        );
+        // A95 -50 %, -75 %, -90 %: 20 log10 of 0.5, 0.25, 0.1 = -6.02, -12.04,
+        // -20 dB, mean -12.69 dB; A95 5, 2.5 and 1 mg, mean 2.83 mg; peak
+        // current 6, 7 and 8 A; learning times 1, 2, 3 s: median 2 s.
+        assert_eq!(
+            lines[3],
+            "| nominal | adaptive | 3 | -20.0 (-10.0) | -12.7 (-6.0) | 2.8 | 0.0100 | 0.0020 | 8.0 | 2.0 | 1 |"
+        );
+    }
+}
