@@ -155,24 +155,7 @@ fn constant_speed_run(speed: &[f64], within: Range<usize>, fs: f64) -> Option<Ra
         return None;
     }
     let level = CONSTANT_SPEED_FRACTION * max;
-    let (mut best, mut run_start): (Range<usize>, Option<usize>) = (0..0, None);
-    for i in within.clone() {
-        match (speed[i] >= level, run_start) {
-            (true, None) => run_start = Some(i),
-            (false, Some(r)) => {
-                if i - r > best.len() {
-                    best = r..i;
-                }
-                run_start = None;
-            }
-            _ => {}
-        }
-    }
-    if let Some(r) = run_start {
-        if within.end - r > best.len() {
-            best = r..within.end;
-        }
-    }
+    let best = crate::stages::longest_run(within, |i| speed[i] >= level);
     (best.len() >= samples(MIN_CONSTANT_SPEED_S, fs)).then_some(best)
 }
 

@@ -127,25 +127,7 @@ fn stage_of_smoothed(s: &[f64]) -> Result<(f64, Range<usize>), AnalysisError> {
 
     // Longest run within the band (the first one on a tie).
     let band = BAND_FRACTION * level;
-    let (mut best, mut run_start) = (0..0, None);
-    for (i, &v) in s.iter().enumerate() {
-        let inside = (v - level).abs() <= band;
-        match (inside, run_start) {
-            (true, None) => run_start = Some(i),
-            (false, Some(r)) => {
-                if i - r > best.len() {
-                    best = r..i;
-                }
-                run_start = None;
-            }
-            _ => {}
-        }
-    }
-    if let Some(r) = run_start {
-        if s.len() - r > best.len() {
-            best = r..s.len();
-        }
-    }
+    let best = longest_run(0..s.len(), |i| (s[i] - level).abs() <= band);
     // The median sample itself is in the band, so the run is not empty.
     let edge = EDGE_FRACTION * level;
     let first = best.clone().find(|&i| s[i] >= edge);
@@ -229,6 +211,30 @@ pub fn travel_phases(speed_radps: &[f64], sample_rate_hz: f64) -> Result<TravelP
         deceleration: constant.end..end,
         stop: end..n,
     })
+}
+
+/// The longest run of consecutive indices in `within` where `inside`
+/// holds (the first one on a tie; empty when it never holds).
+pub(crate) fn longest_run(within: std::ops::Range<usize>, inside: impl Fn(usize) -> bool) -> std::ops::Range<usize> {
+    let (mut best, mut run_start) = (within.start..within.start, None);
+    for i in within.clone() {
+        match (inside(i), run_start) {
+            (true, None) => run_start = Some(i),
+            (false, Some(r)) => {
+                if i - r > best.len() {
+                    best = r..i;
+                }
+                run_start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(r) = run_start {
+        if within.end - r > best.len() {
+            best = r..within.end;
+        }
+    }
+    best
 }
 
 #[cfg(test)]
