@@ -356,15 +356,7 @@ impl WkFilter {
 /// [`AnalysisError::InvalidParameter`] for a non-finite frequency or a
 /// sample rate that is not finite or below [`WK_MIN_SAMPLE_RATE_HZ`].
 pub fn wk_digital_gain(frequency_hz: f64, sample_rate_hz: f64) -> Result<f64, AnalysisError> {
-    check_wk_sample_rate(sample_rate_hz)?;
-    if !frequency_hz.is_finite() {
-        return Err(AnalysisError::InvalidParameter {
-            name: "frequency_hz",
-            value: frequency_hz,
-            expected: "a finite frequency in Hz",
-        });
-    }
-    Ok(WkFilter::new(sample_rate_hz).response(frequency_hz).norm())
+    weighting_digital_gain(Weighting::Wk, frequency_hz, sample_rate_hz)
 }
 
 /// Applies the ISO 2631-1 Wk frequency weighting to `signal`.
