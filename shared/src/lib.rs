@@ -17,6 +17,7 @@ pub mod config;
 pub mod controller;
 pub mod current_loop;
 pub mod current_offset;
+pub mod dcp;
 pub mod fixed;
 pub mod frame;
 pub mod observer;
