@@ -20,6 +20,7 @@ pub mod current_offset;
 pub mod dcp;
 pub mod fixed;
 pub mod frame;
+pub mod lift_drive;
 pub mod observer;
 pub mod park_clarke;
 pub mod pi;
