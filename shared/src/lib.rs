@@ -22,6 +22,7 @@ pub mod fixed;
 pub mod frame;
 pub mod lift_drive;
 pub mod observer;
+pub mod param_store;
 pub mod park_clarke;
 pub mod pi;
 pub mod profile;
