@@ -28,13 +28,15 @@
 //! (MOE = 0), brake applied, until a reset command; a failed calibration
 //! latches until the chip restarts (there are no valid offsets to run with).
 
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::DWT;
 use critical_section::{CriticalSection, Mutex};
 use drive_core::controller::{CommandError, Telemetry};
 use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
+use drive_core::dcp::StopReason;
+use drive_core::lift_drive::{self, ControllerCommand};
 use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::interrupt;
@@ -67,12 +69,16 @@ const COMMAND_CAPACITY: usize = 4;
 pub enum Command {
     /// Start a travel (accepted only when calibrated, fault-free and idle).
     Travel(TravelCommand),
+    /// Stop now in the safe state (inverter off, brake applied): the DCP
+    /// slave's timeout or a travel interruption. Changes nothing when idle
+    /// or tripped, and never clears a fault.
+    SafeStop(StopReason),
     /// Clear latched faults: the controller's, and the firmware's overrun and
     /// break latches (not a failed calibration). Refused when nothing is
     /// latched, so that it can never stop a running travel.
     #[allow(
         dead_code,
-        reason = "no reset source on this board yet (the chip reset clears faults); a host link submits it"
+        reason = "no reset source yet (the chip reset clears faults): the DCP fault-reset message is not implemented"
     )]
     Reset,
 }
@@ -152,6 +158,22 @@ pub struct Record {
     pub telemetry: Telemetry,
 }
 
+/// The drive as the DCP task sees it, written by every step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Snapshot {
+    /// Controller state after the latest step (`None` before it runs).
+    pub state: Option<DriveState>,
+    /// Estimated shaft speed, rad/s.
+    pub speed_radps: f32,
+    /// Current offsets calibrated and no firmware fault latched.
+    pub ready_gate: bool,
+}
+
+/// The latest [`Snapshot`].
+pub fn snapshot() -> Snapshot {
+    critical_section::with(|cs| SNAPSHOT.borrow(cs).get())
+}
+
 enum Phase {
     Settling(u16),
     Calibrating(OffsetCalibration),
@@ -172,6 +194,8 @@ static DRIVE: Mutex<RefCell<Option<Drive>>> = Mutex::new(RefCell::new(None));
 static RECORDS: Mutex<RefCell<Deque<Record, RECORD_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
 static EVENTS: Mutex<RefCell<Deque<Event, EVENT_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
 static COMMANDS: Mutex<RefCell<Deque<Command, COMMAND_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
+static SNAPSHOT: Mutex<Cell<Snapshot>> =
+    Mutex::new(Cell::new(Snapshot { state: None, speed_radps: 0.0, ready_gate: false }));
 static STEPS: AtomicU32 = AtomicU32::new(0);
 static MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
 static DROPPED: AtomicU32 = AtomicU32::new(0);
@@ -314,6 +338,11 @@ impl Drive {
             self.latch(cs, FirmwareFault::TriggerOverrun);
         }
         MAX_CYCLES.fetch_max(cycles, Ordering::Relaxed);
+        SNAPSHOT.borrow(cs).set(Snapshot {
+            state: output.map(|o| o.state),
+            speed_radps: output.map_or(0.0, |o| o.telemetry.speed_radps),
+            ready_gate: self.fault.is_none() && matches!(self.phase, Phase::Running(_)),
+        });
 
         if self.steps % RECORD_DECIMATION == 0 {
             let record = Record {
@@ -392,6 +421,8 @@ impl Drive {
                     self.controller.command_travel(travel).map_err(Refusal::Controller)
                 }
             }
+            Command::SafeStop(reason) => lift_drive::apply(ControllerCommand::SafeStop(reason), &mut self.controller)
+                .map_err(Refusal::Controller),
             Command::Reset => {
                 let controller_tripped = matches!(self.controller.state(), DriveState::Tripped(_));
                 match self.fault {
