@@ -8,6 +8,7 @@
 //! `DEFMT_LOG=debug`.
 
 use defmt::{debug, error, info, warn};
+use drive_core::alignment::AlignmentError;
 use drive_core::controller::CommandError;
 use drive_core::current_offset::OffsetError;
 use drive_core::supervisor::Fault;
@@ -107,13 +108,17 @@ fn log_event(event: &Event) {
             let [u, v, w] = offsets.zero_current_codes;
             info!(
                 "current offsets calibrated with the inverter off: zero-current codes U {=u16} V {=u16} W {=u16} \
-                 (mid-scale {=u16}); drive idle, waiting for the lift controller",
+                 (mid-scale {=u16}); aligning the rotor (brake open, current injected)",
                 u,
                 v,
                 w,
                 DRIVE_CONFIG.adc_zero_code()
             );
         }
+        Event::Aligned(count) => info!(
+            "rotor aligned: encoder count {=u32} at electrical angle zero (checks passed); brake applied, drive idle",
+            count
+        ),
         Event::Fault(fault) => log_fault(fault),
         Event::Applied(command) => info!("command applied: {=str}", command_name(&command)),
         Event::Refused(command, refusal) => {
@@ -139,6 +144,24 @@ fn log_fault(fault: FirmwareFault) {
         }
         FirmwareFault::AdcSequenceIncomplete => {
             error!("ADC1 sequence incomplete at ADC2's end of sequence: {=str}", SAFE)
+        }
+        FirmwareFault::Alignment(error) => {
+            let (what, counts) = match error {
+                AlignmentError::CurrentNotReached => ("the injected current was not reached", 0),
+                AlignmentError::NotSettled(c) => ("the rotor did not settle (counts of motion)", c as i32),
+                AlignmentError::NoMotion(c) => ("the rotor did not turn (brake applied or no torque; counts)", c),
+                AlignmentError::WrongDirection(c) => {
+                    ("the rotor turned backwards (phase order or encoder direction; counts)", c)
+                }
+                AlignmentError::WrongDistance(c) => {
+                    ("the rotor turned by the wrong angle (pole pairs or encoder counts; counts)", c)
+                }
+                AlignmentError::NotRepeatable(c) => {
+                    ("the rotor did not return to its aligned position (counts off)", c)
+                }
+                AlignmentError::Runaway(c) => ("the load pulled the rotor off the current vector (counts)", c),
+            };
+            error!("rotor alignment failed: {=str} {=i32}: {=str} until restart", what, counts, SAFE)
         }
         FirmwareFault::Calibration(error) => match error {
             OffsetError::NotEnoughSamples { samples, required } => error!(
