@@ -20,7 +20,7 @@
 //! controller having no controlled stop on command.
 
 use crate::config::{Direction, DriveConfig};
-use crate::controller::{CommandError, Controller, DriveState, TravelCommand};
+use crate::controller::{CommandError, ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, FRAME_LEN};
 use crate::dcp::slave::{DriveStatus, Outcome, Refusal, Request, Slave, SlaveConfig, StopReason, Travel};
 
@@ -208,6 +208,115 @@ impl DcpPort {
         match controller_command(request, &self.geometry, self.m_car_kg) {
             Ok(command) => event.command = Some(command),
             Err(e) => event.unsupported = Some(e),
+        }
+    }
+}
+
+/// Most DCP bytes one [`LiftDrive::step`] takes.
+pub const MAX_BYTES_PER_STEP: usize = 8;
+
+/// Most reply bytes one [`LiftDrive::step`] gives: a reply per byte and one for the poll.
+pub const MAX_REPLY_PER_STEP: usize = 6 * (MAX_BYTES_PER_STEP + 1);
+
+/// The drive's application layer in one call per PWM period, for targets
+/// that run the DCP line and the controller in one loop (the
+/// processor-in-the-loop target and its host shadow): the DCP bytes
+/// received since the previous period, time stamped with this period's
+/// sensor time, then the controller step. The firmware runs the same
+/// [`DcpPort`] in a task of its own and hands the commands to the control
+/// interrupt.
+#[derive(Clone, Copy, Debug)]
+pub struct LiftDrive {
+    controller: Controller,
+    port: DcpPort,
+    config: DriveConfig,
+    state: DriveState,
+    speed_radps: f32,
+}
+
+/// What one [`LiftDrive::step`] did besides the controller step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepDcp {
+    /// Reply bytes to send, in order (the first `reply_len`).
+    pub reply: [u8; MAX_REPLY_PER_STEP],
+    /// Reply bytes used.
+    pub reply_len: usize,
+    /// A command applied to the controller this period, and its result.
+    pub applied: Option<(ControllerCommand, Result<(), CommandError>)>,
+    /// A message got the error answer this period.
+    pub refused: Option<Refusal>,
+}
+
+impl LiftDrive {
+    /// The application layer of `controller` with `port`; `config` is the controller's.
+    pub fn new(controller: Controller, port: DcpPort, config: &DriveConfig) -> Self {
+        Self { controller, port, config: *config, state: DriveState::Idle, speed_radps: 0.0 }
+    }
+
+    /// The controller.
+    pub fn controller(&self) -> &Controller {
+        &self.controller
+    }
+
+    /// The controller, to install compensation or command it directly.
+    pub fn controller_mut(&mut self) -> &mut Controller {
+        &mut self.controller
+    }
+
+    /// The DCP port.
+    pub fn port(&self) -> &DcpPort {
+        &self.port
+    }
+
+    /// One PWM period: [`LiftDrive::dcp_step`], then [`LiftDrive::control_step`].
+    pub fn step(&mut self, dcp_in: &[u8], sensors: &SensorFrame) -> (ControlOutput, StepDcp) {
+        let dcp = self.dcp_step(dcp_in, sensors.time_us);
+        (self.control_step(sensors), dcp)
+    }
+
+    /// The DCP part of a period: the bytes `dcp_in` (at most
+    /// [`MAX_BYTES_PER_STEP`]; the rest are ignored) time stamped `now_us`
+    /// (the period's sensor time), then the idle gap and the timeout; the
+    /// commands go to the controller at once. The drive status the slave
+    /// sees is the previous period's.
+    pub fn dcp_step(&mut self, dcp_in: &[u8], now_us: u32) -> StepDcp {
+        let mut dcp = StepDcp { reply: [0; MAX_REPLY_PER_STEP], reply_len: 0, applied: None, refused: None };
+        for &byte in dcp_in.iter().take(MAX_BYTES_PER_STEP) {
+            let status = drive_status(self.state, self.speed_radps, true, &self.config);
+            let event = self.port.byte(byte, now_us, &status);
+            self.handle(&event, &mut dcp);
+        }
+        let status = drive_status(self.state, self.speed_radps, true, &self.config);
+        let event = self.port.poll(now_us, &status);
+        self.handle(&event, &mut dcp);
+        dcp
+    }
+
+    /// The controller part of a period.
+    pub fn control_step(&mut self, sensors: &SensorFrame) -> ControlOutput {
+        let output = self.controller.step(sensors);
+        self.state = output.state;
+        self.speed_radps = output.telemetry.speed_radps;
+        output
+    }
+
+    fn handle(&mut self, event: &PortEvent, dcp: &mut StepDcp) {
+        if let Some(reply) = event.reply {
+            let end = (dcp.reply_len + reply.len()).min(MAX_REPLY_PER_STEP);
+            let n = end - dcp.reply_len;
+            dcp.reply[dcp.reply_len..end].copy_from_slice(&reply[..n]);
+            dcp.reply_len = end;
+        }
+        if event.refused.is_some() {
+            dcp.refused = event.refused;
+        }
+        if let Some(command) = event.command {
+            let result = apply(command, &mut self.controller);
+            if result.is_ok() {
+                // The next status already shows a started travel or a stop.
+                self.state = self.controller.state();
+            }
+            dcp.applied = Some((command, result));
         }
     }
 }
