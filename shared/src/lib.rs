@@ -28,6 +28,7 @@ pub mod park_clarke;
 pub mod pi;
 pub mod profile;
 pub mod ripple;
+pub mod service;
 pub mod speed_estimator;
 pub mod speed_loop;
 pub mod supervisor;
