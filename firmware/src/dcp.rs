@@ -75,6 +75,10 @@ pub async fn run(mut uart: BufferedUart<'static>, mut port: DcpPort) {
     let mut pending: Option<Command> = None;
     let mut buf = [0u8; 8];
     loop {
+        // The load weighing of the service port, from the next travel on.
+        if let Some(m_car_kg) = crate::service::car_mass_kg() {
+            port.set_car_mass(m_car_kg);
+        }
         let event = match with_timeout(Duration::from_micros(POLL_US), uart.read(&mut buf)).await {
             Ok(Ok(n)) => {
                 for &byte in &buf[..n] {

@@ -39,6 +39,10 @@
 //! stored. A latched fault is cleared by restarting the chip (reset button
 //! B2), which also repeats the calibration.
 //!
+//! Service port (`service.rs`): LPUART1 on the ST-LINK virtual COM port,
+//! the line protocol of `drive_core::service` (`host-sim drive --port`):
+//! strategy, table, car mass (settable), fault log, state.
+//!
 //! Compensation: the ripple-compensation strategy and its harmonic table
 //! are parameters, read at start-up from the parameter record in flash
 //! (`params.rs`, version and CRC checked); without a valid record the drive
@@ -64,6 +68,7 @@ mod dcp;
 mod encoder;
 mod params;
 mod pwm;
+mod service;
 mod telemetry;
 mod timebase;
 mod watchdog;
@@ -76,7 +81,7 @@ use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::Controller;
 use embassy_executor::Spawner;
-use embassy_stm32::peripherals::USART3;
+use embassy_stm32::peripherals::{LPUART1, USART3};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::{bind_interrupts, usart};
 
@@ -90,6 +95,7 @@ pub const DCP_MODE: Mode = Mode::Dcp4;
 
 bind_interrupts!(struct Irqs {
     USART3 => usart::BufferedInterruptHandler<USART3>;
+    LPUART1 => usart::BufferedInterruptHandler<LPUART1>;
 });
 
 /// The offline compensation table: the rig's ripple (`RIPPLE`), negated.
@@ -167,6 +173,19 @@ async fn main(spawner: Spawner) {
         if stored.is_some() { "stored parameters" } else { "defaults" },
         m_car_kg
     );
+    critical_section::with(|cs| {
+        service::STATE.borrow_ref_mut(cs).replace(drive_core::service::ServiceState {
+            strategy,
+            table,
+            m_car_kg,
+            faults: [0; drive_core::service::FAULT_LOG],
+            fault_count: 0,
+            state_code: 0,
+            speed_radps: 0.0,
+            travelling: false,
+            strategy_settable: false,
+        });
+    });
     control::start(controller, brake);
     info!(
         "control interrupt running: current loop {=f32} Hz, speed loop {=f32} Hz; calibrating current offsets",
@@ -194,6 +213,13 @@ async fn main(spawner: Spawner) {
             return;
         }
     };
+    let service_tx = defmt::unwrap!(cortex_m::singleton!(: [u8; 512] = [0; 512]));
+    let service_rx = defmt::unwrap!(cortex_m::singleton!(: [u8; 128] = [0; 128]));
+    match usart::BufferedUart::new(p.LPUART1, p.PA3, p.PA2, service_tx, service_rx, Irqs, service::uart_config()) {
+        Ok(uart) => spawner.spawn(defmt::unwrap!(service::run(uart))),
+        Err(e) => error!("LPUART1 (service port) setup failed ({}): no service port", e),
+    }
+
     let slave = SlaveConfig::new(DCP_MODE, dcp_speeds(), LIFT_GEOMETRY.shaft_travel_mm);
     spawner.spawn(defmt::unwrap!(dcp::run(uart, DcpPort::new(slave, LIFT_GEOMETRY, m_car_kg))));
 }

@@ -51,6 +51,9 @@ pub async fn run(mut watchdog: Watchdog) {
         while let Some(record) = control::pop_record() {
             records = records.wrapping_add(1);
             if record.state != last_state {
+                if let Some(DriveState::Tripped(fault)) = record.state {
+                    crate::service::log_fault(fault.code());
+                }
                 info!("drive state: {=str} -> {=str}", state_name(last_state), state_name(record.state));
                 last_state = record.state;
             }

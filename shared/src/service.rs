@@ -17,7 +17,8 @@
 //! | `get state` | `state <code> speed <rad/s>` (`DriveState::code`) |
 //!
 //! Anything else is answered `error <reason>`, never acted on. A `set` is
-//! refused while a travel runs (`error busy`).
+//! refused while a travel runs (`error busy`); a drive that cannot install
+//! another strategy answers `set strategy` with `error unsupported`.
 
 use core::fmt::Write;
 
@@ -63,6 +64,8 @@ pub enum RequestError {
     Mass,
     /// A `set` while a travel runs.
     Busy,
+    /// A request this drive does not carry out (see [`ServiceState::strategy_settable`]).
+    Unsupported,
 }
 
 impl RequestError {
@@ -74,6 +77,7 @@ impl RequestError {
             RequestError::Strategy => "unknown-strategy",
             RequestError::Mass => "mass-out-of-range",
             RequestError::Busy => "busy",
+            RequestError::Unsupported => "unsupported",
         }
     }
 }
@@ -129,6 +133,8 @@ pub struct ServiceState {
     pub speed_radps: f32,
     /// A travel runs (sets are refused).
     pub travelling: bool,
+    /// Whether `set strategy` is carried out (false: answered `error unsupported`).
+    pub strategy_settable: bool,
 }
 
 impl ServiceState {
@@ -179,6 +185,8 @@ pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
         let is_set = matches!(request, Request::SetStrategy(_) | Request::SetMass(_));
         if is_set && state.travelling {
             Err(RequestError::Busy)
+        } else if matches!(request, Request::SetStrategy(_)) && !state.strategy_settable {
+            Err(RequestError::Unsupported)
         } else {
             Ok(request)
         }
@@ -229,6 +237,7 @@ mod tests {
             state_code: 0,
             speed_radps: 0.0,
             travelling: false,
+            strategy_settable: true,
         }
     }
 
@@ -277,6 +286,9 @@ mod tests {
         s.travelling = true;
         assert_eq!(ask("set mass 50", &mut s), "error busy");
         s.travelling = false;
+        s.strategy_settable = false;
+        assert_eq!(ask("set strategy off", &mut s), "error unsupported");
+        s.strategy_settable = true;
         assert_eq!(s, before);
     }
 
