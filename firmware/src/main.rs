@@ -13,10 +13,11 @@
 //!
 //! The control interrupt (`control.rs`, highest priority) runs
 //! `drive_core::Controller::step` once per PWM period with the measured values;
-//! the speed loop, the profile and the speed observer run inside it. Two
+//! the speed loop, the profile and the speed observer run inside it. Three
 //! Embassy tasks: `telemetry.rs` logs what the interrupt queues and feeds
 //! the watchdog while the interrupt is alive; `dcp.rs` answers the lift
-//! controller and submits its commands.
+//! controller and submits its commands; `service.rs` answers the service
+//! port.
 //!
 //! Start-up: clocks, then the peripherals with the inverter off (MOE = 0,
 //! brake applied), then the control interrupt, which waits 10 ms for the
@@ -28,15 +29,18 @@
 //! readings are trustworthy. (The switching noise that couples into the
 //! readings is therefore not part of the offset.) A rejected calibration
 //! latches a fault (PWM off, brake applied) and the log says why; otherwise
-//! the drive is Idle and waits for a travel command.
+//! the rotor alignment follows (`drive_core::alignment`: current injected at
+//! electrical 0, +90 and 0 degrees with the brake open, checked from the
+//! encoder; a failure latches a fault), the brake is set, and the drive is
+//! Idle and reports itself ready to the lift controller.
 //!
 //! Travel commands come from a lift controller over DCP (`dcp.rs`: USART3,
 //! RS-485 half duplex with the USART driving the transceiver's DE): DCP4
 //! distance travels with the position message after each stop; the slave's
 //! timeout watchdog stops the drive safely (inverter off, brake applied)
 //! when the master falls silent. The car mass of the load weighing is a
-//! parameter (`params.rs`), the heaviest car of the rig until one is
-//! stored. A latched fault is cleared by restarting the chip (reset button
+//! parameter (`params.rs`, settable on the service port), the heaviest car
+//! of the rig until one is stored. A latched fault is cleared by restarting the chip (reset button
 //! B2), which also repeats the calibration.
 //!
 //! Service port (`service.rs`): LPUART1 on the ST-LINK virtual COM port,
