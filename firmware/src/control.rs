@@ -170,8 +170,12 @@ pub struct Snapshot {
     pub state: Option<DriveState>,
     /// Estimated shaft speed, rad/s.
     pub speed_radps: f32,
-    /// Current offsets calibrated and no firmware fault latched.
+    /// Current offsets calibrated, rotor aligned and no firmware fault latched.
     pub ready_gate: bool,
+    /// Inverter outputs on after the latest step (also during the alignment).
+    pub pwm_on: bool,
+    /// Brake released after the latest step (also during the alignment).
+    pub brake_released: bool,
 }
 
 /// The latest [`Snapshot`].
@@ -217,8 +221,13 @@ static DRIVE: Mutex<RefCell<Option<Drive>>> = Mutex::new(RefCell::new(None));
 static RECORDS: Mutex<RefCell<Deque<Record, RECORD_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
 static EVENTS: Mutex<RefCell<Deque<Event, EVENT_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
 static COMMANDS: Mutex<RefCell<Deque<Command, COMMAND_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
-static SNAPSHOT: Mutex<Cell<Snapshot>> =
-    Mutex::new(Cell::new(Snapshot { state: None, speed_radps: 0.0, ready_gate: false }));
+static SNAPSHOT: Mutex<Cell<Snapshot>> = Mutex::new(Cell::new(Snapshot {
+    state: None,
+    speed_radps: 0.0,
+    ready_gate: false,
+    pwm_on: false,
+    brake_released: false,
+}));
 static STEPS: AtomicU32 = AtomicU32::new(0);
 static MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
 static DROPPED: AtomicU32 = AtomicU32::new(0);
@@ -373,6 +382,8 @@ impl Drive {
             state: output.map(|o| o.state),
             speed_radps: output.map_or(0.0, |o| o.telemetry.speed_radps),
             ready_gate: self.fault.is_none() && matches!(self.phase, Phase::Running(_)),
+            pwm_on,
+            brake_released,
         });
 
         if self.steps % RECORD_DECIMATION == 0 {

@@ -60,8 +60,13 @@ fn status() -> drive_core::dcp::DriveStatus {
     let s = control::snapshot();
     match s.state {
         Some(state) => drive_status(state, s.speed_radps, s.ready_gate, &DRIVE_CONFIG),
-        // Calibrating, or the calibration failed: not ready, nothing moving.
-        None => drive_core::dcp::DriveStatus::default(),
+        // Calibrating or aligning (or failed): not ready; during the
+        // alignment the inverter drives the machine with the brake open.
+        None => drive_core::dcp::DriveStatus {
+            travelling: s.pwm_on,
+            brake_open: s.brake_released,
+            ..drive_core::dcp::DriveStatus::default()
+        },
     }
 }
 
