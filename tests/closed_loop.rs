@@ -2,10 +2,10 @@
 //! balance (Eqn 4, 13), ripple lines in the car acceleration, growth of the
 //! 12th-order line near the first elastic mode, and integrator accuracy.
 
+use crate::support::{constant_speed_range, mean, reference_travel, rig, rms};
 use closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
 use drive_core::config::Direction;
 use dsp::amplitude_spectrum;
-use integration_tests::{constant_speed_range, mean, reference_travel, rig, rms};
 use plant::effects::{EffectKind, Effects};
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, CAR};

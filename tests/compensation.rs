@@ -2,10 +2,11 @@
 //! against the simulated plant, the best strategy on the 8 nominal travels,
 //! and every strategy on the mismatch cases. By default the two sweeps run a
 //! fixed subset of their travels; the full sweeps are ignored tests, run with
-//! `cargo test --release -p integration-tests -- --ignored NAME`.
+//! `cargo test --release -p host-sim --test integration -- --ignored NAME`.
 
 use std::thread;
 
+use crate::support::rig;
 use closed_loop::compensation::{all_cases, calibrate_table, compensator, run_case, CompareRow, Mismatch};
 use closed_loop::{simulate_travel_with, SimOptions, StepLog, TravelSpec};
 use drive_core::config::Direction;
@@ -14,7 +15,6 @@ use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::response::{chain_response, loop_response};
 use drive_core::ripple::{RippleCompensator, Strategy};
 use drive_core::speed_loop::equivalent_inertia_kg_m2;
-use integration_tests::rig;
 use plant::modes::natural_modes;
 use plant::rope::ChainParams;
 
@@ -175,7 +175,7 @@ fn the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_a_
 }
 
 /// The best strategy on the 8 nominal travels (the full sweep):
-/// `cargo test --release -p integration-tests -- --ignored
+/// `cargo test --release -p host-sim --test integration -- --ignored
 /// the_best_strategy_lowers_the_12x_car_vibration_20_db_and_a95_60_percent_on_every_nominal_travel --nocapture`.
 #[test]
 #[ignore = "full sweep: run with --ignored"]
@@ -238,7 +238,7 @@ fn no_strategy_makes_a_subset_of_the_mismatch_cases_worse_than_no_compensation_b
 }
 
 /// Every strategy on every mismatch case (the full sweep):
-/// `cargo test --release -p integration-tests -- --ignored
+/// `cargo test --release -p host-sim --test integration -- --ignored
 /// no_strategy_makes_a_mismatch_case_worse_than_no_compensation_by_more_than_1_db --nocapture`.
 #[test]
 #[ignore = "full sweep: run with --ignored"]
@@ -256,7 +256,7 @@ fn a_table_that_only_adds_vibration_backs_off() {
     for r in rig.ripple.iter_mut() {
         r.amplitude_nm = 0.0;
     }
-    let nominal = integration_tests::rig();
+    let nominal = crate::support::rig();
     let table = closed_loop::compensation::rig_ripple_table(&nominal).negated();
     let spec = TravelSpec::full_travel(&rig, 70.5, Direction::Up);
     let (_, after) = closed_loop::compensation::travel_with_compensator(

@@ -8,10 +8,10 @@
 
 use std::f64::consts::{PI, TAU};
 
+use crate::support::{constant_speed_range, mean, rig};
 use closed_loop::{simulate_travel, SimOptions, TravelRun, TravelSpec};
 use drive_core::config::Direction;
 use dsp::amplitude_spectrum;
-use integration_tests::{constant_speed_range, mean, rig};
 use plant::effects::{
     CarFrameMode, CoulombGuideFriction, CurrentSensorError, DeadTime, DivertingPulley, EffectKind, Effects,
     EncoderError, RopeDiscretization, SheaveEccentricity,

@@ -5,9 +5,10 @@
 //! below the trip levels; and arbitrary sensor inputs never make the
 //! controller panic or leave its safe state once tripped.
 //!
-//! `cargo test -p integration-tests --test integration faults:: -- --nocapture`
+//! `cargo test -p host-sim --test integration faults:: -- --nocapture`
 //! prints the measured figures.
 
+use crate::support::rig;
 use closed_loop::faults::run::{run_case_with, FaultCase, FaultOutcome};
 use closed_loop::faults::{parse_fault, FaultSpec};
 use closed_loop::{simulate_travel_with, DriveController, SimError, SimOptions, TravelSpec};
@@ -15,7 +16,6 @@ use drive_core::config::Direction;
 use drive_core::controller::CommandError;
 use drive_core::supervisor::{Fault, MonitorLevels, BACK_EMF_TAU_S, CURRENT_SUM_TAU_S};
 use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
-use integration_tests::rig;
 use proptest::prelude::*;
 
 /// Current-loop period of the rig, s.

@@ -34,7 +34,7 @@ use proptest::prelude::*;
 const VOLTAGE_BOUND_V: f64 = 0.25;
 
 fn drive() -> DriveConfig {
-    integration_tests::rig().drive_config()
+    crate::support::rig().drive_config()
 }
 
 /// The same current-loop step in f64, from empty integrators.

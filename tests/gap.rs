@@ -15,7 +15,7 @@
 //! Datasets are small to keep the test short: two car masses, up and down,
 //! over 2.5 m of travel, and two free decays, sampled at 16 kHz. The blind
 //! test runs three effects by default; the sweep over all ten is an ignored
-//! test (`cargo test --release -p integration-tests -- --ignored
+//! test (`cargo test --release -p host-sim --test integration -- --ignored
 //! blind_every_effect_is_named_and_removes_the_held_out_gap --nocapture`).
 
 use closed_loop::synthetic::{add_noise, make_dataset, DatasetSpec};
@@ -200,7 +200,7 @@ fn blind_subset_effects_are_named_and_remove_the_held_out_gap() {
 }
 
 /// The blind test on every effect of the library (about 14 min on two
-/// cores): `cargo test --release -p integration-tests -- --ignored
+/// cores): `cargo test --release -p host-sim --test integration -- --ignored
 /// blind_every_effect_is_named_and_removes_the_held_out_gap --nocapture`.
 #[test]
 #[ignore = "full sweep: run with --ignored"]

@@ -2,7 +2,7 @@
 //! det(K - w^2 M) found by scanning and bisection with a hand-written
 //! Gaussian elimination, against the eigen-solver used by `host-sim modes`.
 
-use integration_tests::rig;
+use crate::support::rig;
 use plant::modes::natural_modes;
 use plant::rope::ChainParams;
 

@@ -7,15 +7,15 @@
 //! compared with the plant's, both band-passed 1-80 Hz (zero phase), from
 //! brake lift to landing (end of the `Travel` state). By default two of the
 //! travels run (the ones with the largest error); the sweeps over all 8 are
-//! ignored tests, run with `cargo test --release -p integration-tests --
+//! ignored tests, run with `cargo test --release -p host-sim --test integration --
 //! --ignored NAME`.
 
+use crate::support::{rig, rms};
 use closed_loop::{simulate_travel_with, SimOptions, StepLog, TravelRun, TravelSpec};
 use drive_core::config::Direction;
 use drive_core::observer::{ChainObserver, ObserverTuning};
 use drive_core::{Controller, DriveState};
 use dsp::highpass_zero_phase;
-use integration_tests::{rig, rms};
 use plant::modes::natural_modes;
 use plant::rope::ChainParams;
 use rig_config::RigConfig;
@@ -197,7 +197,7 @@ fn car_acceleration_error_under_25_percent_on_a_subset_of_the_nominal_travels() 
     assert_all_below(&outcomes, 0.25);
 }
 
-/// The full sweep: `cargo test --release -p integration-tests -- --ignored
+/// The full sweep: `cargo test --release -p host-sim --test integration -- --ignored
 /// car_acceleration_error_under_25_percent_on_all_8_nominal_travels --nocapture`.
 #[test]
 #[ignore = "full sweep: run with --ignored"]
@@ -229,7 +229,7 @@ fn car_acceleration_error_under_40_percent_with_the_plant_ea_off_by_20_percent_o
     }
 }
 
-/// The full sweep: `cargo test --release -p integration-tests -- --ignored
+/// The full sweep: `cargo test --release -p host-sim --test integration -- --ignored
 /// car_acceleration_error_under_40_percent_with_the_plant_ea_off_by_20_percent --nocapture`.
 #[test]
 #[ignore = "full sweep: run with --ignored"]

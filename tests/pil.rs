@@ -4,12 +4,12 @@
 
 use std::time::Instant;
 
+use crate::support::rig;
 use closed_loop::pil::{PilOptions, PilTarget};
 use closed_loop::{simulate_travel_with, DriveController, SimOptions, StepLog, TravelSpec};
 use drive_core::config::Direction;
 use drive_core::frame::StepReport;
 use drive_core::{ControlOutput, Controller, DriveState};
-use integration_tests::rig;
 
 fn launch() -> PilTarget {
     PilTarget::launch(&PilOptions::default(), &rig().drive_config()).unwrap_or_else(|e| panic!("{e}"))

@@ -7,6 +7,7 @@
 
 use std::time::Instant;
 
+use crate::support::rig;
 use closed_loop::faults::parse_fault;
 use closed_loop::faults::run::{run_case_with, FaultCase, FaultOutcome};
 use closed_loop::pil::{PilOptions, PilTarget};
@@ -14,7 +15,6 @@ use closed_loop::TravelSpec;
 use drive_core::config::Direction;
 use drive_core::supervisor::Fault;
 use drive_core::{Controller, DriveState};
-use integration_tests::rig;
 
 const TS: f64 = 1.0 / 16_000.0;
 /// Simulated time after the trip: enough to see the safe state held.

@@ -234,7 +234,7 @@ const EVA_REPORT: [(&str, usize, f64); 6] = [
 
 /// Against the analyzer: the export has no licence, so it is not in this
 /// repository; give its path in `EVA_SAMPLE_EVIMP` and run
-/// `cargo test -p host-sim --test host-sim ride_quality:: -- --ignored`.
+/// `cargo test -p host-sim --test integration commands::ride_quality:: -- --ignored`.
 #[test]
 #[ignore = "needs the analyzer export (no licence to copy it here): EVA_SAMPLE_EVIMP=<path>"]
 fn the_public_eva_export_agrees_with_its_analyzer_report_within_5_percent() {

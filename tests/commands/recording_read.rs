@@ -770,7 +770,7 @@ proptest! {
 // Read time of a full-size recording (printed, not asserted).
 
 /// 20 s at 16384 Hz with 14 columns, as the rig records. Run with
-/// `cargo test --release -p host-sim --test host-sim recording_read:: -- --ignored --nocapture`.
+/// `cargo test --release -p host-sim --test integration commands::recording_read:: -- --ignored --nocapture`.
 #[test]
 #[ignore = "timing; run on demand"]
 fn read_time_of_a_20_s_recording_at_16384_hz() {

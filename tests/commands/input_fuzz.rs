@@ -3,7 +3,7 @@
 //! rig config (`--config`), a recording's metadata (the `<stem>.toml`
 //! sidecar) and the `EVIMP1` export. Each must return an error or a value
 //! that satisfies every documented bound; none may panic.
-//! `host-sim/tests/recording_read.rs` fuzzes the samples reader.
+//! `tests/commands/recording_read.rs` fuzzes the samples reader.
 
 use std::fs;
 use std::path::{Path, PathBuf};
