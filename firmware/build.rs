@@ -2,18 +2,19 @@
 //!
 //! 1. Puts the workspace's `memory.x` on the linker search path and passes
 //!    cortex-m-rt's `link.x` and defmt's `defmt.x` linker scripts to the binary.
-//! 2. Generates `$OUT_DIR/drive_config.rs`: the drive parameters of
-//!    `configs/rig.toml` as a `drive_core::DriveConfig` constant, through the same
-//!    `rig-config` code the host simulator uses, so firmware and host run the
-//!    controller with identical values; the inverter's dead time
-//!    (`[inverter].dead_time_s`) as `DEAD_TIME_S`; and the operator's travel
-//!    command of the environment variable `FW_TRAVEL` as `OPERATOR_TRAVEL`.
+//! 2. Generates `$OUT_DIR/drive_config.rs` from `configs/rig.toml`, through
+//!    the same `rig-config` code the host simulator uses, so firmware and host
+//!    run the controller with identical values: the drive parameters as a
+//!    `drive_core::DriveConfig` constant, the drive's chain model
+//!    (`CHAIN_MODEL`, for the ripple compensation and the observer), the
+//!    inverter's dead time (`DEAD_TIME_S`), the landings (`LIFT_GEOMETRY`:
+//!    `[travel].lw_low_m` is the lowest landing, `lw_high_m` the highest) and
+//!    the rig's ripple components (`RIPPLE`, from which the offline
+//!    compensation table is built), and the default car mass of the load
+//!    weighing (`DEFAULT_CAR_MASS_KG`, the heaviest car).
 //!
-//! `FW_TRAVEL=<up|down>:<distance m>:<car mass kg>:<lw at start m>`, e.g.
-//! `FW_TRAVEL=up:1.0:70.5:2.0 cargo flash`, builds a firmware that starts
-//! exactly that one travel once the drive is calibrated and idle. The board
-//! has no load weighing and no car-position sensor, so the operator states
-//! both; without `FW_TRAVEL` the drive stays idle.
+//! Travels are commanded at run time by a lift controller over DCP
+//! (`src/dcp.rs`); nothing about a travel is fixed at build time.
 
 use std::env;
 use std::fs;
@@ -26,8 +27,7 @@ fn main() {
 
     println!("cargo:rerun-if-changed=build.rs");
     link_scripts(&workspace_root, &out_dir);
-    let mut source = drive_config(&workspace_root);
-    source.push_str(&operator_travel());
+    let source = drive_config(&workspace_root);
     let path = out_dir.join("drive_config.rs");
     fs::write(&path, source).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
 }
@@ -60,47 +60,44 @@ fn drive_config(workspace_root: &std::path::Path) -> String {
         "{}: [inverter].dead_time_s must be a positive number of seconds, is {dead_time_s}",
         rig_toml.display()
     );
-    // The same generator the PIL target uses, so both run identical values.
-    format!(
-        "{}/// Inverter dead time between the switches of one leg, s (`[inverter].dead_time_s`).\n\
-         pub const DEAD_TIME_S: f32 = {dead_time_s:?};\n",
-        rig.drive_config_source("configs/rig.toml")
-    )
-}
-
-/// Source of `pub const OPERATOR_TRAVEL: Option<drive_core::TravelCommand> = ...;`
-/// from the environment variable `FW_TRAVEL` (see the module doc).
-fn operator_travel() -> String {
-    println!("cargo:rerun-if-env-changed=FW_TRAVEL");
-    let doc = "/// The travel the operator asked for at build time (`FW_TRAVEL`), if any.\n";
-    let value = match env::var("FW_TRAVEL") {
-        Err(env::VarError::NotPresent) => "None".to_string(),
-        Err(e) => panic!("FW_TRAVEL: {e}"),
-        Ok(text) if text.trim().is_empty() => "None".to_string(),
-        Ok(text) => {
-            let fields: Vec<&str> = text.trim().split(':').collect();
-            let usage = "FW_TRAVEL=<up|down>:<distance m>:<car mass kg>:<lw at start m>, e.g. up:1.0:70.5:2.0";
-            let [direction, distance, mass, lw_start] = fields[..] else {
-                panic!("FW_TRAVEL={text:?}: expected {usage}");
-            };
-            let direction = match direction {
-                "up" => "Up",
-                "down" => "Down",
-                other => panic!("FW_TRAVEL: direction {other:?} is neither `up` nor `down` ({usage})"),
-            };
-            let number = |name: &str, field: &str| -> f32 {
-                match field.parse::<f32>() {
-                    Ok(v) if v.is_finite() && v > 0.0 => v,
-                    _ => panic!("FW_TRAVEL: {name} {field:?} is not a positive number ({usage})"),
-                }
-            };
-            let (distance, mass, lw_start) =
-                (number("distance", distance), number("car mass", mass), number("lw at start", lw_start));
+    let lw_low = rig.travel.lw_low_m;
+    let lw_high = rig.travel.lw_high_m;
+    let shaft_travel_mm = ((lw_high - lw_low) * 1000.0).round();
+    assert!(
+        shaft_travel_mm >= 1.0 && shaft_travel_mm <= u16::MAX as f64,
+        "{}: [travel].lw_high_m - lw_low_m = {shaft_travel_mm} mm is not a DCP distance (1..=65535 mm)",
+        rig_toml.display()
+    );
+    let ripple: Vec<String> = rig
+        .ripple
+        .iter()
+        .map(|r| {
             format!(
-                "Some(drive_core::TravelCommand {{ direction: drive_core::config::Direction::{direction}, \
-                 distance_m: {distance:?}, m_car_kg: {mass:?}, lw_start_m: {lw_start:?} }})"
+                "({}, {:?}, {:?}, {:?})",
+                r.mechanical_order.min(u16::MAX as u32),
+                r.amplitude_nm as f32,
+                r.phase_rad.cos() as f32,
+                r.phase_rad.sin() as f32
             )
-        }
-    };
-    format!("{doc}pub const OPERATOR_TRAVEL: Option<drive_core::TravelCommand> = {value};\n")
+        })
+        .collect();
+    // The same generators the PIL target uses, so both run identical values.
+    format!(
+        "{}{}/// Inverter dead time between the switches of one leg, s (`[inverter].dead_time_s`).\n\
+         pub const DEAD_TIME_S: f32 = {dead_time_s:?};\n\
+         /// The landings: `[travel].lw_low_m` (lowest landing) to `lw_high_m` (highest).\n\
+         pub const LIFT_GEOMETRY: drive_core::lift_drive::LiftGeometry = drive_core::lift_drive::LiftGeometry {{ \
+         lw_lowest_landing_m: {:?}, shaft_travel_mm: {} }};\n\
+         /// Car mass of the load weighing until one is stored: the heaviest car of `[mechanics].m_car_kg`, kg.\n\
+         pub const DEFAULT_CAR_MASS_KG: f32 = {:?};\n\
+         /// The rig's torque ripple (`[[ripple]]`): mechanical order, amplitude N m, cos and sin of the phase.\n\
+         pub const RIPPLE: [(u16, f32, f32, f32); {}] = [{}];\n",
+        rig.drive_config_source("configs/rig.toml"),
+        rig.chain_model_source("configs/rig.toml"),
+        lw_low as f32,
+        shaft_travel_mm as u32,
+        rig.mechanics.m_car_kg.iter().cloned().fold(f64::MIN, f64::max) as f32,
+        ripple.len(),
+        ripple.join(", ")
+    )
 }

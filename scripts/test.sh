@@ -67,7 +67,7 @@ step "firmware release build"
 cargo build -p firmware --release --target thumbv7em-none-eabihf
 size_tool="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size"
 "$size_tool" target/thumbv7em-none-eabihf/release/firmware | awk 'NR==2 {
-  printf "firmware flash (text+data): %d B of 128 KiB budget; RAM (data+bss): %d B of 32 KiB budget\n", $1+$2, $2+$3 }'
+  printf "firmware flash (text+data): %d B of 192 KiB budget; RAM (data+bss): %d B of 64 KiB budget\n", $1+$2, $2+$3 }'
 
 step "PIL target build (QEMU mps2-an386)"
 cargo build --manifest-path pil/Cargo.toml --release --target thumbv7em-none-eabihf

@@ -22,6 +22,9 @@
 //! | Phase V current (Curr_fdbk2)     | PC1   | ADC2_IN7          | an |
 //! | Phase W current (Curr_fdbk3)     | PC0   | ADC1_IN6          | an |
 //! | DC-bus voltage divider (VBUS)    | PA1   | ADC2_IN2          | an |
+//! | DCP (RS-485) transmit, to DI     | PC10  | USART3_TX         | 7  |
+//! | DCP (RS-485) receive, from RO    | PC11  | USART3_RX         | 7  |
+//! | DCP (RS-485) driver enable DE+/RE| PB14  | USART3_DE         | 7  |
 //!
 //! ("an": analog mode.) All four analog pins are ADC12 inputs, i.e. both ADC1
 //! and ADC2 can convert them, on the same channel numbers (PA0 IN1, PA1 IN2,
@@ -88,6 +91,14 @@
 //!   the line to ground (UM1996: "generates a fault condition at the BKIN
 //!   pin that goes to ground"); the pin has no internal pull, the shield's
 //!   pull-up defines its idle level (NOT verified).
+//! - DCP: an RS-485 transceiver (e.g. a 3.3 V MAX3485-class part) with DE
+//!   and /RE tied together on PB14, which USART3 drives itself around each
+//!   reply; A/B to the lift controller's DCP bus with its termination. The
+//!   three USART3 pins are checked at compile time by the driver's pin
+//!   traits (`dcp.rs`, `main.rs`); that PC10, PC11 and PB14 are free on the
+//!   IHM08M1 and reachable on the NUCLEO's morpho connectors is NOT
+//!   verified. Only a transceiver with a receiver that is
+//!   disabled while transmitting keeps the drive from reading its own reply.
 //! - Timer 2 (32-bit) is the 1 MHz time base of the control interrupt's time
 //!   stamps; it uses no pin.
 //!

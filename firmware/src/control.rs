@@ -28,13 +28,16 @@
 //! (MOE = 0), brake applied, until a reset command; a failed calibration
 //! latches until the chip restarts (there are no valid offsets to run with).
 
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::DWT;
 use critical_section::{CriticalSection, Mutex};
+use drive_core::alignment::{Alignment, AlignmentError, AlignmentParams, AlignmentStep, Injection};
 use drive_core::controller::{CommandError, Telemetry};
 use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
+use drive_core::dcp::StopReason;
+use drive_core::lift_drive::{self, ControllerCommand};
 use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
 use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::interrupt;
@@ -67,12 +70,16 @@ const COMMAND_CAPACITY: usize = 4;
 pub enum Command {
     /// Start a travel (accepted only when calibrated, fault-free and idle).
     Travel(TravelCommand),
+    /// Stop now in the safe state (inverter off, brake applied): the DCP
+    /// slave's timeout or a travel interruption. Changes nothing when idle
+    /// or tripped, and never clears a fault.
+    SafeStop(StopReason),
     /// Clear latched faults: the controller's, and the firmware's overrun and
     /// break latches (not a failed calibration). Refused when nothing is
     /// latched, so that it can never stop a running travel.
     #[allow(
         dead_code,
-        reason = "no reset source on this board yet (the chip reset clears faults); a host link submits it"
+        reason = "no reset source yet (the chip reset clears faults): the DCP fault-reset message is not implemented"
     )]
     Reset,
 }
@@ -105,6 +112,8 @@ pub enum FirmwareFault {
     AdcSequenceIncomplete,
     /// The start-up current-offset calibration was rejected.
     Calibration(OffsetError),
+    /// The start-up rotor alignment failed its checks.
+    Alignment(AlignmentError),
 }
 
 /// Something the task should log.
@@ -113,6 +122,8 @@ pub enum Event {
     /// The current-offset calibration passed; the drive is idle and accepts
     /// commands.
     Calibrated(CurrentOffsets),
+    /// The rotor alignment passed: the encoder count at electrical angle zero.
+    Aligned(u32),
     /// A firmware fault was latched.
     Fault(FirmwareFault),
     /// A command was applied.
@@ -152,15 +163,53 @@ pub struct Record {
     pub telemetry: Telemetry,
 }
 
+/// The drive as the DCP task sees it, written by every step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Snapshot {
+    /// Controller state after the latest step (`None` before it runs).
+    pub state: Option<DriveState>,
+    /// Estimated shaft speed, rad/s.
+    pub speed_radps: f32,
+    /// Current offsets calibrated, rotor aligned and no firmware fault latched.
+    pub ready_gate: bool,
+    /// Inverter outputs on after the latest step (also during the alignment).
+    pub pwm_on: bool,
+    /// Brake released after the latest step (also during the alignment).
+    pub brake_released: bool,
+}
+
+/// The latest [`Snapshot`].
+pub fn snapshot() -> Snapshot {
+    critical_section::with(|cs| SNAPSHOT.borrow(cs).get())
+}
+
 enum Phase {
     Settling(u16),
     Calibrating(OffsetCalibration),
+    /// Rotor alignment: current injected, brake open.
+    Aligning(Alignment, Injection, CurrentOffsets),
+    /// Aligned: brake applied, current kept at electrical zero while it sets.
+    BrakeSetting(u32, Injection, CurrentOffsets),
     Running(CurrentOffsets),
     Failed,
 }
 
+/// The inverter outputs of a start-up step that drives the machine itself
+/// (rotor alignment), outside the controller.
+#[derive(Clone, Copy)]
+struct Injected {
+    compare: [u16; 3],
+    brake_released: bool,
+}
+
+/// PWM periods the current is kept after the alignment while the brake sets:
+/// the controller's brake-set time.
+const BRAKE_SET_STEPS: u32 = (drive_core::controller::BRAKE_SET_S * DRIVE_CONFIG.current_loop_hz) as u32;
+
 struct Drive {
     controller: Controller,
+    /// The injected current measured at the latest alignment step, A.
+    measured_a: f32,
     phase: Phase,
     fault: Option<FirmwareFault>,
     encoder: Extender,
@@ -172,6 +221,13 @@ static DRIVE: Mutex<RefCell<Option<Drive>>> = Mutex::new(RefCell::new(None));
 static RECORDS: Mutex<RefCell<Deque<Record, RECORD_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
 static EVENTS: Mutex<RefCell<Deque<Event, EVENT_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
 static COMMANDS: Mutex<RefCell<Deque<Command, COMMAND_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
+static SNAPSHOT: Mutex<Cell<Snapshot>> = Mutex::new(Cell::new(Snapshot {
+    state: None,
+    speed_radps: 0.0,
+    ready_gate: false,
+    pwm_on: false,
+    brake_released: false,
+}));
 static STEPS: AtomicU32 = AtomicU32::new(0);
 static MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
 static DROPPED: AtomicU32 = AtomicU32::new(0);
@@ -186,6 +242,7 @@ pub fn start(controller: Controller, brake: Output<'static>) {
     critical_section::with(|cs| {
         DRIVE.borrow_ref_mut(cs).replace(Drive {
             controller,
+            measured_a: 0.0,
             phase: Phase::Settling(SETTLE_STEPS),
             fault: None,
             encoder: Extender::new(encoder::raw_count()),
@@ -287,24 +344,31 @@ impl Drive {
             self.apply(cs, command);
         }
 
-        let (output, codes, dc_bus_code) = match samples {
+        let (output, injected, codes, dc_bus_code) = match samples {
             Ok(samples) => {
-                let (output, codes) = self.sense(cs, samples, encoder_count, time_us);
-                (output, codes, samples.dc_bus_code)
+                let (output, injected, codes) = self.sense(cs, samples, encoder_count, time_us);
+                (output, injected, codes, samples.dc_bus_code)
             }
             Err(Incomplete) => {
                 self.latch(cs, FirmwareFault::AdcSequenceIncomplete);
-                (None, [0; 3], 0)
+                (None, None, [0; 3], 0)
             }
         };
 
-        let pwm_on = self.fault.is_none() && output.is_some_and(|o| o.pwm_enabled);
-        let compare = output.map_or([0; 3], |o| o.pwm_compare);
+        let (pwm_on, compare, brake_wanted) = match injected {
+            Some(i) => (self.fault.is_none(), i.compare, i.brake_released),
+            None => (
+                self.fault.is_none() && output.is_some_and(|o| o.pwm_enabled),
+                output.map_or([0; 3], |o| o.pwm_compare),
+                output.is_some_and(|o| o.brake_released),
+            ),
+        };
+        let compare = if pwm_on { compare } else { [0; 3] };
         pwm::set_compares(compare);
         pwm::set_outputs_enabled(pwm_on);
         // Fail-safe: the brake is released only while the inverter drives
         // the machine, whatever the controller asks.
-        let brake_released = pwm_on && output.is_some_and(|o| o.brake_released);
+        let brake_released = pwm_on && brake_wanted;
         self.brake.set_level(if brake_released { Level::High } else { Level::Low });
 
         let cycles = DWT::cycle_count().wrapping_sub(entry_cycles);
@@ -314,6 +378,13 @@ impl Drive {
             self.latch(cs, FirmwareFault::TriggerOverrun);
         }
         MAX_CYCLES.fetch_max(cycles, Ordering::Relaxed);
+        SNAPSHOT.borrow(cs).set(Snapshot {
+            state: output.map(|o| o.state),
+            speed_radps: output.map_or(0.0, |o| o.telemetry.speed_radps),
+            ready_gate: self.fault.is_none() && matches!(self.phase, Phase::Running(_)),
+            pwm_on,
+            brake_released,
+        });
 
         if self.steps % RECORD_DECIMATION == 0 {
             let record = Record {
@@ -344,7 +415,7 @@ impl Drive {
         samples: Samples,
         encoder_count: u32,
         time_us: u32,
-    ) -> (Option<ControlOutput>, [u16; 3]) {
+    ) -> (Option<ControlOutput>, Option<Injected>, [u16; 3]) {
         match &mut self.phase {
             Phase::Settling(left) => {
                 *left = left.saturating_sub(1);
@@ -352,14 +423,18 @@ impl Drive {
                     let limits = OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits);
                     self.phase = Phase::Calibrating(OffsetCalibration::new(CALIBRATION_SAMPLES, limits));
                 }
-                (None, samples.phase_codes)
+                (None, None, samples.phase_codes)
             }
             Phase::Calibrating(calibration) => {
                 calibration.push(samples.phase_codes);
                 if calibration.is_complete() {
                     match calibration.finish() {
                         Ok(offsets) => {
-                            self.phase = Phase::Running(offsets);
+                            self.phase = Phase::Aligning(
+                                Alignment::new(AlignmentParams::for_drive(&DRIVE_CONFIG)),
+                                Injection::new(&DRIVE_CONFIG),
+                                offsets,
+                            );
                             push_event(cs, Event::Calibrated(offsets));
                         }
                         Err(error) => {
@@ -368,7 +443,43 @@ impl Drive {
                         }
                     }
                 }
-                (None, samples.phase_codes)
+                (None, None, samples.phase_codes)
+            }
+            Phase::Aligning(alignment, injection, offsets) => {
+                let codes = offsets.correct(samples.phase_codes, ZERO_CODE);
+                let (angle, current_a) = match alignment.step(encoder_count, self.measured_a) {
+                    AlignmentStep::Inject { angle, current_a } => (angle, current_a),
+                    AlignmentStep::Done(Ok(count)) => {
+                        push_event(cs, Event::Aligned(count));
+                        self.phase = Phase::BrakeSetting(BRAKE_SET_STEPS, *injection, *offsets);
+                        (0, AlignmentParams::for_drive(&DRIVE_CONFIG).current_a)
+                    }
+                    AlignmentStep::Done(Err(error)) => {
+                        self.phase = Phase::Failed;
+                        self.latch(cs, FirmwareFault::Alignment(error));
+                        return (None, None, codes);
+                    }
+                };
+                let injection = match &mut self.phase {
+                    Phase::Aligning(_, injection, _) | Phase::BrakeSetting(_, injection, _) => injection,
+                    _ => return (None, None, codes),
+                };
+                let (compare, measured_a) = injection.step(codes, samples.dc_bus_code, angle, current_a);
+                self.measured_a = measured_a;
+                let brake_released = matches!(self.phase, Phase::Aligning(..));
+                (None, Some(Injected { compare, brake_released }), codes)
+            }
+            Phase::BrakeSetting(left, injection, offsets) => {
+                let codes = offsets.correct(samples.phase_codes, ZERO_CODE);
+                let current_a = AlignmentParams::for_drive(&DRIVE_CONFIG).current_a;
+                let (compare, _) = injection.step(codes, samples.dc_bus_code, 0, current_a);
+                *left = left.saturating_sub(1);
+                if *left == 0 {
+                    // The controller's first step follows with the rotor at
+                    // electrical zero: its angle reference.
+                    self.phase = Phase::Running(*offsets);
+                }
+                (None, Some(Injected { compare, brake_released: false }), codes)
             }
             Phase::Running(offsets) => {
                 let frame = SensorFrame {
@@ -377,9 +488,9 @@ impl Drive {
                     dc_bus_code: samples.dc_bus_code,
                     time_us,
                 };
-                (Some(self.controller.step(&frame)), frame.phase_current_codes)
+                (Some(self.controller.step(&frame)), None, frame.phase_current_codes)
             }
-            Phase::Failed => (None, samples.phase_codes),
+            Phase::Failed => (None, None, samples.phase_codes),
         }
     }
 
@@ -392,10 +503,12 @@ impl Drive {
                     self.controller.command_travel(travel).map_err(Refusal::Controller)
                 }
             }
+            Command::SafeStop(reason) => lift_drive::apply(ControllerCommand::SafeStop(reason), &mut self.controller)
+                .map_err(Refusal::Controller),
             Command::Reset => {
                 let controller_tripped = matches!(self.controller.state(), DriveState::Tripped(_));
                 match self.fault {
-                    Some(FirmwareFault::Calibration(_)) => Err(Refusal::NotReady),
+                    Some(FirmwareFault::Calibration(_) | FirmwareFault::Alignment(_)) => Err(Refusal::NotReady),
                     None if !controller_tripped => Err(Refusal::NothingToReset),
                     _ => {
                         pwm::clear_break_flag();

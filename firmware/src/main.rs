@@ -13,9 +13,11 @@
 //!
 //! The control interrupt (`control.rs`, highest priority) runs
 //! `drive_core::Controller::step` once per PWM period with the measured values;
-//! the speed loop, the profile and the speed observer run inside it. One
-//! Embassy task (`telemetry.rs`) logs what the interrupt queues, feeds the
-//! watchdog while the interrupt is alive and submits commands.
+//! the speed loop, the profile and the speed observer run inside it. Three
+//! Embassy tasks: `telemetry.rs` logs what the interrupt queues and feeds
+//! the watchdog while the interrupt is alive; `dcp.rs` answers the lift
+//! controller and submits its commands; `service.rs` answers the service
+//! port.
 //!
 //! Start-up: clocks, then the peripherals with the inverter off (MOE = 0,
 //! brake applied), then the control interrupt, which waits 10 ms for the
@@ -27,16 +29,28 @@
 //! readings are trustworthy. (The switching noise that couples into the
 //! readings is therefore not part of the offset.) A rejected calibration
 //! latches a fault (PWM off, brake applied) and the log says why; otherwise
-//! the drive is Idle and waits for a travel command.
+//! the rotor alignment follows (`drive_core::alignment`: current injected at
+//! electrical 0, +90 and 0 degrees with the brake open, checked from the
+//! encoder; a failure latches a fault), the brake is set, and the drive is
+//! Idle and reports itself ready to the lift controller.
 //!
-//! Travel commands: the board has no host link yet, and a travel needs the
-//! car's load weighing and position, which the firmware cannot measure. So
-//! the only source is the operator, at build time:
-//! `FW_TRAVEL=up:1.0:70.5:2.0 cargo flash` (direction, distance m, car mass
-//! kg, counterweight-side rope length at the start m) starts that one travel
-//! after the calibration; without `FW_TRAVEL` the drive stays Idle and logs
-//! so. A latched fault is cleared by restarting the chip (reset button B2),
-//! which also repeats the calibration.
+//! Travel commands come from a lift controller over DCP (`dcp.rs`: USART3,
+//! RS-485 half duplex with the USART driving the transceiver's DE): DCP4
+//! distance travels with the position message after each stop; the slave's
+//! timeout watchdog stops the drive safely (inverter off, brake applied)
+//! when the master falls silent. The car mass of the load weighing is a
+//! parameter (`params.rs`, settable on the service port), the heaviest car
+//! of the rig until one is stored. A latched fault is cleared by restarting the chip (reset button
+//! B2), which also repeats the calibration.
+//!
+//! Service port (`service.rs`): LPUART1 on the ST-LINK virtual COM port,
+//! the line protocol of `drive_core::service` (`host-sim drive --port`):
+//! strategy, table, car mass (settable), fault log, state.
+//!
+//! Compensation: the ripple-compensation strategy and its harmonic table
+//! are parameters, read at start-up from the parameter record in flash
+//! (`params.rs`, version and CRC checked); without a valid record the drive
+//! installs [`DEFAULT_STRATEGY`] with the offline table of the rig's ripple.
 //!
 //! Build and flash: `cargo flash` (alias for `cargo run -p firmware --release
 //! --target thumbv7em-none-eabihf`) from the workspace root, or `cargo run
@@ -54,19 +68,57 @@
 mod adc;
 mod board;
 mod control;
+mod dcp;
 mod encoder;
+mod params;
 mod pwm;
+mod service;
 mod telemetry;
 mod timebase;
 mod watchdog;
 
-use defmt::{error, info};
+use defmt::{error, info, warn};
 use defmt_rtt as _;
+use drive_core::dcp::{Mode, SlaveConfig, Speed};
+use drive_core::lift_drive::DcpPort;
+use drive_core::ripple::harmonics::HarmonicTable;
+use drive_core::ripple::Strategy;
 use drive_core::Controller;
 use embassy_executor::Spawner;
+use embassy_stm32::peripherals::{LPUART1, USART3};
 use embassy_stm32::time::Hertz;
+use embassy_stm32::{bind_interrupts, usart};
 
 include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
+
+/// The compensation strategy installed when no valid parameter record is stored.
+pub const DEFAULT_STRATEGY: Strategy = Strategy::Table;
+
+/// The DCP variant: distance mode.
+pub const DCP_MODE: Mode = Mode::Dcp4;
+
+bind_interrupts!(struct Irqs {
+    USART3 => usart::BufferedInterruptHandler<USART3>;
+    LPUART1 => usart::BufferedInterruptHandler<LPUART1>;
+});
+
+/// The offline compensation table: the rig's ripple (`RIPPLE`), negated.
+fn offline_table() -> HarmonicTable {
+    let mut table = HarmonicTable::default();
+    for (order, amplitude_nm, cos_phase, sin_phase) in RIPPLE {
+        table.push_cosine(order, amplitude_nm, cos_phase, sin_phase);
+    }
+    table.negated()
+}
+
+/// The speeds the DCP slave offers: V4 (fast) at the rated speed, the
+/// speed of the drive's distance travels. The controller has no
+/// speed-reference travel, so no other speed is offered.
+fn dcp_speeds() -> [Option<f32>; 11] {
+    let mut speeds = [None; 11];
+    speeds[Speed::V4.index()] = Some(DRIVE_CONFIG.rated_speed_mps);
+    speeds
+}
 
 // rig-config derives the PWM period from its own idea of the timer clock
 // (centre-aligned counting): it must be the clock this board runs TIM1 at.
@@ -111,14 +163,81 @@ async fn main(spawner: Spawner) {
     );
     adc::init(p.ADC1, p.ADC2, p.PA0, p.PC1, p.PC0, p.PA1);
 
-    control::start(Controller::new(&DRIVE_CONFIG), brake);
+    let stored = params::load(p.FLASH).await;
+    let (mut strategy, mut table, m_car_kg) = match stored {
+        Some(parameters) => (parameters.strategy, parameters.table, parameters.m_car_kg),
+        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG),
+    };
+    if strategy == Strategy::CarObserver {
+        // Its chain observer runs in the controller's speed-loop tick: on the
+        // emulated Cortex-M4F that tick takes up to 34 278 instructions,
+        // 3.2 PWM periods at 170 MHz, which would overrun the control
+        // interrupt. Refused until the observer runs in a task of its own.
+        warn!(
+            "parameters: strategy car-observer refused (its observer does not fit the control interrupt);              running {=str}",
+            DEFAULT_STRATEGY.name()
+        );
+        strategy = DEFAULT_STRATEGY;
+        table = offline_table();
+    }
+    let mut controller = Controller::new(&DRIVE_CONFIG);
+    controller.install_compensation(strategy, &table, &CHAIN_MODEL);
+    info!(
+        "compensation: {=str} over {=usize} harmonics ({=str}); car mass {=f32} kg",
+        strategy.name(),
+        table.len,
+        if stored.is_some() { "stored parameters" } else { "defaults" },
+        m_car_kg
+    );
+    critical_section::with(|cs| {
+        service::STATE.borrow_ref_mut(cs).replace(drive_core::service::ServiceState {
+            strategy,
+            table,
+            m_car_kg,
+            faults: [0; drive_core::service::FAULT_LOG],
+            fault_count: 0,
+            state_code: 0,
+            speed_radps: 0.0,
+            travelling: false,
+            strategy_settable: false,
+        });
+    });
+    control::start(controller, brake);
     info!(
         "control interrupt running: current loop {=f32} Hz, speed loop {=f32} Hz; calibrating current offsets",
         DRIVE_CONFIG.current_loop_hz, DRIVE_CONFIG.speed_loop_hz
     );
 
     let watchdog = watchdog::Watchdog::start(p.IWDG, control::steps());
-    spawner.spawn(defmt::unwrap!(telemetry::run(watchdog, OPERATOR_TRAVEL)));
+    spawner.spawn(defmt::unwrap!(telemetry::run(watchdog)));
+
+    let tx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 32] = [0; 32]));
+    let rx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 64] = [0; 64]));
+    let uart = match usart::BufferedUart::new_with_de(
+        p.USART3,
+        p.PC11,
+        p.PC10,
+        p.PB14,
+        Irqs,
+        tx_buffer,
+        rx_buffer,
+        dcp::uart_config(),
+    ) {
+        Ok(uart) => uart,
+        Err(e) => {
+            error!("USART3 (DCP) setup failed ({}): no lift controller link, the drive stays idle", e);
+            return;
+        }
+    };
+    let service_tx = defmt::unwrap!(cortex_m::singleton!(: [u8; 512] = [0; 512]));
+    let service_rx = defmt::unwrap!(cortex_m::singleton!(: [u8; 128] = [0; 128]));
+    match usart::BufferedUart::new(p.LPUART1, p.PA3, p.PA2, service_tx, service_rx, Irqs, service::uart_config()) {
+        Ok(uart) => spawner.spawn(defmt::unwrap!(service::run(uart))),
+        Err(e) => error!("LPUART1 (service port) setup failed ({}): no service port", e),
+    }
+
+    let slave = SlaveConfig::new(DCP_MODE, dcp_speeds(), LIFT_GEOMETRY.shaft_travel_mm);
+    spawner.spawn(defmt::unwrap!(dcp::run(uart, DcpPort::new(slave, LIFT_GEOMETRY, m_car_kg))));
 }
 
 /// Stops with the drive in its safe state: undefined instruction, so the

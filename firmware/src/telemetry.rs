@@ -1,7 +1,6 @@
 //! The lower-priority task: every [`POLL_MS`] it feeds the watchdog (if the
 //! control interrupt is alive), drains the interrupt's event and telemetry
-//! queues into the defmt log, and submits the operator's travel command once
-//! the drive is calibrated and idle.
+//! queues into the defmt log.
 //!
 //! Log levels: events (calibration, faults, commands) and state changes at
 //! `info`/`error`, a one-line summary every [`SUMMARY_EVERY`] records
@@ -9,10 +8,11 @@
 //! `DEFMT_LOG=debug`.
 
 use defmt::{debug, error, info, warn};
+use drive_core::alignment::AlignmentError;
 use drive_core::controller::CommandError;
 use drive_core::current_offset::OffsetError;
 use drive_core::supervisor::Fault;
-use drive_core::{DriveState, TravelCommand};
+use drive_core::DriveState;
 use embassy_time::{Duration, Instant, Ticker};
 
 use crate::control::{self, Command, Event, FirmwareFault, Record, Refusal};
@@ -26,26 +26,9 @@ pub const POLL_MS: u64 = 10;
 /// Records between two summary lines (1000 records = 1 s).
 pub const SUMMARY_EVERY: u32 = 1000;
 
-/// The task. `operator_travel` is started once, when the drive is first
-/// calibrated and idle.
+/// The task.
 #[embassy_executor::task]
-pub async fn run(mut watchdog: Watchdog, operator_travel: Option<TravelCommand>) {
-    match operator_travel {
-        Some(travel) => info!(
-            "operator travel (FW_TRAVEL): {=str} {=f32} m, car {=f32} kg, lw at start {=f32} m; starts once calibrated and idle",
-            direction_name(travel),
-            travel.distance_m,
-            travel.m_car_kg,
-            travel.lw_start_m
-        ),
-        None => info!(
-            "no travel source: this board has no host link and no load weighing, so the drive stays Idle. \
-             Build with FW_TRAVEL=<up|down>:<distance m>:<car mass kg>:<lw at start m> for one travel"
-        ),
-    }
-
-    let mut pending_travel = operator_travel;
-    let mut calibrated = false;
+pub async fn run(mut watchdog: Watchdog) {
     let mut last_state: Option<DriveState> = None;
     let mut records: u32 = 0;
     let mut ticker = Ticker::every(Duration::from_millis(POLL_MS));
@@ -63,24 +46,18 @@ pub async fn run(mut watchdog: Watchdog, operator_travel: Option<TravelCommand>)
         stalled = !fed;
 
         while let Some(event) = control::pop_event() {
-            calibrated |= matches!(event, Event::Calibrated(_));
             log_event(&event);
         }
         while let Some(record) = control::pop_record() {
             records = records.wrapping_add(1);
             if record.state != last_state {
+                if let Some(DriveState::Tripped(fault)) = record.state {
+                    crate::service::log_fault(fault.code());
+                }
                 info!("drive state: {=str} -> {=str}", state_name(last_state), state_name(record.state));
                 last_state = record.state;
             }
             log_record(&record, records % SUMMARY_EVERY == 0);
-        }
-
-        if calibrated && last_state == Some(DriveState::Idle) {
-            if let Some(travel) = pending_travel.take() {
-                if control::submit(Command::Travel(travel)).is_err() {
-                    pending_travel = Some(travel);
-                }
-            }
         }
     }
 }
@@ -134,13 +111,17 @@ fn log_event(event: &Event) {
             let [u, v, w] = offsets.zero_current_codes;
             info!(
                 "current offsets calibrated with the inverter off: zero-current codes U {=u16} V {=u16} W {=u16} \
-                 (mid-scale {=u16}); drive idle, waiting for a travel command",
+                 (mid-scale {=u16}); aligning the rotor (brake open, current injected)",
                 u,
                 v,
                 w,
                 DRIVE_CONFIG.adc_zero_code()
             );
         }
+        Event::Aligned(count) => info!(
+            "rotor aligned: encoder count {=u32} at electrical angle zero (checks passed); brake applied, drive idle",
+            count
+        ),
         Event::Fault(fault) => log_fault(fault),
         Event::Applied(command) => info!("command applied: {=str}", command_name(&command)),
         Event::Refused(command, refusal) => {
@@ -166,6 +147,24 @@ fn log_fault(fault: FirmwareFault) {
         }
         FirmwareFault::AdcSequenceIncomplete => {
             error!("ADC1 sequence incomplete at ADC2's end of sequence: {=str}", SAFE)
+        }
+        FirmwareFault::Alignment(error) => {
+            let (what, counts) = match error {
+                AlignmentError::CurrentNotReached => ("the injected current was not reached", 0),
+                AlignmentError::NotSettled(c) => ("the rotor did not settle (counts of motion)", c as i32),
+                AlignmentError::NoMotion(c) => ("the rotor did not turn (brake applied or no torque; counts)", c),
+                AlignmentError::WrongDirection(c) => {
+                    ("the rotor turned backwards (phase order or encoder direction; counts)", c)
+                }
+                AlignmentError::WrongDistance(c) => {
+                    ("the rotor turned by the wrong angle (pole pairs or encoder counts; counts)", c)
+                }
+                AlignmentError::NotRepeatable(c) => {
+                    ("the rotor did not return to its aligned position (counts off)", c)
+                }
+                AlignmentError::Runaway(c) => ("the load pulled the rotor off the current vector (counts)", c),
+            };
+            error!("rotor alignment failed: {=str} {=i32}: {=str} until restart", what, counts, SAFE)
         }
         FirmwareFault::Calibration(error) => match error {
             OffsetError::NotEnoughSamples { samples, required } => error!(
@@ -202,16 +201,10 @@ fn phase_name(phase: u8) -> &'static str {
     }
 }
 
-fn direction_name(travel: TravelCommand) -> &'static str {
-    match travel.direction {
-        drive_core::config::Direction::Up => "up",
-        drive_core::config::Direction::Down => "down",
-    }
-}
-
 fn command_name(command: &Command) -> &'static str {
     match command {
         Command::Travel(_) => "travel",
+        Command::SafeStop(_) => "safe stop",
         Command::Reset => "reset",
     }
 }

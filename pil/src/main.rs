@@ -10,6 +10,18 @@
 //! acknowledged with [`Message::Ack`]. The frame codec is `drive_core::frame`,
 //! the same code the host uses.
 //!
+//! The lift controller's DCP line is UART1: at every `Sense` frame the
+//! target takes the DCP bytes that have arrived (at most
+//! `drive_core::lift_drive::MAX_BYTES_PER_STEP`), runs the drive's
+//! application layer (`drive_core::lift_drive::LiftDrive`: the DCP slave,
+//! the commands it gives the controller, then the controller step) with the
+//! frame's time stamp as the DCP clock, and writes one record per step on
+//! UART1: `n_in, the bytes taken, n_out, the reply bytes`. The host's
+//! lift controller reads its replies from the records, and the host shadow
+//! replays the same bytes at the same steps, so the chip and the host run
+//! the same application layer bit for bit whatever the emulator's timing
+//! of the bytes.
+//!
 //! Logging: defmt over semihosting (feature `semihosting`, the default) or
 //! RTT (feature `rtt`); the controller code is the same either way.
 #![no_std]
@@ -21,7 +33,9 @@ mod uart;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
+use drive_core::dcp::{Mode, SlaveConfig, Speed};
 use drive_core::frame::{command_result_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
+use drive_core::lift_drive::{DcpPort, LiftDrive, MAX_BYTES_PER_STEP, MAX_REPLY_PER_STEP};
 use drive_core::Controller;
 
 #[cfg(feature = "rtt")]
@@ -31,6 +45,19 @@ use defmt_semihosting as _;
 
 include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
 include!(concat!(env!("OUT_DIR"), "/chain_model.rs"));
+include!(concat!(env!("OUT_DIR"), "/lift.rs"));
+
+/// The DCP slave of the target: distance mode, V4 at the rated speed (the
+/// firmware's configuration).
+fn dcp_port() -> DcpPort {
+    let mut speeds = [None; 11];
+    speeds[Speed::V4.index()] = Some(DRIVE_CONFIG.rated_speed_mps);
+    DcpPort::new(
+        SlaveConfig::new(Mode::Dcp4, speeds, LIFT_GEOMETRY.shaft_travel_mm),
+        LIFT_GEOMETRY,
+        DEFAULT_CAR_MASS_KG,
+    )
+}
 
 /// SysTick reload: the full 24-bit range, ticks.
 const SYSTICK_RELOAD: u32 = 0x00FF_FFFF;
@@ -53,7 +80,9 @@ fn main() -> ! {
     let timing_overhead_ticks = first.wrapping_sub(second) & SYSTICK_RELOAD;
 
     let mut uart = uart::Uart0::enable();
-    let mut controller = Controller::new(&DRIVE_CONFIG);
+    let mut dcp_uart = uart::Uart1::enable();
+    let mut drive = LiftDrive::new(Controller::new(&DRIVE_CONFIG), dcp_port(), &DRIVE_CONFIG);
+    let mut record = [0u8; 2 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP];
     let mut decoder = Decoder::new();
     let mut frame = [0u8; MAX_FRAME];
     defmt::info!("PIL target up: PWM {} Hz, waiting for frames on UART0", DRIVE_CONFIG.pwm_hz);
@@ -62,20 +91,41 @@ fn main() -> ! {
         let reply = match decoder.push(uart.read_byte()) {
             None => continue,
             Some(Ok(Message::Sense(sensors))) => {
+                let mut taken = [0u8; MAX_BYTES_PER_STEP];
+                let mut n_in = 0;
+                while n_in < MAX_BYTES_PER_STEP {
+                    match dcp_uart.try_read_byte() {
+                        Some(byte) => {
+                            taken[n_in] = byte;
+                            n_in += 1;
+                        }
+                        None => break,
+                    }
+                }
+                let dcp = drive.dcp_step(&taken[..n_in], sensors.time_us);
+                // The cost of the controller step alone: on the chip the DCP
+                // slave runs in a task, outside the control interrupt.
                 let start = SYST::get_current();
-                let output = controller.step(&sensors);
+                let output = drive.control_step(&sensors);
                 let end = SYST::get_current();
                 // SysTick counts down, modulo its 24-bit reload.
                 let cost_ticks = (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
+                record[0] = n_in as u8;
+                record[1..1 + n_in].copy_from_slice(&taken[..n_in]);
+                record[1 + n_in] = dcp.reply_len as u8;
+                record[2 + n_in..2 + n_in + dcp.reply_len].copy_from_slice(&dcp.reply[..dcp.reply_len]);
+                dcp_uart.write_all(&record[..2 + n_in + dcp.reply_len]);
                 Message::Output(StepReport::new(&output, cost_ticks))
             }
-            Some(Ok(Message::Travel(command))) => Message::Ack(command_result_code(controller.command_travel(command))),
+            Some(Ok(Message::Travel(command))) => {
+                Message::Ack(command_result_code(drive.controller_mut().command_travel(command)))
+            }
             Some(Ok(Message::Reset)) => {
-                controller.reset();
+                drive.controller_mut().reset();
                 Message::Ack(0)
             }
             Some(Ok(Message::Compensation { strategy, table })) => {
-                controller.install_compensation(strategy, &table, &CHAIN_MODEL);
+                drive.controller_mut().install_compensation(strategy, &table, &CHAIN_MODEL);
                 Message::Ack(0)
             }
             Some(Ok(Message::Output(_) | Message::Ack(_))) => continue,

@@ -1,6 +1,8 @@
-//! The CMSDK APB UART0 of the MPS2 board (as QEMU emulates it), polled.
+//! The CMSDK APB UARTs of the MPS2 board (as QEMU emulates them), polled:
+//! UART0 (0x4000_4000) carries the PIL frames, UART1 (0x4000_5000) the DCP
+//! line of the lift controller.
 //!
-//! Registers at 0x4000_4000: DATA (+0x00), STATE (+0x04: bit 0 TX full,
+//! Registers from the base: DATA (+0x00), STATE (+0x04: bit 0 TX full,
 //! bit 1 RX full), CTRL (+0x08: bit 0 TX enable, bit 1 RX enable, bit 3 RX
 //! interrupt enable), INTCLEAR (+0x0C: bit 1 clears the RX interrupt),
 //! BAUDDIV (+0x10, at least 16 for the UART to run).
@@ -17,6 +19,8 @@ const STATE: usize = BASE + 0x04;
 const CTRL: usize = BASE + 0x08;
 const INTCLEAR: usize = BASE + 0x0C;
 const BAUDDIV: usize = BASE + 0x10;
+/// UART1's registers: UART0's, 0x1000 further.
+const UART1_OFFSET: usize = 0x1000;
 /// NVIC interrupt number of the UART0 receiver on the MPS2.
 const UART0_RX_IRQ: u32 = 0;
 const NVIC_ISER0: usize = 0xE000_E100;
@@ -25,7 +29,7 @@ const TX_FULL: u32 = 1 << 0;
 const RX_FULL: u32 = 1 << 1;
 
 fn read(address: usize) -> u32 {
-    // SAFETY: `address` is one of the UART0 registers above, a valid,
+    // SAFETY: `address` is one of the UART registers above, a valid,
     // aligned MMIO location on this machine; volatile keeps every access.
     unsafe { core::ptr::read_volatile(address as *const u32) }
 }
@@ -64,6 +68,34 @@ impl Uart0 {
         for &byte in bytes {
             while read(STATE) & TX_FULL != 0 {}
             write(DATA, byte as u32);
+        }
+    }
+}
+
+/// UART1, polled without interrupts: the DCP line.
+pub struct Uart1(());
+
+impl Uart1 {
+    /// Sets the baud divider and enables transmitter and receiver (no interrupt).
+    pub fn enable() -> Self {
+        write(BAUDDIV + UART1_OFFSET, 16);
+        write(CTRL + UART1_OFFSET, 0b0011);
+        Self(())
+    }
+
+    /// The received byte, if one is waiting.
+    pub fn try_read_byte(&mut self) -> Option<u8> {
+        if read(STATE + UART1_OFFSET) & RX_FULL == 0 {
+            return None;
+        }
+        Some(read(DATA + UART1_OFFSET) as u8)
+    }
+
+    /// Sends `bytes`, waiting whenever the transmit buffer is full.
+    pub fn write_all(&mut self, bytes: &[u8]) {
+        for &byte in bytes {
+            while read(STATE + UART1_OFFSET) & TX_FULL != 0 {}
+            write(DATA + UART1_OFFSET, byte as u32);
         }
     }
 }

@@ -13,17 +13,22 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod alignment;
 pub mod config;
 pub mod controller;
 pub mod current_loop;
 pub mod current_offset;
+pub mod dcp;
 pub mod fixed;
 pub mod frame;
+pub mod lift_drive;
 pub mod observer;
+pub mod param_store;
 pub mod park_clarke;
 pub mod pi;
 pub mod profile;
 pub mod ripple;
+pub mod service;
 pub mod speed_estimator;
 pub mod speed_loop;
 pub mod supervisor;

@@ -20,6 +20,7 @@ pub mod bench;
 pub mod compare;
 pub mod dataset;
 pub mod decay;
+pub mod drive;
 pub mod faults;
 pub mod gap;
 pub mod identify;
@@ -92,6 +93,9 @@ pub enum Command {
     /// gap lies, which effect of the library explains it (cross-validated),
     /// verdict; gap.json, gap.md and plots.
     Gap(gap::GapArgs),
+    /// One request to a drive's service port over a serial line (the
+    /// NUCLEO's virtual COM port): parameters, state, fault log.
+    Drive(drive::DriveArgs),
 }
 
 /// Runs a parsed command line.
@@ -110,6 +114,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Compare(args) => compare::run(&rig, &args),
         Command::Dataset(args) => dataset::run(&rig, &args),
         Command::Gap(args) => gap::run(&rig, &args),
+        Command::Drive(args) => drive::run(&rig, &args),
     }
 }
 

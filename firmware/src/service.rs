@@ -1,0 +1,98 @@
+//! The service port for the bench: LPUART1 on the ST-LINK virtual COM port
+//! (PA2 TX, PA3 RX, 115 200 baud 8N1), the line protocol of
+//! `drive_core::service` (`host-sim drive --port ...` on the PC).
+//!
+//! What it reads and changes lives in [`STATE`]: the strategy and table
+//! installed at start-up, the car mass of the load weighing (the DCP task
+//! takes a new one before the next travel), the fault log (the controller's
+//! trips, filled by the telemetry task) and the drive's state and speed (from
+//! the control interrupt's snapshot, refreshed before each answer).
+//! `set strategy` is answered `error unsupported`: installing another
+//! strategy between travels and writing the parameter record to flash are
+//! not implemented on the chip yet.
+
+use core::cell::RefCell;
+
+use critical_section::Mutex;
+use defmt::warn;
+use drive_core::service::{answer, ServiceState, MAX_LINE};
+use embassy_stm32::usart::{self, BufferedUart};
+use embedded_io_async::{Read, Write};
+
+use crate::control;
+
+/// Baud rate of the service port.
+pub const BAUD: u32 = 115_200;
+
+/// The state the service port reads and changes (set once by `main`).
+pub static STATE: Mutex<RefCell<Option<ServiceState>>> = Mutex::new(RefCell::new(None));
+
+/// The USART settings of the service port: 115 200 baud 8N1.
+pub fn uart_config() -> usart::Config {
+    let mut config = usart::Config::default();
+    config.baudrate = BAUD;
+    config
+}
+
+/// The car mass of the load weighing now, kg (`None` before `main` set the state).
+pub fn car_mass_kg() -> Option<f32> {
+    critical_section::with(|cs| STATE.borrow_ref(cs).as_ref().map(|s| s.m_car_kg))
+}
+
+/// Logs a controller fault code in the service port's fault log.
+pub fn log_fault(code: u8) {
+    critical_section::with(|cs| {
+        if let Some(s) = STATE.borrow_ref_mut(cs).as_mut() {
+            s.log_fault(code);
+        }
+    });
+}
+
+/// The service task: one answer line per request line.
+#[embassy_executor::task]
+pub async fn run(mut uart: BufferedUart<'static>) {
+    let mut line = [0u8; MAX_LINE + 1];
+    let mut len = 0;
+    let mut byte = [0u8; 1];
+    loop {
+        match uart.read(&mut byte).await {
+            Ok(0) => continue,
+            Ok(_) => {}
+            Err(e) => {
+                warn!("service port: line error {}", e);
+                len = 0;
+                continue;
+            }
+        }
+        if byte[0] != b'\n' {
+            // A line too long is answered `error line` once it ends.
+            if len < line.len() {
+                line[len] = byte[0];
+                len += 1;
+            }
+            continue;
+        }
+        // Copied out and back: formatting an answer takes far longer than
+        // the control interrupt may be held off (one PWM period).
+        let Some(mut state) = critical_section::with(|cs| *STATE.borrow_ref(cs)) else {
+            len = 0;
+            continue;
+        };
+        let snapshot = control::snapshot();
+        if let Some(drive) = snapshot.state {
+            state.state_code = drive.code();
+            state.travelling = drive.pwm_enabled() || drive.brake_released();
+        }
+        state.speed_radps = snapshot.speed_radps;
+        let reply = answer(&line[..len], &mut state);
+        critical_section::with(|cs| {
+            if let Some(shared) = STATE.borrow_ref_mut(cs).as_mut() {
+                shared.m_car_kg = state.m_car_kg;
+            }
+        });
+        len = 0;
+        if uart.write_all(reply.as_bytes()).await.is_err() || uart.write_all(b"\r\n").await.is_err() {
+            warn!("service port: answer not sent");
+        }
+    }
+}

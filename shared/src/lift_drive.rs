@@ -1,0 +1,429 @@
+//! The lift drive's application layer between the DCP line and the
+//! controller: bytes in, replies out, and the controller commands that the
+//! master's requests become. No hardware: the firmware, the PIL target and
+//! the host run this same code.
+//!
+//! - [`DcpPort`] takes the received bytes with their time stamps, delimits
+//!   the messages ([`crate::dcp::FrameReceiver`]), runs the slave
+//!   ([`crate::dcp::Slave`]) and returns the reply to send and the command
+//!   for the controller.
+//! - [`drive_status`] is what the slave is told about the drive, from the
+//!   controller's state and speed.
+//! - [`apply`] applies a [`ControllerCommand`] to a [`Controller`].
+//!
+//! What the controller cannot do yet: speed-mode travels (DCP3, inspection,
+//! re-levelling) need a travel at a commanded speed with a stop on command,
+//! which `Controller` does not offer (its travels are planned S-curves over a
+//! distance). Those requests are answered by the slave and then refused by
+//! the drive: no travel, S5 ("accepted") clear. The safe stop is the
+//! supervisor's safe state (inverter off, brake applied at once), the
+//! controller having no controlled stop on command.
+
+use crate::config::{Direction, DriveConfig};
+use crate::controller::{CommandError, ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
+use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, FRAME_LEN};
+use crate::dcp::slave::{DriveStatus, Outcome, Refusal, Request, Slave, SlaveConfig, StopReason, Travel};
+
+/// Where the landings are in the drive's rope coordinate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LiftGeometry {
+    /// Counterweight-side rope length `lw` with the car at the lowest landing, m
+    /// (it grows as the car goes up).
+    pub lw_lowest_landing_m: f32,
+    /// Travel from the lowest to the highest landing, mm.
+    pub shaft_travel_mm: u32,
+}
+
+/// What the controller is told to do.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ControllerCommand {
+    /// Start a distance travel.
+    Travel(TravelCommand),
+    /// Stop now in the safe state (inverter off, brake applied).
+    SafeStop(StopReason),
+}
+
+/// Why a request has no controller command.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unsupported {
+    /// Speed-mode travel, crawl or stop on command: the controller has no speed-reference travel.
+    SpeedMode,
+}
+
+/// The controller command of a slave request, with the car mass from the load weighing (kg).
+pub fn controller_command(
+    request: Request,
+    geometry: &LiftGeometry,
+    m_car_kg: f32,
+) -> Result<ControllerCommand, Unsupported> {
+    match request {
+        Request::Distance { direction, distance_mm, start_position_mm } => {
+            Ok(ControllerCommand::Travel(TravelCommand {
+                direction: match direction {
+                    Travel::Up => Direction::Up,
+                    Travel::Down => Direction::Down,
+                },
+                distance_m: distance_mm as f32 / 1000.0,
+                m_car_kg,
+                lw_start_m: geometry.lw_lowest_landing_m + start_position_mm as f32 / 1000.0,
+            }))
+        }
+        Request::SafeStop(reason) => Ok(ControllerCommand::SafeStop(reason)),
+        Request::Speed { .. } | Request::Crawl | Request::Stop => Err(Unsupported::SpeedMode),
+    }
+}
+
+/// Applies `command` to `controller`. A safe stop of an idle or tripped
+/// drive changes nothing (it never clears a latched fault).
+pub fn apply(command: ControllerCommand, controller: &mut Controller) -> Result<(), CommandError> {
+    match command {
+        ControllerCommand::Travel(travel) => controller.command_travel(travel),
+        ControllerCommand::SafeStop(_) => {
+            if !matches!(controller.state(), DriveState::Idle | DriveState::Tripped(_)) {
+                controller.reset();
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Distance to stop from car speed `speed_mps` with the profile's
+/// acceleration and jerk limits (the deceleration half of the S-curve),
+/// mm, rounded up, at most `u16::MAX`.
+pub fn braking_distance_mm(speed_mps: f32, config: &DriveConfig) -> u16 {
+    let v = if speed_mps < 0.0 { -speed_mps } else { speed_mps };
+    let (a, j) = (config.max_accel_mps2, config.max_jerk_mps3);
+    if !(v > 0.0 && a > 0.0 && j > 0.0) {
+        return 0;
+    }
+    // Peak deceleration: a, or sqrt(v j) when the speed is too low to reach it.
+    let a_peak = if v * j < a * a { crate::profile::sqrt_newton(v * j) } else { a };
+    let metres = 0.5 * v * (v / a_peak + a_peak / j);
+    let mm = metres * 1000.0 + 1.0;
+    if mm >= u16::MAX as f32 {
+        u16::MAX
+    } else {
+        mm as u16
+    }
+}
+
+/// The slave's view of the drive: `state` and shaft speed `speed_radps`
+/// of the latest step; `ready_gate` is what the controller does not know
+/// (current offsets calibrated, rotor aligned, no firmware fault).
+pub fn drive_status(state: DriveState, speed_radps: f32, ready_gate: bool, config: &DriveConfig) -> DriveStatus {
+    let speed_mps = speed_radps * config.sheave_radius_m;
+    let speed_mps = if speed_mps < 0.0 { -speed_mps } else { speed_mps };
+    DriveStatus {
+        ready: ready_gate && state == DriveState::Idle,
+        travelling: state.pwm_enabled() || state.brake_released(),
+        fault: matches!(state, DriveState::Tripped(_)),
+        brake_open: state.brake_released(),
+        speed_mps,
+        braking_distance_mm: braking_distance_mm(speed_mps, config),
+    }
+}
+
+/// What one call of [`DcpPort`] produced.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PortEvent {
+    /// The reply to send on the line, if a message was finished.
+    pub reply: Option<[u8; FRAME_LEN]>,
+    /// The command for the controller, if any.
+    pub command: Option<ControllerCommand>,
+    /// Why the finished message got the error answer, if it did.
+    pub refused: Option<Refusal>,
+    /// A request the controller cannot carry out (answered, not acted on).
+    pub unsupported: Option<Unsupported>,
+}
+
+/// The DCP port of the drive: receiver, slave and the mapping to the controller.
+#[derive(Clone, Copy, Debug)]
+pub struct DcpPort {
+    receiver: FrameReceiver,
+    slave: Slave,
+    geometry: LiftGeometry,
+    m_car_kg: f32,
+}
+
+impl DcpPort {
+    /// A port for a slave configured by `config`, the landings of
+    /// `geometry` and a car mass from the load weighing of `m_car_kg` kg.
+    pub fn new(config: SlaveConfig, geometry: LiftGeometry, m_car_kg: f32) -> Self {
+        Self { receiver: FrameReceiver::default(), slave: Slave::new(config), geometry, m_car_kg }
+    }
+
+    /// The slave (state, position).
+    pub fn slave(&self) -> &Slave {
+        &self.slave
+    }
+
+    /// Sets the car mass of the load weighing, kg (used from the next travel).
+    pub fn set_car_mass(&mut self, m_car_kg: f32) {
+        self.m_car_kg = m_car_kg;
+    }
+
+    /// One byte received at `now_us`, with the drive's status now.
+    pub fn byte(&mut self, byte: u8, now_us: u32, drive: &DriveStatus) -> PortEvent {
+        let finished = self.receiver.push(byte, now_us);
+        self.finish(finished, now_us, drive)
+    }
+
+    /// A UART error (framing, noise, overrun) at `now_us`.
+    pub fn line_error(&mut self, now_us: u32, drive: &DriveStatus) -> PortEvent {
+        let finished = self.receiver.line_error(now_us);
+        self.finish(finished, now_us, drive)
+    }
+
+    /// Time passes: finishes a message after the idle gap, checks the timeout.
+    pub fn poll(&mut self, now_us: u32, drive: &DriveStatus) -> PortEvent {
+        let finished = self.receiver.poll(now_us);
+        let mut event = self.finish(finished, now_us, drive);
+        if event.command.is_none() {
+            if let Some(request) = self.slave.poll(now_us, drive) {
+                self.map(request, &mut event);
+            }
+        }
+        event
+    }
+
+    fn finish(
+        &mut self,
+        finished: Option<Result<MasterFrame, FrameError>>,
+        now_us: u32,
+        drive: &DriveStatus,
+    ) -> PortEvent {
+        let mut event = PortEvent::default();
+        if let Some(received) = finished {
+            let Outcome { reply, request, refused } = self.slave.receive(received, now_us, drive);
+            event.reply = Some(reply.encode());
+            event.refused = refused;
+            if let Some(request) = request {
+                self.map(request, &mut event);
+            }
+        }
+        event
+    }
+
+    fn map(&self, request: Request, event: &mut PortEvent) {
+        match controller_command(request, &self.geometry, self.m_car_kg) {
+            Ok(command) => event.command = Some(command),
+            Err(e) => event.unsupported = Some(e),
+        }
+    }
+}
+
+/// Most DCP bytes one [`LiftDrive::step`] takes.
+pub const MAX_BYTES_PER_STEP: usize = 8;
+
+/// Most reply bytes one [`LiftDrive::step`] gives: a reply per byte and one for the poll.
+pub const MAX_REPLY_PER_STEP: usize = 6 * (MAX_BYTES_PER_STEP + 1);
+
+/// The drive's application layer in one call per PWM period, for targets
+/// that run the DCP line and the controller in one loop (the
+/// processor-in-the-loop target and its host shadow): the DCP bytes
+/// received since the previous period, time stamped with this period's
+/// sensor time, then the controller step. The firmware runs the same
+/// [`DcpPort`] in a task of its own and hands the commands to the control
+/// interrupt.
+#[derive(Clone, Copy, Debug)]
+pub struct LiftDrive {
+    controller: Controller,
+    port: DcpPort,
+    config: DriveConfig,
+    state: DriveState,
+    speed_radps: f32,
+}
+
+/// What one [`LiftDrive::step`] did besides the controller step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepDcp {
+    /// Reply bytes to send, in order (the first `reply_len`).
+    pub reply: [u8; MAX_REPLY_PER_STEP],
+    /// Reply bytes used.
+    pub reply_len: usize,
+    /// A command applied to the controller this period, and its result.
+    pub applied: Option<(ControllerCommand, Result<(), CommandError>)>,
+    /// A message got the error answer this period.
+    pub refused: Option<Refusal>,
+}
+
+impl LiftDrive {
+    /// The application layer of `controller` with `port`; `config` is the controller's.
+    pub fn new(controller: Controller, port: DcpPort, config: &DriveConfig) -> Self {
+        Self { controller, port, config: *config, state: DriveState::Idle, speed_radps: 0.0 }
+    }
+
+    /// The controller.
+    pub fn controller(&self) -> &Controller {
+        &self.controller
+    }
+
+    /// The controller, to install compensation or command it directly.
+    pub fn controller_mut(&mut self) -> &mut Controller {
+        &mut self.controller
+    }
+
+    /// The DCP port.
+    pub fn port(&self) -> &DcpPort {
+        &self.port
+    }
+
+    /// One PWM period: [`LiftDrive::dcp_step`], then [`LiftDrive::control_step`].
+    pub fn step(&mut self, dcp_in: &[u8], sensors: &SensorFrame) -> (ControlOutput, StepDcp) {
+        let dcp = self.dcp_step(dcp_in, sensors.time_us);
+        (self.control_step(sensors), dcp)
+    }
+
+    /// The DCP part of a period: the bytes `dcp_in` (at most
+    /// [`MAX_BYTES_PER_STEP`]; the rest are ignored) time stamped `now_us`
+    /// (the period's sensor time), then the idle gap and the timeout; the
+    /// commands go to the controller at once. The drive status the slave
+    /// sees is the previous period's.
+    pub fn dcp_step(&mut self, dcp_in: &[u8], now_us: u32) -> StepDcp {
+        let mut dcp = StepDcp { reply: [0; MAX_REPLY_PER_STEP], reply_len: 0, applied: None, refused: None };
+        for &byte in dcp_in.iter().take(MAX_BYTES_PER_STEP) {
+            let status = drive_status(self.state, self.speed_radps, true, &self.config);
+            let event = self.port.byte(byte, now_us, &status);
+            self.handle(&event, &mut dcp);
+        }
+        let status = drive_status(self.state, self.speed_radps, true, &self.config);
+        let event = self.port.poll(now_us, &status);
+        self.handle(&event, &mut dcp);
+        dcp
+    }
+
+    /// The controller part of a period.
+    pub fn control_step(&mut self, sensors: &SensorFrame) -> ControlOutput {
+        let output = self.controller.step(sensors);
+        self.state = output.state;
+        self.speed_radps = output.telemetry.speed_radps;
+        output
+    }
+
+    fn handle(&mut self, event: &PortEvent, dcp: &mut StepDcp) {
+        if let Some(reply) = event.reply {
+            let end = (dcp.reply_len + reply.len()).min(MAX_REPLY_PER_STEP);
+            let n = end - dcp.reply_len;
+            dcp.reply[dcp.reply_len..end].copy_from_slice(&reply[..n]);
+            dcp.reply_len = end;
+        }
+        if event.refused.is_some() {
+            dcp.refused = event.refused;
+        }
+        if let Some(command) = event.command {
+            let result = apply(command, &mut self.controller);
+            if result.is_ok() {
+                // The next status already shows a started travel or a stop.
+                self.state = self.controller.state();
+            }
+            dcp.applied = Some((command, result));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::reference_rig;
+    use crate::dcp::channel::position_message;
+    use crate::dcp::command::{command_byte, Kind, Mode, Speed};
+    use crate::dcp::frame::{CHARACTER_US, FRAME_GAP_US};
+
+    fn port() -> DcpPort {
+        let mut speeds = [None; 11];
+        speeds[Speed::V4.index()] = Some(0.4);
+        speeds[Speed::Vi.index()] = Some(0.3);
+        DcpPort::new(
+            SlaveConfig::new(Mode::Dcp4, speeds, 6600),
+            LiftGeometry { lw_lowest_landing_m: 1.0, shaft_travel_mm: 6600 },
+            70.5,
+        )
+    }
+
+    /// Sends one message byte by byte and lets the gap pass; the event of the gap.
+    fn send(port: &mut DcpPort, t: &mut u32, frame: MasterFrame, drive: &DriveStatus) -> PortEvent {
+        for b in frame.encode() {
+            assert_eq!(port.byte(b, *t, drive).reply, None);
+            *t += CHARACTER_US;
+        }
+        *t += FRAME_GAP_US;
+        port.poll(*t, drive)
+    }
+
+    #[test]
+    fn a_remaining_distance_becomes_a_travel_command_from_the_position_of_the_lowest_landing() {
+        let rig = reference_rig();
+        let mut p = port();
+        let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
+        let mut t = 0;
+        let mut channel = position_message(1500).to_vec();
+        for _ in 0..9 {
+            let mut comm = [0u8; 2];
+            for slot in comm.iter_mut() {
+                if !channel.is_empty() {
+                    *slot = channel.remove(0);
+                }
+            }
+            let frame = MasterFrame { command: command_byte(Kind::Stop, false), data: [0, 0], comm };
+            assert!(send(&mut p, &mut t, frame, &idle).reply.is_some());
+        }
+        assert_eq!(p.slave().position_mm(), Some(1500));
+        let frame =
+            MasterFrame { command: command_byte(Kind::Decelerate, false), data: 2000u16.to_be_bytes(), comm: [0; 2] };
+        let event = send(&mut p, &mut t, frame, &idle);
+        let Some(ControllerCommand::Travel(travel)) = event.command else { panic!("{event:?}") };
+        assert_eq!(travel.direction, Direction::Up);
+        assert_eq!(travel.distance_m, 2.0);
+        assert_eq!(travel.lw_start_m, 2.5);
+        assert_eq!(travel.m_car_kg, 70.5);
+        let mut c = Controller::new(&rig);
+        assert_eq!(apply(ControllerCommand::Travel(travel), &mut c), Ok(()));
+        assert_eq!(c.state(), DriveState::PreTorque);
+        assert_eq!(apply(ControllerCommand::SafeStop(StopReason::Timeout), &mut c), Ok(()));
+        assert_eq!(c.state(), DriveState::Idle);
+    }
+
+    #[test]
+    fn a_speed_mode_travel_is_answered_but_not_carried_out() {
+        let rig = reference_rig();
+        let mut p = port();
+        let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
+        let mut t = 0;
+        let speed = MasterFrame { command: command_byte(Kind::SpeedMode, false), data: Speed::Vi.data(), comm: [0; 2] };
+        send(&mut p, &mut t, speed, &idle);
+        let travel = MasterFrame { command: command_byte(Kind::Travel, false), data: [0, 0], comm: [0; 2] };
+        let event = send(&mut p, &mut t, travel, &idle);
+        assert_eq!(event.command, None);
+        assert_eq!(event.unsupported, Some(Unsupported::SpeedMode));
+        // Next message: the drive did not start, so the travel is not accepted.
+        let event = send(&mut p, &mut t, travel, &idle);
+        let status = event.reply.unwrap()[0];
+        assert_eq!(status & crate::dcp::slave::S5_ACCEPTED, 0);
+    }
+
+    #[test]
+    fn the_braking_distance_is_the_deceleration_half_of_the_s_curve() {
+        let rig = reference_rig();
+        // 0.4 m/s, 0.5 m/s^2, 1 m/s^3: a_peak = sqrt(0.4) = 0.632 > 0.5, so 0.5:
+        // 0.5 * 0.4 * (0.8 + 0.5) = 0.26 m.
+        assert_eq!(braking_distance_mm(0.4, &rig), 261);
+        assert_eq!(braking_distance_mm(-0.4, &rig), 261);
+        assert_eq!(braking_distance_mm(0.0, &rig), 0);
+        let slow = braking_distance_mm(0.1, &rig) as f32;
+        // a_peak = sqrt(0.1): 0.5 * 0.1 * 2 * sqrt(0.1) = 0.0316 m.
+        assert!((slow - 32.6).abs() < 1.0, "{slow}");
+        assert_eq!(braking_distance_mm(f32::NAN, &rig), 0);
+        assert_eq!(braking_distance_mm(1e9, &rig), u16::MAX);
+    }
+
+    #[test]
+    fn the_status_follows_the_controller_state() {
+        let rig = reference_rig();
+        let travel = drive_status(DriveState::Travel, -6.0, true, &rig);
+        assert!(travel.travelling && travel.brake_open && !travel.ready && !travel.fault);
+        assert!((travel.speed_mps - 0.39).abs() < 1e-6);
+        let tripped = drive_status(DriveState::Tripped(crate::supervisor::Fault::OverCurrent), 0.0, true, &rig);
+        assert!(tripped.fault && !tripped.ready && !tripped.travelling);
+        assert!(!drive_status(DriveState::Idle, 0.0, false, &rig).ready, "not calibrated or aligned");
+    }
+}

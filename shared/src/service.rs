@@ -1,0 +1,317 @@
+//! The service port's protocol: one ASCII line per request, one line per
+//! answer, for the bench (the ST-LINK virtual COM port on the board, the
+//! `host-sim drive --port` command on the PC). No hardware here: parsing,
+//! the answers, and the state they read and change.
+//!
+//! Requests (case-sensitive, fields separated by single spaces, `\n` ends a
+//! line, `\r` before it is ignored, at most [`MAX_LINE`] bytes):
+//!
+//! | request | answer |
+//! |---|---|
+//! | `get strategy` | `strategy <off\|table\|adaptive\|learning\|car-observer>` |
+//! | `set strategy <name>` | `ok strategy <name>` (installed before the next travel) |
+//! | `get mass` | `mass <kg>` (the load weighing's car mass) |
+//! | `set mass <kg>` | `ok mass <kg>`; a mass outside (0, 10 000] kg is refused |
+//! | `get table` | `table <n> <order> <re N m> <im N m> ...` (numbers in Rust's shortest round-trip form) |
+//! | `get faults` | `faults <n> <code> ...` (oldest first, the fault codes of `supervisor::Fault`) |
+//! | `get state` | `state <code> speed <rad/s>` (`DriveState::code`) |
+//!
+//! Anything else is answered `error <reason>`, never acted on. A `set` is
+//! refused while a travel runs (`error busy`); a drive that cannot install
+//! another strategy answers `set strategy` with `error unsupported`.
+
+use core::fmt::Write;
+
+use crate::ripple::harmonics::HarmonicTable;
+use crate::ripple::Strategy;
+
+/// Longest request line, bytes.
+pub const MAX_LINE: usize = 64;
+/// Longest answer line, bytes (a full table: 8 harmonics).
+pub const MAX_ANSWER: usize = 320;
+/// Faults the log keeps (the oldest is dropped).
+pub const FAULT_LOG: usize = 16;
+
+/// A parsed request.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Request {
+    /// `get strategy`.
+    GetStrategy,
+    /// `set strategy <name>`.
+    SetStrategy(Strategy),
+    /// `get mass`.
+    GetMass,
+    /// `set mass <kg>`.
+    SetMass(f32),
+    /// `get table`.
+    GetTable,
+    /// `get faults`.
+    GetFaults,
+    /// `get state`.
+    GetState,
+}
+
+/// Why a request line is refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RequestError {
+    /// Longer than [`MAX_LINE`] or not ASCII.
+    Line,
+    /// Not a request of the table.
+    Unknown,
+    /// A strategy name that does not exist.
+    Strategy,
+    /// A mass that is not a number in (0, 10 000] kg.
+    Mass,
+    /// A `set` while a travel runs.
+    Busy,
+    /// A request this drive does not carry out (see [`ServiceState::strategy_settable`]).
+    Unsupported,
+}
+
+impl RequestError {
+    /// The reason word of the `error` answer.
+    pub fn word(self) -> &'static str {
+        match self {
+            RequestError::Line => "line",
+            RequestError::Unknown => "unknown-request",
+            RequestError::Strategy => "unknown-strategy",
+            RequestError::Mass => "mass-out-of-range",
+            RequestError::Busy => "busy",
+            RequestError::Unsupported => "unsupported",
+        }
+    }
+}
+
+/// The request of one line (without its `\n`).
+pub fn parse(line: &[u8]) -> Result<Request, RequestError> {
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    if line.len() > MAX_LINE || !line.is_ascii() {
+        return Err(RequestError::Line);
+    }
+    let text = core::str::from_utf8(line).map_err(|_| RequestError::Line)?;
+    let mut words = text.split(' ');
+    let request = match (words.next(), words.next(), words.next()) {
+        (Some("get"), Some("strategy"), None) => Request::GetStrategy,
+        (Some("get"), Some("mass"), None) => Request::GetMass,
+        (Some("get"), Some("table"), None) => Request::GetTable,
+        (Some("get"), Some("faults"), None) => Request::GetFaults,
+        (Some("get"), Some("state"), None) => Request::GetState,
+        (Some("set"), Some("strategy"), Some(name)) => Request::SetStrategy(
+            Strategy::ALL.iter().copied().find(|s| s.name() == name).ok_or(RequestError::Strategy)?,
+        ),
+        (Some("set"), Some("mass"), Some(kg)) => {
+            let kg: f32 = kg.parse().map_err(|_| RequestError::Mass)?;
+            if !(kg > 0.0 && kg <= 10_000.0) {
+                return Err(RequestError::Mass);
+            }
+            Request::SetMass(kg)
+        }
+        _ => return Err(RequestError::Unknown),
+    };
+    if words.next().is_some() {
+        return Err(RequestError::Unknown);
+    }
+    Ok(request)
+}
+
+/// What the service port reads and changes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServiceState {
+    /// The strategy to install before the next travel.
+    pub strategy: Strategy,
+    /// The harmonic table in use, N m.
+    pub table: HarmonicTable,
+    /// Car mass of the load weighing, kg.
+    pub m_car_kg: f32,
+    /// Fault codes, oldest first (the first `fault_count`).
+    pub faults: [u8; FAULT_LOG],
+    /// Faults held.
+    pub fault_count: usize,
+    /// `DriveState::code` of the drive now.
+    pub state_code: u8,
+    /// Shaft speed now, rad/s.
+    pub speed_radps: f32,
+    /// A travel runs (sets are refused).
+    pub travelling: bool,
+    /// Whether `set strategy` is carried out (false: answered `error unsupported`).
+    pub strategy_settable: bool,
+}
+
+impl ServiceState {
+    /// Appends a fault code to the log, dropping the oldest when full.
+    pub fn log_fault(&mut self, code: u8) {
+        if self.fault_count == FAULT_LOG {
+            self.faults.copy_within(1.., 0);
+            self.fault_count -= 1;
+        }
+        self.faults[self.fault_count] = code;
+        self.fault_count += 1;
+    }
+}
+
+/// An answer line (without `\n`).
+pub struct Answer {
+    bytes: [u8; MAX_ANSWER],
+    len: usize,
+}
+
+impl Answer {
+    fn new() -> Self {
+        Self { bytes: [0; MAX_ANSWER], len: 0 }
+    }
+
+    /// The answer's bytes.
+    pub fn as_bytes(&self) -> &[u8] {
+        &self.bytes[..self.len]
+    }
+}
+
+impl Write for Answer {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let end = self.len + s.len();
+        if end > MAX_ANSWER {
+            return Err(core::fmt::Error);
+        }
+        self.bytes[self.len..end].copy_from_slice(s.as_bytes());
+        self.len = end;
+        Ok(())
+    }
+}
+
+/// Answers one request line, changing `state` for a valid `set`.
+pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
+    let mut out = Answer::new();
+    let result = parse(line).and_then(|request| {
+        let is_set = matches!(request, Request::SetStrategy(_) | Request::SetMass(_));
+        if is_set && state.travelling {
+            Err(RequestError::Busy)
+        } else if matches!(request, Request::SetStrategy(_)) && !state.strategy_settable {
+            Err(RequestError::Unsupported)
+        } else {
+            Ok(request)
+        }
+    });
+    // Every answer fits MAX_ANSWER (numbers in Rust's shortest round-trip
+    // form, a full table at most 8 x 38 bytes): the writes cannot fail.
+    let _ = match result {
+        Err(e) => write!(out, "error {}", e.word()),
+        Ok(Request::GetStrategy) => write!(out, "strategy {}", state.strategy.name()),
+        Ok(Request::SetStrategy(s)) => {
+            state.strategy = s;
+            write!(out, "ok strategy {}", s.name())
+        }
+        Ok(Request::GetMass) => write!(out, "mass {:?}", state.m_car_kg),
+        Ok(Request::SetMass(kg)) => {
+            state.m_car_kg = kg;
+            write!(out, "ok mass {kg:?}")
+        }
+        Ok(Request::GetTable) => {
+            let t = &state.table;
+            let n = t.len.min(t.orders.len());
+            let _ = write!(out, "table {n}");
+            (0..n).try_for_each(|k| write!(out, " {} {:?} {:?}", t.orders[k], t.torque_nm[k].re, t.torque_nm[k].im))
+        }
+        Ok(Request::GetFaults) => {
+            let _ = write!(out, "faults {}", state.fault_count);
+            state.faults[..state.fault_count].iter().try_for_each(|c| write!(out, " {c}"))
+        }
+        Ok(Request::GetState) => write!(out, "state {} speed {:?}", state.state_code, state.speed_radps),
+    };
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ripple::complex::Complex;
+
+    fn state() -> ServiceState {
+        let mut table = HarmonicTable::zero(&[1, 12]);
+        table.torque_nm[1] = Complex::new(-3.5, 0.25);
+        ServiceState {
+            strategy: Strategy::Table,
+            table,
+            m_car_kg: 70.5,
+            faults: [0; FAULT_LOG],
+            fault_count: 0,
+            state_code: 0,
+            speed_radps: 0.0,
+            travelling: false,
+            strategy_settable: true,
+        }
+    }
+
+    fn ask(line: &str, s: &mut ServiceState) -> std::string::String {
+        std::string::String::from_utf8(answer(line.as_bytes(), s).as_bytes().to_vec()).unwrap()
+    }
+
+    extern crate std;
+
+    #[test]
+    fn every_request_of_the_table_is_answered() {
+        let mut s = state();
+        assert_eq!(ask("get strategy", &mut s), "strategy table");
+        assert_eq!(ask("set strategy car-observer\r", &mut s), "ok strategy car-observer");
+        assert_eq!(s.strategy, Strategy::CarObserver);
+        assert_eq!(ask("get mass", &mut s), "mass 70.5");
+        assert_eq!(ask("set mass 45.5", &mut s), "ok mass 45.5");
+        assert_eq!(s.m_car_kg, 45.5);
+        assert_eq!(ask("get table", &mut s), "table 2 1 0.0 0.0 12 -3.5 0.25");
+        s.log_fault(1);
+        s.log_fault(7);
+        assert_eq!(ask("get faults", &mut s), "faults 2 1 7");
+        s.state_code = 3;
+        s.speed_radps = 6.125;
+        assert_eq!(ask("get state", &mut s), "state 3 speed 6.125");
+    }
+
+    #[test]
+    fn bad_requests_are_refused_and_change_nothing() {
+        let mut s = state();
+        let before = s;
+        for (line, word) in [
+            ("get", "unknown-request"),
+            ("get strategy now", "unknown-request"),
+            ("set strategy fast", "unknown-strategy"),
+            ("set mass -3", "mass-out-of-range"),
+            ("set mass NaN", "mass-out-of-range"),
+            ("set mass 1e9", "mass-out-of-range"),
+            ("set  mass 3", "unknown-request"),
+            ("gét state", "line"),
+        ] {
+            assert_eq!(ask(line, &mut s), std::format!("error {word}"), "{line}");
+        }
+        let long = [b'a'; MAX_LINE + 1];
+        assert_eq!(answer(&long, &mut s).as_bytes(), b"error line");
+        s.travelling = true;
+        assert_eq!(ask("set mass 50", &mut s), "error busy");
+        s.travelling = false;
+        s.strategy_settable = false;
+        assert_eq!(ask("set strategy off", &mut s), "error unsupported");
+        s.strategy_settable = true;
+        assert_eq!(s, before);
+    }
+
+    #[test]
+    fn the_fault_log_keeps_the_newest() {
+        let mut s = state();
+        for code in 0..(FAULT_LOG as u8 + 3) {
+            s.log_fault(code);
+        }
+        assert_eq!(s.fault_count, FAULT_LOG);
+        assert_eq!(s.faults[0], 3);
+        assert_eq!(s.faults[FAULT_LOG - 1], FAULT_LOG as u8 + 2);
+    }
+
+    #[test]
+    fn a_full_table_fits_the_answer() {
+        let mut s = state();
+        s.table = HarmonicTable::zero(&[65535; 8]);
+        for u in s.table.torque_nm.iter_mut() {
+            *u = Complex::new(-1.234_567_9e-30, -9.876_543e30);
+        }
+        let a = ask("get table", &mut s);
+        assert!(a.starts_with("table 8 65535 "), "{a}");
+        assert_eq!(a.split(' ').count(), 2 + 8 * 3, "{a}");
+    }
+}
