@@ -408,7 +408,7 @@ fn torque_psd_plot(path: &std::path::Path, title: &str, psd: &Psd, lines: &[Ripp
             let lobe = k.saturating_sub(2)..(k + 3).min(psd.density.len());
             let peak = psd.density[lobe].iter().copied().fold(0.0, f64::max);
             let label = format!("{}x {} {:.3} N m", l.mechanical_order, l.source, l.amplitude_nm);
-            Mark { x: l.frequency_hz, y: db(peak), label }
+            Mark { x: l.frequency_hz, y: db(peak), label, y_error: None }
         })
         .collect();
     let panel = Panel {
