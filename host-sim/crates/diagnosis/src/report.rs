@@ -91,7 +91,7 @@ pub fn gap_map_plot(path: &Path, title: &str, cells: &[CellGap], bands_hz: &[(f6
         rows: bands_hz.iter().map(|(lo, hi)| format_hz((lo * hi).sqrt())).collect(),
         x_label: "travel phase".to_string(),
         y_label: "third-octave band centre [Hz]".to_string(),
-        colour_label: "excess gap [dB] (|d| beyond 2 noise + tolerance, sign of d)".to_string(),
+        colour_label: "excess gap [dB]".to_string(),
         limit: Some(GAP_MAP_LIMIT_DB),
         panels,
     };
@@ -181,14 +181,17 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
 
     let mut plots = Vec::new();
     let p = out.join("gap_map_before.png");
-    let title = format!("{}: excess gap of the calibrated nominal model, per channel", report.dataset);
+    let title = format!(
+        "{}: excess gap of the calibrated nominal model (d beyond noise and tolerance; white: none)",
+        report.dataset
+    );
     gap_map_plot(&p, &title, &report.map_before, &report.bands_hz)?;
     plots.push(("gap map before (nominal model)".to_string(), "gap_map_before.png".to_string()));
     written.push(p);
     if !after.is_empty() {
         let p = out.join("gap_map_after.png");
         let title = format!(
-            "{}: excess gap with {}, per channel",
+            "{}: excess gap with {} (d beyond noise and tolerance; white: none)",
             report.dataset,
             report.explained_by.as_deref().unwrap_or("the explaining model")
         );

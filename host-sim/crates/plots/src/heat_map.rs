@@ -45,7 +45,7 @@ pub struct HeatMap {
     /// magnitude of the cells (at least 1).
     pub limit: Option<f64>,
     /// The panels (at least one), laid out left to right, at most
-    /// [`HEAT_PANELS_PER_ROW`] to a row.
+    /// [`HEAT_PANELS_PER_ROW`] to a row (four as two by two).
     pub panels: Vec<HeatPanel>,
 }
 
@@ -126,8 +126,8 @@ fn check_heat_map(map: &HeatMap) -> Result<f64, PlotError> {
     }
 }
 
-/// Heat maps of `map` into a PNG at `path`: panels of
-/// [`HEAT_PANELS_PER_ROW`] to a row, each with the column names under it
+/// Heat maps of `map` into a PNG at `path`: panels of up to
+/// [`HEAT_PANELS_PER_ROW`] to a row (four as two by two), each with the column names under it
 /// (written upwards) and the row names left of it, the panel's title above;
 /// a colour bar from `-limit` to `limit` labelled `colour_label` on the
 /// right, with zero (white) in its middle; cells without data grey.
@@ -143,8 +143,8 @@ fn check_heat_map(map: &HeatMap) -> Result<f64, PlotError> {
 pub fn heat_map_plot(path: &Path, map: &HeatMap) -> Result<(), PlotError> {
     check_png_path(path)?;
     let limit = check_heat_map(map)?;
-    let per_row = map.panels.len().min(HEAT_PANELS_PER_ROW);
-    let panel_rows = map.panels.len().div_ceil(HEAT_PANELS_PER_ROW);
+    let per_row = panels_per_row(map.panels.len());
+    let panel_rows = map.panels.len().div_ceil(per_row);
     let (title_px, x_label_px) = (56, 34);
     let width = 40 + per_row as u32 * PANEL_W_PX + BAR_W_PX;
     let height = title_px + panel_rows as u32 * PANEL_H_PX + x_label_px;
@@ -179,6 +179,15 @@ pub fn heat_map_plot(path: &Path, map: &HeatMap) -> Result<(), PlotError> {
         }
         draw_diverging_bar(&bar_column, cell_rows, limit, &map.colour_label)
     })
+}
+
+/// Panels in a row for `n` panels: all of up to [`HEAT_PANELS_PER_ROW`] in
+/// one row, four as two rows of two, more [`HEAT_PANELS_PER_ROW`] to a row.
+fn panels_per_row(n: usize) -> usize {
+    match n {
+        4 => 2,
+        n => n.clamp(1, HEAT_PANELS_PER_ROW),
+    }
 }
 
 /// One panel on `area`; returns the pixel rows (root coordinates) of its cells.
@@ -331,8 +340,9 @@ mod tests {
         let path = dir.path().join("heat.png");
         heat_map_plot(&path, &map(4)).unwrap();
         let (w, h, rgb) = read_rgb(&path);
-        assert_eq!(w, 40 + 3 * PANEL_W_PX + BAR_W_PX);
+        assert_eq!(w, 40 + 2 * PANEL_W_PX + BAR_W_PX);
         assert_eq!(h, 56 + 2 * PANEL_H_PX + 34);
+        assert_eq!((panels_per_row(1), panels_per_row(3), panels_per_row(5)), (1, 3, 3));
         let count = |c: RGBColor| rgb.chunks(3).filter(|p| p == &[c.0, c.1, c.2]).count();
         // Four panels of one red, one blue and one grey column, each a
         // sizeable area (the bar holds the end colours only in a sliver).

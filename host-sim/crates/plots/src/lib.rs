@@ -24,6 +24,7 @@ pub mod panels;
 pub use heat_map::{diverging, heat_map_plot, HeatMap, HeatPanel};
 pub use panels::{envelope, stacked_plot, Band, Level, Mark, Panel};
 
+
 use std::fmt::Display;
 use std::fs;
 use std::ops::Range;
@@ -358,7 +359,7 @@ pub fn spectrogram_plot_with_top_axis(
         let mut chart = ChartBuilder::on(&main)
             .caption(title, (FONT_FAMILY, 24))
             .margin(15)
-            .top_x_label_area_size(if top.is_some() { 52 } else { 0 })
+            .margin_top(if top.is_some() { 67 } else { 15 })
             .x_label_area_size(55)
             .y_label_area_size(85)
             .build_cartesian_2d(axes.t_range.clone(), axes.f_range.clone())
@@ -1095,6 +1096,54 @@ mod tests {
         assert_eq!(cell_index(&e, 4.0), Some(2));
         assert_eq!(cell_index(&e, f64::NAN), None);
         assert_eq!(cell_edges(&[2.0]), vec![1.5, 2.5]);
+    }
+
+    #[test]
+    fn top_axis_ticks_where_the_value_crosses_its_multiples() {
+        // A rope length at rest at 1.0 m for 1 s, then rising 0.5 m/s to
+        // 2.2 m, then at rest: ticks at 1.0 (its start), 1.5 and 2.0 m.
+        let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.1).collect();
+        let lw: Vec<f64> = t.iter().map(|&t| (1.0 + 0.5 * (t - 1.0).max(0.0)).min(2.2)).collect();
+        let axis = TopAxis::at_multiples("lw [m]", &t, &lw, 0.5, 1);
+        let want = [(0.0, "1.0"), (2.0, "1.5"), (3.0, "2.0")];
+        assert_eq!(axis.ticks.len(), want.len(), "{:?}", axis.ticks);
+        for ((t, text), (wt, wtext)) in axis.ticks.iter().zip(want) {
+            assert!((t - wt).abs() < 1e-9 && text == wtext, "{t} {text}");
+        }
+        // Falling values tick too; a constant one gets one tick at its start.
+        let down: Vec<f64> = lw.iter().map(|v| 3.0 - v).collect();
+        assert_eq!(TopAxis::at_multiples("x", &t, &down, 0.5, 1).ticks.len(), 3);
+        let flat = TopAxis::at_multiples("x", &t, &vec![1.23; t.len()], 0.5, 2);
+        assert_eq!(flat.ticks, vec![(0.0, "1.23".to_string())]);
+    }
+
+    #[test]
+    fn spectrogram_with_top_axis_draws_its_ticks_above_the_map() {
+        let dir = tempfile::tempdir().unwrap();
+        let (with, without) = (dir.path().join("top.png"), dir.path().join("plain.png"));
+        let s = Spectrogram {
+            times_s: (0..20).map(f64::from).collect(),
+            frequency_hz: (0..10).map(f64::from).collect(),
+            psd_db: vec![vec![-30.0; 10]; 20],
+        };
+        let top = TopAxis { label: "lw [m]".to_string(), ticks: vec![(5.0, "2.0".to_string()), (15.0, "4.0".to_string())] };
+        spectrogram_plot_with_top_axis(&with, "t", &s, &[], None, Some(&top)).unwrap();
+        spectrogram_plot(&without, "t", &s, &[], None).unwrap();
+        let (w, _, a) = read_png(&with);
+        let (_, _, b) = read_png(&without);
+        // The heat map starts lower with the axis: its top row of colour is
+        // further down, and dark tick text sits above it.
+        let first_coloured_row = |rgb: &[u8]| (0..PLOT_HEIGHT_PX).find(|&y| pixel(rgb, w, 600, y) == {
+            let c = viridis(1.0);
+            (c.0, c.1, c.2)
+        });
+        let (ya, yb) = (first_coloured_row(&a).unwrap(), first_coloured_row(&b).unwrap());
+        assert!(ya > yb + 40, "{ya} {yb}");
+        let dark_above = (yb..ya).flat_map(|y| (100..1000).map(move |x| (x, y))).filter(|&(x, y)| {
+            let p = pixel(&a, w, x, y);
+            p.0 < 80 && p.1 < 80 && p.2 < 80
+        });
+        assert!(dark_above.count() > 30);
     }
 
     #[test]
