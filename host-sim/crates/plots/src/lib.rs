@@ -356,10 +356,16 @@ pub fn spectrogram_plot_with_top_axis(
 
     render(path, |root| {
         let (main, bar_panel) = root.split_horizontally(PLOT_WIDTH_PX - COLORBAR_PANEL_PX);
-        let mut chart = ChartBuilder::on(&main)
-            .caption(title, (FONT_FAMILY, 24))
-            .margin(15)
-            .margin_top(if top.is_some() { 67 } else { 15 })
+        // With a top axis the title goes above it, clear of its labels.
+        let (head, body) = main.split_vertically(if top.is_some() { 42 } else { 0 });
+        let mut builder = ChartBuilder::on(&body);
+        if top.is_some() {
+            head.titled(title, (FONT_FAMILY, 24)).map_err(draw_err)?;
+            builder.margin(15).margin_top(60);
+        } else {
+            builder.caption(title, (FONT_FAMILY, 24)).margin(15);
+        }
+        let mut chart = builder
             .x_label_area_size(55)
             .y_label_area_size(85)
             .build_cartesian_2d(axes.t_range.clone(), axes.f_range.clone())
