@@ -232,15 +232,24 @@ struct EaPoint {
 fn ea_plot(path: &Path, dataset: &Path, points: &[EaPoint], rig_ea_n: f64) -> anyhow::Result<()> {
     let (lo, hi) =
         points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.tension_n), b.max(p.tension_n)));
-    let pad = 0.1 * (hi - lo).max(1.0);
-    let (x0, x1) = (lo - pad, hi + pad);
+    // Room on the right for the last point's label.
+    let span = (hi - lo).max(1.0);
+    let (x0, x1) = (lo - 0.1 * span, hi + 0.4 * span);
     let level = |f: f64, label: String| Level { y: rig_ea_n * f, x0, x1, label };
     let panel = Panel {
         y_label: "EA [N]".to_string(),
         series: vec![Series::new("rig EA", vec![x0, x1], vec![rig_ea_n, rig_ea_n])],
         marks: points
             .iter()
-            .map(|p| Mark { x: p.tension_n, y: p.ea_n, label: p.label.clone(), y_error: p.error_n })
+            .map(|p| Mark {
+                x: p.tension_n,
+                y: p.ea_n,
+                label: match p.error_n {
+                    Some(e) if e.is_finite() => format!("{}: {:.5e} +- {e:.0} N", p.label, p.ea_n),
+                    _ => p.label.clone(),
+                },
+                y_error: p.error_n,
+            })
             .collect(),
         levels: vec![
             level(1.0 + EA_BAND_FRACTION, format!("rig EA + {:.0} %", 100.0 * EA_BAND_FRACTION)),
