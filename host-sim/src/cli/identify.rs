@@ -419,7 +419,12 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
                         c.frequencies_hz()
                             .iter()
                             .map(|&f| {
-                                rope_ea_from_first_frequency(f, m.rope_mass_per_length_kg_per_m, d.rope_length_m, d.mass_kg)
+                                rope_ea_from_first_frequency(
+                                    f,
+                                    m.rope_mass_per_length_kg_per_m,
+                                    d.rope_length_m,
+                                    d.mass_kg,
+                                )
                             })
                             .collect()
                     })
@@ -486,7 +491,7 @@ mod tests {
     fn decay_cycles_give_the_damped_frequency_of_a_decaying_sine() {
         // A 6.25 Hz decay (zeta 0.02) released at 1 s after rest, 4096 Hz:
         // the cycles' peaks are one damped period apart.
-        let (fs, f, zeta) = (4096.0, 6.25, 0.02);
+        let (fs, f, zeta): (f64, f64, f64) = (4096.0, 6.25, 0.02);
         let wd = std::f64::consts::TAU * f * (1.0 - zeta * zeta).sqrt();
         let a: Vec<f64> = (0..(8.0 * fs) as usize)
             .map(|i| {

@@ -33,7 +33,11 @@ pub fn cell_excess_db(c: &CellGap) -> f64 {
 }
 
 /// Mean of `value` per (channel, phase, band) over the recordings.
-fn mean_map(cells: &[CellGap], bands: usize, value: impl Fn(&CellGap) -> f64) -> Vec<(Channel, Phase, Vec<Option<f64>>)> {
+fn mean_map(
+    cells: &[CellGap],
+    bands: usize,
+    value: impl Fn(&CellGap) -> f64,
+) -> Vec<(Channel, Phase, Vec<Option<f64>>)> {
     let mut out = Vec::new();
     for channel in Channel::ALL {
         for phase in PHASES {

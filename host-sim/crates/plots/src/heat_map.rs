@@ -112,7 +112,8 @@ fn check_heat_map(map: &HeatMap) -> Result<f64, PlotError> {
                     expected: map.rows.len(),
                 });
             }
-            if let Some((r, v)) = column.iter().enumerate().find_map(|(r, v)| v.filter(|v| !v.is_finite()).map(|v| (r, v)))
+            if let Some((r, v)) =
+                column.iter().enumerate().find_map(|(r, v)| v.filter(|v| !v.is_finite()).map(|v| (r, v)))
             {
                 return Err(PlotError::SpectrogramValue { time_index: c, frequency_index: r, value: v });
             }
@@ -206,13 +207,7 @@ fn draw_heat_panel(
         .y_label_area_size(62)
         .build_cartesian_2d(0.0..n_cols as f64, 0.0..n_rows as f64)
         .map_err(draw_err)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .x_labels(0)
-        .y_labels(0)
-        .draw()
-        .map_err(draw_err)?;
+    chart.configure_mesh().disable_mesh().x_labels(0).y_labels(0).draw().map_err(draw_err)?;
     let cells = panel.values.iter().enumerate().flat_map(|(c, column)| {
         column.iter().enumerate().map(move |(r, v)| {
             let colour = v.map_or(NO_DATA, |v| diverging(v / limit));
@@ -238,7 +233,11 @@ fn draw_heat_panel(
         area.draw(&Text::new(
             name.clone(),
             (x - area_x, py.end - area_y + 6),
-            (FONT_FAMILY, 15).into_font().transform(FontTransform::Rotate270).color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center)),
+            (FONT_FAMILY, 15)
+                .into_font()
+                .transform(FontTransform::Rotate270)
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Right, VPos::Center)),
         ))
         .map_err(draw_err)?;
     }

@@ -24,7 +24,6 @@ pub mod panels;
 pub use heat_map::{diverging, heat_map_plot, HeatMap, HeatPanel};
 pub use panels::{envelope, stacked_plot, Band, Level, Mark, Panel};
 
-
 use std::fmt::Display;
 use std::fs;
 use std::ops::Range;
@@ -391,7 +390,12 @@ pub fn spectrogram_plot_with_top_axis(
 
 /// The ticks, their labels and the description of `top` along the top edge
 /// of `chart`'s plotting area (drawn on `root`).
-fn draw_top_axis(root: &Area<'_>, chart: &Chart<'_, '_>, axes: &SpectrogramAxes, top: &TopAxis) -> Result<(), PlotError> {
+fn draw_top_axis(
+    root: &Area<'_>,
+    chart: &Chart<'_, '_>,
+    axes: &SpectrogramAxes,
+    top: &TopAxis,
+) -> Result<(), PlotError> {
     let (px, py) = chart.plotting_area().get_pixel_range();
     let style = ShapeStyle::from(BLACK).stroke_width(1);
     root.draw(&PathElement::new(vec![(px.start, py.start), (px.end, py.start)], style)).map_err(draw_err)?;
@@ -1132,17 +1136,22 @@ mod tests {
             frequency_hz: (0..10).map(f64::from).collect(),
             psd_db: vec![vec![-30.0; 10]; 20],
         };
-        let top = TopAxis { label: "lw [m]".to_string(), ticks: vec![(5.0, "2.0".to_string()), (15.0, "4.0".to_string())] };
+        let top =
+            TopAxis { label: "lw [m]".to_string(), ticks: vec![(5.0, "2.0".to_string()), (15.0, "4.0".to_string())] };
         spectrogram_plot_with_top_axis(&with, "t", &s, &[], None, Some(&top)).unwrap();
         spectrogram_plot(&without, "t", &s, &[], None).unwrap();
         let (w, _, a) = read_png(&with);
         let (_, _, b) = read_png(&without);
         // The heat map starts lower with the axis: its top row of colour is
         // further down, and dark tick text sits above it.
-        let first_coloured_row = |rgb: &[u8]| (0..PLOT_HEIGHT_PX).find(|&y| pixel(rgb, w, 600, y) == {
-            let c = viridis(1.0);
-            (c.0, c.1, c.2)
-        });
+        let first_coloured_row = |rgb: &[u8]| {
+            (0..PLOT_HEIGHT_PX).find(|&y| {
+                pixel(rgb, w, 600, y) == {
+                    let c = viridis(1.0);
+                    (c.0, c.1, c.2)
+                }
+            })
+        };
         let (ya, yb) = (first_coloured_row(&a).unwrap(), first_coloured_row(&b).unwrap());
         assert!(ya > yb + 40, "{ya} {yb}");
         let dark_above = (yb..ya).flat_map(|y| (100..1000).map(move |x| (x, y))).filter(|&(x, y)| {

@@ -220,7 +220,9 @@ fn draw_levels_and_marks(chart: &mut Chart<'_, '_>, panel: &Panel) -> Result<(),
         if let Some(e) = mark.y_error.filter(|e| e.is_finite() && *e > 0.0) {
             let bar = ShapeStyle::from(red).stroke_width(2);
             let (lo, hi) = (mark.y - e, mark.y + e);
-            chart.draw_series(std::iter::once(PathElement::new(vec![(mark.x, lo), (mark.x, hi)], bar))).map_err(draw_err)?;
+            chart
+                .draw_series(std::iter::once(PathElement::new(vec![(mark.x, lo), (mark.x, hi)], bar)))
+                .map_err(draw_err)?;
             let caps = [lo, hi].map(|y| EmptyElement::at((mark.x, y)) + PathElement::new(vec![(-7, 0), (7, 0)], bar));
             chart.draw_series(caps).map_err(draw_err)?;
         }
