@@ -18,7 +18,7 @@ use diagnosis::travel_signals::{counterweight_side_length_m, travel_torque, Trav
 use dsp::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Psd, Spectrogram};
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, DOF};
-use plots::{line_plot, spectrogram_plot, stacked_plot, Mark, Panel, Series};
+use plots::{spectrogram_plot_with_top_axis, stacked_plot, Band, Mark, Panel, Series, TopAxis};
 use recording::{read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
 use rig_config::RigConfig;
 
@@ -260,24 +260,47 @@ fn analyze_travel(
     );
     torque_psd_plot(&psd_png, &title, &psd, &ripple_lines)?;
     files.push(published(&psd_png));
+    let stage_band = Band {
+        x0: stage.start as f64 / fs,
+        x1: stage.end as f64 / fs,
+        label: "constant-speed stage (torque PSD)".to_string(),
+    };
+    let torque_png = out.join("torque.png");
+    let time: Vec<f64> = (0..torque.len()).map(|i| i as f64 / fs).collect();
+    stacked_plot(
+        &torque_png,
+        &format!("{stem}: machine torque from the phase currents (dq0), the stage of the torque PSD shaded"),
+        "time [s]",
+        &[Panel {
+            y_label: "torque [N m]".to_string(),
+            series: vec![Series::new("torque", time.clone(), torque.clone())],
+            ..Panel::default()
+        }],
+        std::slice::from_ref(&stage_band),
+    )?;
+    files.push(published(&torque_png));
 
     // Accelerations: 1 Hz zero-phase high-pass, spectrograms with the model's modes.
     let mut chain = ChainParams::from_rig(rig, m_car_kg);
     chain.m_cw_kg = m_cw_kg;
     let lw = counterweight_side_length_m(&angle, lw_start_m, rig.mechanics.sheave_radius_m);
-    let time: Vec<f64> = (0..speed.len()).map(|i| i as f64 / fs).collect();
     let [_, band_hi] = rig.measurement.spectrogram_band_hz;
+    let rope = TopAxis::at_multiples("counterweight-side rope length lw [m]", &time, &lw, 0.5, 1);
     for (name, label) in [(ACC_CAR, "car"), (ACC_CW, "counterweight"), (ACC_MACHINE, "machine")] {
         let Some(acc) = recording.column(name) else { continue };
         let filtered = highpass_zero_phase(&acc.values, fs, rig.measurement.highpass_hz)
             .with_context(|| format!("`{name}`: high-pass at [measurement].highpass_hz"))?;
         let hp_png = out.join(format!("{name}_hp.png"));
-        line_plot(
+        stacked_plot(
             &hp_png,
             &format!("{stem}: {label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
             "time [s]",
-            "acceleration [m/s^2]",
-            &[Series::new(label, time.clone(), filtered.clone())],
+            &[Panel {
+                y_label: "acceleration [m/s^2]".to_string(),
+                series: vec![Series::new(label, time.clone(), filtered.clone())],
+                ..Panel::default()
+            }],
+            std::slice::from_ref(&stage_band),
         )?;
         files.push(published(&hp_png));
         let burg = burg_spectrogram(&filtered, fs, args.burg_window_s, 0.75, args.burg_order, band_hi, 0.25)
@@ -291,7 +314,7 @@ fn analyze_travel(
             .with_context(|| format!("`{name}`: STFT spectrogram (--stft-window {} s)", args.stft_window_s))?;
         for (method, spectrogram) in [("burg", &burg), ("stft", &stft)] {
             let png = out.join(format!("{name}_spectrogram_{method}.png"));
-            spectrogram_plot(
+            spectrogram_plot_with_top_axis(
                 &png,
                 &format!("{stem}: {label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, modes and orders traced"),
                 spectrogram,
@@ -301,6 +324,7 @@ fn analyze_travel(
                 ]
                 .concat(),
                 None,
+                Some(&rope),
             )?;
             files.push(published(&png));
         }
@@ -408,7 +432,7 @@ fn torque_psd_plot(path: &std::path::Path, title: &str, psd: &Psd, lines: &[Ripp
             let lobe = k.saturating_sub(2)..(k + 3).min(psd.density.len());
             let peak = psd.density[lobe].iter().copied().fold(0.0, f64::max);
             let label = format!("{}x {} {:.3} N m", l.mechanical_order, l.source, l.amplitude_nm);
-            Mark { x: l.frequency_hz, y: db(peak), label }
+            Mark { x: l.frequency_hz, y: db(peak), label, y_error: None }
         })
         .collect();
     let panel = Panel {

@@ -11,6 +11,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::output_dir;
+use diagnosis::identify::rope_ea_from_first_frequency;
 use diagnosis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
 use plots::{stacked_plot, Level, Mark, Panel, Series};
 use recording::read::read_dataset;
@@ -146,18 +147,110 @@ struct Report {
 /// few 0.01 % does not read as a trend.
 const EA_BAND_FRACTION: f64 = 0.01;
 
+/// The cycles of a free decay that the identification's decrement uses,
+/// read again for the plots: the first mode isolated as the identification
+/// isolates it (zero-phase high-pass at `f1 / 2` minus zero-phase
+/// high-pass at `2 f1`), its positive half-cycles after the release, and
+/// from the second after the largest on, `cycles_used` of them.
+#[derive(Debug, Clone, PartialEq)]
+struct DecayCycles {
+    /// Time of each used cycle's peak, s (parabolic interpolation through
+    /// the peak sample and its neighbours).
+    peak_times_s: Vec<f64>,
+}
+
+impl DecayCycles {
+    /// The cycles of `acceleration_mps2` (sampled at `fs` Hz) with the
+    /// identified first mode `f1_hz` and `cycles_used`; `None` when the
+    /// record holds fewer than two such cycles.
+    fn find(acceleration_mps2: &[f64], fs: f64, f1_hz: f64, cycles_used: usize) -> Option<Self> {
+        let release = diagnosis::identify::release_index(acceleration_mps2).ok()?;
+        let half = dsp::highpass_zero_phase(acceleration_mps2, fs, 0.5 * f1_hz).ok()?;
+        let double = dsp::highpass_zero_phase(&half, fs, (2.0 * f1_hz).min(0.45 * fs)).ok()?;
+        let mode: Vec<f64> = half.iter().zip(&double).map(|(a, b)| a - b).collect();
+        // Positive half-cycles after the release: (peak index, peak value).
+        let mut peaks: Vec<(usize, f64)> = Vec::new();
+        let mut current: Option<(usize, f64)> = None;
+        for (i, &x) in mode.iter().enumerate().skip(release) {
+            if x > 0.0 {
+                current = Some(current.map_or((i, x), |c| if x > c.1 { (i, x) } else { c }));
+            } else if let Some(c) = current.take() {
+                peaks.push(c);
+            }
+        }
+        let top = peaks.iter().enumerate().fold((0, 0.0), |b, (k, p)| if p.1 > b.1 { (k, p.1) } else { b }).0;
+        let used: Vec<f64> = peaks
+            .iter()
+            .skip(top + 2)
+            .take(cycles_used)
+            .map(|&(i, _)| {
+                let (a, b, c) = (mode[i - 1], mode[i], mode[(i + 1).min(mode.len() - 1)]);
+                let curvature = a - 2.0 * b + c;
+                let shift = if curvature < 0.0 { (0.5 * (a - c) / curvature).clamp(-0.5, 0.5) } else { 0.0 };
+                (i as f64 + shift) / fs
+            })
+            .collect();
+        (used.len() >= 2).then_some(Self { peak_times_s: used })
+    }
+
+    /// The frequency of each cycle, Hz: the inverse of the spacing of
+    /// consecutive peaks (a decaying sinusoid's peaks are one damped period
+    /// apart).
+    fn frequencies_hz(&self) -> Vec<f64> {
+        self.peak_times_s.windows(2).map(|w| 1.0 / (w[1] - w[0])).collect()
+    }
+}
+
+/// Twice the standard error of the mean of `values` (the sample standard
+/// deviation over `sqrt(n)`), `None` for fewer than two values.
+fn two_standard_errors(values: &[f64]) -> Option<f64> {
+    let n = values.len();
+    if n < 2 {
+        return None;
+    }
+    let mean = values.iter().sum::<f64>() / n as f64;
+    let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    Some(2.0 * (variance / n as f64).sqrt())
+}
+
+/// A free decay's point of `ea_vs_tension.png`: tension (N), EA (N), its
+/// error bar's half-width (N, when the record holds two cycles or more) and
+/// its label.
+struct EaPoint {
+    tension_n: f64,
+    ea_n: f64,
+    error_n: Option<f64>,
+    label: String,
+}
+
 /// `ea_vs_tension.png`: each free decay's EA (Eqn 9) as a point labelled
-/// with its recording, the rig's EA (`[mechanics].rope_ea_n`) as a line and
-/// +-1 % around it (the axis spans at least that band).
-fn ea_plot(path: &Path, dataset: &Path, points: &[(f64, f64, String)], rig_ea_n: f64) -> anyhow::Result<()> {
-    let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
-    let pad = 0.1 * (hi - lo).max(1.0);
-    let (x0, x1) = (lo - pad, hi + pad);
+/// with its recording, with an error bar of twice the standard error of
+/// the EA of its single cycles (each cycle's frequency, from the spacing of
+/// its peak to the next, through Eqn 9: the scatter the frequency estimate
+/// carries); the rig's EA (`[mechanics].rope_ea_n`) as a line and +-1 %
+/// around it (the axis spans at least that band).
+fn ea_plot(path: &Path, dataset: &Path, points: &[EaPoint], rig_ea_n: f64) -> anyhow::Result<()> {
+    let (lo, hi) =
+        points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.tension_n), b.max(p.tension_n)));
+    // Room on the right for the last point's label.
+    let span = (hi - lo).max(1.0);
+    let (x0, x1) = (lo - 0.1 * span, hi + 0.4 * span);
     let level = |f: f64, label: String| Level { y: rig_ea_n * f, x0, x1, label };
     let panel = Panel {
         y_label: "EA [N]".to_string(),
         series: vec![Series::new("rig EA", vec![x0, x1], vec![rig_ea_n, rig_ea_n])],
-        marks: points.iter().map(|(t, ea, name)| Mark { x: *t, y: *ea, label: name.clone() }).collect(),
+        marks: points
+            .iter()
+            .map(|p| Mark {
+                x: p.tension_n,
+                y: p.ea_n,
+                label: match p.error_n {
+                    Some(e) if e.is_finite() => format!("{}: {:.5e} +- {e:.0} N", p.label, p.ea_n),
+                    _ => p.label.clone(),
+                },
+                y_error: p.error_n,
+            })
+            .collect(),
         levels: vec![
             level(1.0 + EA_BAND_FRACTION, format!("rig EA + {:.0} %", 100.0 * EA_BAND_FRACTION)),
             level(
@@ -166,7 +259,10 @@ fn ea_plot(path: &Path, dataset: &Path, points: &[(f64, f64, String)], rig_ea_n:
             ),
         ],
     };
-    let title = format!("{}: rope EA from free decays (Eqn 9) against tension", dataset.display());
+    let title = format!(
+        "{}: rope EA from free decays (Eqn 9) against tension, bars +-2 standard errors of the cycles' EA",
+        dataset.display()
+    );
     stacked_plot(path, &title, "tension m g [N]", &[panel], &[])?;
     Ok(())
 }
@@ -177,7 +273,9 @@ const MAX_DECAY_PANELS: usize = 8;
 /// `free_decays.png`: each identified free decay's car acceleration with the
 /// envelope of its identification, `+-A exp(-zeta 2 pi f1 (t - t_A))`
 /// (zeta and f1 as identified, Eqn 11; anchored at the largest magnitude
-/// `A`, at `t_A`), from the largest magnitude on.
+/// `A`, at `t_A`), from the largest magnitude on, and the window of the
+/// cycles the decrement used ([`DecayCycles`]) marked as a dashed segment
+/// at zero.
 fn decays_plot(
     path: &Path,
     dataset_dir: &Path,
@@ -198,6 +296,10 @@ fn decays_plot(
                 .map(|&t| if t >= time[k] { sign * peak * (-rate * (t - time[k])).exp() } else { f64::NAN })
                 .collect()
         };
+        let window = DecayCycles::find(&acc.values, fs, d.first_frequency_hz, d.cycles_used).map(|c| {
+            let (t0, t1) = (c.peak_times_s[0], c.peak_times_s[c.peak_times_s.len() - 1]);
+            Level { y: 0.0, x0: t0, x1: t1, label: format!("{} cycles used ({t0:.2}-{t1:.2} s)", d.cycles_used) }
+        });
         panels.push(Panel {
             y_label: format!("{stem} [m/s^2]"),
             series: vec![
@@ -209,6 +311,7 @@ fn decays_plot(
                 ),
                 Series::new("envelope (lower)", time.clone(), envelope(-1.0)),
             ],
+            levels: window.into_iter().collect(),
             ..Panel::default()
         });
     }
@@ -302,8 +405,38 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     }
     csv.flush()?;
     if report.free_decays.len() >= 2 {
-        let points: Vec<(f64, f64, String)> =
-            report.free_decays.iter().map(|d| (d.tension_n, d.rope_ea_n, d.recording.clone())).collect();
+        let points: Vec<EaPoint> = report
+            .free_decays
+            .iter()
+            .zip(&id.decays)
+            .map(|(d, (stem, decay))| {
+                let cycles = dataset.iter().find(|(s, _)| s == stem).and_then(|(_, rec)| {
+                    let acc = rec.column(recording::ACC_CAR)?;
+                    DecayCycles::find(&acc.values, rec.meta.sample_rate_hz, decay.first_frequency_hz, decay.cycles_used)
+                });
+                let cycle_ea: Vec<f64> = cycles
+                    .map(|c| {
+                        c.frequencies_hz()
+                            .iter()
+                            .map(|&f| {
+                                rope_ea_from_first_frequency(
+                                    f,
+                                    m.rope_mass_per_length_kg_per_m,
+                                    d.rope_length_m,
+                                    d.mass_kg,
+                                )
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default();
+                EaPoint {
+                    tension_n: d.tension_n,
+                    ea_n: d.rope_ea_n,
+                    error_n: two_standard_errors(&cycle_ea),
+                    label: d.recording.clone(),
+                }
+            })
+            .collect();
         ea_plot(&out.path(OUTPUTS[2]), &args.dataset, &points, rig.mechanics.rope_ea_n)?;
     }
     if !id.decays.is_empty() {
@@ -348,4 +481,45 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     }
     outln!("wrote {}, {}", json.display(), csv_path.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decay_cycles_give_the_damped_frequency_of_a_decaying_sine() {
+        // A 6.25 Hz decay (zeta 0.02) released at 1 s after rest, 4096 Hz:
+        // the cycles' peaks are one damped period apart.
+        let (fs, f, zeta): (f64, f64, f64) = (4096.0, 6.25, 0.02);
+        let wd = std::f64::consts::TAU * f * (1.0 - zeta * zeta).sqrt();
+        let a: Vec<f64> = (0..(8.0 * fs) as usize)
+            .map(|i| {
+                let t = i as f64 / fs - 1.0;
+                if t < 0.0 {
+                    0.0
+                } else {
+                    (-zeta * std::f64::consts::TAU * f * t).exp() * (wd * t).sin()
+                }
+            })
+            .collect();
+        let cycles = DecayCycles::find(&a, fs, f, 12).unwrap();
+        assert_eq!(cycles.peak_times_s.len(), 12);
+        let fd = wd / std::f64::consts::TAU;
+        for fk in cycles.frequencies_hz() {
+            assert!((fk / fd - 1.0).abs() < 2e-4, "{fk} vs {fd}");
+        }
+        // The window starts at the second peak after the largest (the
+        // identification's rule) and the record is too short for 100.
+        assert!(cycles.peak_times_s[0] > 1.0 + 1.5 / f);
+        assert!(DecayCycles::find(&a, fs, f, 100).unwrap().peak_times_s.len() < 100);
+    }
+
+    #[test]
+    fn two_standard_errors_of_a_known_set() {
+        // 1, 2, 3, 4: sample variance 5/3, standard error sqrt(5/12).
+        let e = two_standard_errors(&[1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert!((e - 2.0 * (5.0_f64 / 12.0).sqrt()).abs() < 1e-12);
+        assert_eq!(two_standard_errors(&[1.0]), None);
+    }
 }

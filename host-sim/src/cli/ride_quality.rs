@@ -406,7 +406,7 @@ fn draw(path: &Path, file: &Path, run: &Run, regions: Option<&RideRegions>, repo
         };
         if whole.peak_to_peak_count > 0 {
             let label = format!("max p-p {:.1} mg", whole.max_peak_to_peak_mg);
-            panel.marks.push(Mark { x: time[whole.max_at], y: mg[whole.max_at], label });
+            panel.marks.push(Mark { x: time[whole.max_at], y: mg[whole.max_at], label, y_error: None });
         }
         if let Some(c) = &report.constant_speed {
             let half = c.axes[i].a95_peak_to_peak_mg / 2.0;
@@ -424,7 +424,12 @@ fn draw(path: &Path, file: &Path, run: &Run, regions: Option<&RideRegions>, repo
             ..Panel::default()
         };
         let s = report.whole_run.sound.as_ref().expect("sound figures of a run with sound");
-        panel.marks.push(Mark { x: time[s.max_at], y: s.max_dba, label: format!("max {:.1} dB(A)", s.max_dba) });
+        panel.marks.push(Mark {
+            x: time[s.max_at],
+            y: s.max_dba,
+            label: format!("max {:.1} dB(A)", s.max_dba),
+            y_error: None,
+        });
         if let Some(c) = report.constant_speed.as_ref().and_then(|c| c.sound.as_ref().map(|s| (c, s))) {
             let (x0, x1) = (c.0.region.start as f64 / fs, c.0.region.end as f64 / fs);
             panel.levels.push(Level { y: c.1.a95_dba, x0, x1, label: format!("A95 {:.1} dB(A)", c.1.a95_dba) });

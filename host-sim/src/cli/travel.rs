@@ -16,7 +16,7 @@ use dsp::{highpass_zero_phase, stft_spectrogram, Spectrogram};
 use plant::effects::Effects;
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, DOF};
-use plots::{line_plot, spectrogram_plot, Series};
+use plots::{line_plot, spectrogram_plot_with_top_axis, Series, TopAxis};
 use recording::write::write_recording;
 use rig_config::RigConfig;
 
@@ -248,7 +248,8 @@ fn plots(
     }
     let (lw0, lw1) = (run.lw_m[0], run.lw_m[run.lw_m.len() - 1]);
     let spectrogram_path = out.path(format!("{stem}_{}.png", PLOTS[1]));
-    spectrogram_plot(
+    let rope = TopAxis::at_multiples("counterweight-side rope length lw [m]", &run.time_s, &run.lw_m, 0.5, 1);
+    spectrogram_plot_with_top_axis(
         &spectrogram_path,
         &format!(
             "{stem}: car acceleration (STFT, {} s), lw {lw0:.2} -> {lw1:.2} m, dB re 1 (m/s^2)^2/Hz",
@@ -257,6 +258,7 @@ fn plots(
         &spectrogram,
         &overlays,
         None,
+        Some(&rope),
     )?;
 
     let drive_path = out.path(format!("{stem}_{}.png", PLOTS[2]));

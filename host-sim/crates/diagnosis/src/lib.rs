@@ -229,7 +229,7 @@ pub struct GapReport {
     pub recordings: Vec<RecordingGap>,
     /// Bands, `[lo, hi)` Hz, as the cell band indices use them.
     pub bands_hz: Vec<(f64, f64)>,
-    /// Car-acceleration cells of the nominal model (the gap map before).
+    /// Cells of every channel of the nominal model (the gap maps before).
     pub map_before: Vec<CellGap>,
     /// The same with the explaining model (after).
     pub map_after: Vec<CellGap>,
@@ -837,7 +837,7 @@ fn nominal_gaps(
 }
 
 /// The explaining model (`effects`) on every target: each recording's gap
-/// after, and the car-acceleration cells of the map after.
+/// after, and the cells (every channel) of the maps after.
 fn gap_after(model: &RigConfig, effects: &Effects, c: &Compared, recordings: &mut [RecordingGap]) -> Vec<CellGap> {
     let bands = &c.bands;
     let after: Vec<Option<Vec<CellGap>>> = c
@@ -856,7 +856,7 @@ fn gap_after(model: &RigConfig, effects: &Effects, c: &Compared, recordings: &mu
             r.explained_excess_db = Some(g.excess_db());
         }
     }
-    after.into_iter().flatten().flatten().filter(|c| c.channel == signals::Channel::CarAcceleration).collect()
+    after.into_iter().flatten().flatten().collect()
 }
 
 /// The verdict from the nominal model's excess gap and the best candidate.
@@ -947,8 +947,7 @@ pub fn diagnose(
         map_after = gap_after(&model, &best.effects, &compared, &mut recordings);
         simulations += compared.targets.len();
     }
-    let map_before =
-        nominal_cells.into_iter().flatten().filter(|c| c.channel == signals::Channel::CarAcceleration).collect();
+    let map_before = nominal_cells.into_iter().flatten().collect();
     Ok(GapReport {
         dataset: name.to_string(),
         verdict,

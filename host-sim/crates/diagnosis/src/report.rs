@@ -1,7 +1,7 @@
 //! The diagnosis report: `gap.json` (everything), `gap.md` (the answer in
 //! words with its tables and plots), `gap_map.csv` and `ranking.csv` (for
-//! pandas/MATLAB), and the gap-map plots (car acceleration, travel phase x
-//! band, before and after).
+//! pandas/MATLAB), and the gap-map plots (the excess gap per channel,
+//! travel phase x band, before and after).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -12,59 +12,109 @@ use super::attribute::Candidate;
 use super::calibrate::Calibration;
 use super::locate::Location;
 use super::measure::CellGap;
-use super::signals::Phase;
+use super::signals::{Channel, Phase};
 use super::{DriveModel, GapReport, RecordingGap, Verdict};
-use dsp::Spectrogram;
-use plots::spectrogram_plot;
+use plots::{heat_map_plot, HeatMap, HeatPanel};
 
 const PHASES: [Phase; 6] =
     [Phase::Start, Phase::Acceleration, Phase::Constant, Phase::Deceleration, Phase::Stop, Phase::Decay];
 
-/// Mean `d` (dB) per (phase, band) over the recordings, for the phases present.
-pub fn gap_map(cells: &[CellGap], bands: usize) -> Vec<(Phase, Vec<Option<f64>>)> {
+/// Mean `d` (dB) per (channel, phase, band) over the recordings, for the
+/// channels and phases present, in signal-chain and travel order.
+pub fn gap_map(cells: &[CellGap], bands: usize) -> Vec<(Channel, Phase, Vec<Option<f64>>)> {
+    mean_map(cells, bands, |c| c.d_db)
+}
+
+/// The excess of a cell, dB: how far `d` strays beyond twice the cell's
+/// noise scatter plus its tolerance, with the sign of `d` (0 within them),
+/// the part of the cell the excess gap of [`super::measure`] counts.
+pub fn cell_excess_db(c: &CellGap) -> f64 {
+    c.d_db.signum() * (c.d_db.abs() - 2.0 * c.noise_db - c.tolerance_db).max(0.0)
+}
+
+/// Mean of `value` per (channel, phase, band) over the recordings.
+fn mean_map(
+    cells: &[CellGap],
+    bands: usize,
+    value: impl Fn(&CellGap) -> f64,
+) -> Vec<(Channel, Phase, Vec<Option<f64>>)> {
     let mut out = Vec::new();
-    for phase in PHASES {
-        let mut row = vec![None; bands];
-        let mut any = false;
-        for (b, slot) in row.iter_mut().enumerate() {
-            let d: Vec<f64> = cells.iter().filter(|c| c.phase == phase && c.band == b).map(|c| c.d_db).collect();
-            if !d.is_empty() {
-                *slot = Some(d.iter().sum::<f64>() / d.len() as f64);
-                any = true;
+    for channel in Channel::ALL {
+        for phase in PHASES {
+            let mut row = vec![None; bands];
+            let mut any = false;
+            for (b, slot) in row.iter_mut().enumerate() {
+                let d: Vec<f64> = cells
+                    .iter()
+                    .filter(|c| c.channel == channel && c.phase == phase && c.band == b)
+                    .map(&value)
+                    .collect();
+                if !d.is_empty() {
+                    *slot = Some(d.iter().sum::<f64>() / d.len() as f64);
+                    any = true;
+                }
             }
-        }
-        if any {
-            out.push((phase, row));
+            if any {
+                out.push((channel, phase, row));
+            }
         }
     }
     out
 }
 
-/// Draws a gap map as a heat map: x the phases in order, y the band centres.
-pub fn gap_map_plot(
-    path: &Path,
-    title: &str,
-    map: &[(Phase, Vec<Option<f64>>)],
-    bands_hz: &[(f64, f64)],
-) -> Result<()> {
+/// Draws the gap maps of `cells` (one panel per channel present; columns
+/// the travel phases present, rows the bands by their centre frequency):
+/// the mean excess of each cell over the recordings ([`cell_excess_db`]),
+/// on a colour scale centred on zero (white: the model meets the data
+/// within noise and tolerance; red: the data holds more power than the
+/// model; blue: less), grey where a channel has no cell.
+pub fn gap_map_plot(path: &Path, title: &str, cells: &[CellGap], bands_hz: &[(f64, f64)]) -> Result<()> {
+    let map = mean_map(cells, bands_hz.len(), cell_excess_db);
     if map.is_empty() || bands_hz.is_empty() {
         return Ok(());
     }
-    let spectrogram = Spectrogram {
-        times_s: (0..map.len()).map(|i| i as f64).collect(),
-        frequency_hz: (0..bands_hz.len()).map(|b| b as f64).collect(),
-        psd_db: map.iter().map(|(_, row)| row.iter().map(|v| v.unwrap_or(0.0)).collect()).collect(),
+    let phases: Vec<Phase> = PHASES.into_iter().filter(|p| map.iter().any(|(_, q, _)| q == p)).collect();
+    let channels: Vec<Channel> = Channel::ALL.into_iter().filter(|c| map.iter().any(|(d, ..)| d == c)).collect();
+    let panels = channels
+        .iter()
+        .map(|&channel| HeatPanel {
+            title: channel.name().to_string(),
+            values: phases
+                .iter()
+                .map(|&phase| {
+                    map.iter()
+                        .find(|(c, p, _)| *c == channel && *p == phase)
+                        .map_or_else(|| vec![None; bands_hz.len()], |(_, _, row)| row.clone())
+                })
+                .collect(),
+        })
+        .collect();
+    let heat = HeatMap {
+        title: title.to_string(),
+        columns: phases.iter().map(|p| p.name().replace('_', " ")).collect(),
+        rows: bands_hz.iter().map(|(lo, hi)| format_hz((lo * hi).sqrt())).collect(),
+        x_label: "travel phase".to_string(),
+        y_label: "third-octave band centre [Hz]".to_string(),
+        colour_label: "excess gap [dB]".to_string(),
+        limit: Some(GAP_MAP_LIMIT_DB),
+        panels,
     };
-    let labels: Vec<String> = map.iter().enumerate().map(|(i, (p, _))| format!("{i} {}", p.name())).collect();
-    let title = format!(
-        "{title} | x: {} | y: band 0 = {:.0} Hz .. {} = {:.0} Hz | colour: d, dB",
-        labels.join(", "),
-        bands_hz[0].0,
-        bands_hz.len() - 1,
-        bands_hz[bands_hz.len() - 1].1
-    );
-    spectrogram_plot(path, &title, &spectrogram, &[], Some((-20.0, 20.0)))
-        .with_context(|| format!("drawing {}", path.display()))
+    heat_map_plot(path, &heat).with_context(|| format!("drawing {}", path.display()))
+}
+
+/// The gap maps' colour scale spans +-this many dB (larger excesses take
+/// the end colours).
+pub const GAP_MAP_LIMIT_DB: f64 = 20.0;
+
+/// A band centre for an axis: three significant figures.
+fn format_hz(f: f64) -> String {
+    if f >= 100.0 {
+        format!("{f:.0}")
+    } else if f >= 10.0 {
+        format!("{f:.1}")
+    } else {
+        format!("{f:.2}")
+    }
 }
 
 /// Writes `gap.json`, `gap_map.csv`, `ranking.csv` and the gap-map plots into
@@ -81,14 +131,21 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
     let after = gap_map(&report.map_after, bands);
     let csv = out.join("gap_map.csv");
     let mut w = csv::Writer::from_path(&csv).with_context(|| format!("writing {}", csv.display()))?;
-    w.write_record(["phase", "band_lo_hz", "band_hi_hz", "d_before_db", "d_after_db"])?;
-    for (phase, row) in &before {
-        let row_after = after.iter().find(|(p, _)| p == phase).map(|(_, r)| r.clone());
+    w.write_record(["channel", "phase", "band_lo_hz", "band_hi_hz", "d_before_db", "d_after_db"])?;
+    for (channel, phase, row) in &before {
+        let row_after = after.iter().find(|(c, p, _)| c == channel && p == phase).map(|(.., r)| r.clone());
         for (b, v) in row.iter().enumerate() {
             let Some(v) = v else { continue };
             let a = row_after.as_ref().and_then(|r| r[b]).map_or(String::new(), |x| format!("{x:.3}"));
             let (lo, hi) = report.bands_hz[b];
-            w.write_record([phase.name().to_string(), format!("{lo:.3}"), format!("{hi:.3}"), format!("{v:.3}"), a])?;
+            w.write_record([
+                channel.name().to_string(),
+                phase.name().to_string(),
+                format!("{lo:.3}"),
+                format!("{hi:.3}"),
+                format!("{v:.3}"),
+                a,
+            ])?;
         }
     }
     w.flush()?;
@@ -128,12 +185,21 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
 
     let mut plots = Vec::new();
     let p = out.join("gap_map_before.png");
-    gap_map_plot(&p, "car acc., nominal", &before, &report.bands_hz)?;
+    let title = format!(
+        "{}: excess gap of the calibrated nominal model (d beyond noise and tolerance; white: none)",
+        report.dataset
+    );
+    gap_map_plot(&p, &title, &report.map_before, &report.bands_hz)?;
     plots.push(("gap map before (nominal model)".to_string(), "gap_map_before.png".to_string()));
     written.push(p);
     if !after.is_empty() {
         let p = out.join("gap_map_after.png");
-        gap_map_plot(&p, "car acc., explaining model", &after, &report.bands_hz)?;
+        let title = format!(
+            "{}: excess gap with {} (d beyond noise and tolerance; white: none)",
+            report.dataset,
+            report.explained_by.as_deref().unwrap_or("the explaining model")
+        );
+        gap_map_plot(&p, &title, &report.map_after, &report.bands_hz)?;
         plots.push(("gap map after (explaining model)".to_string(), "gap_map_after.png".to_string()));
         written.push(p);
     }

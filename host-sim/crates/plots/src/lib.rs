@@ -1,4 +1,5 @@
-//! PNG plots: line plots of time series and spectrogram heat maps.
+//! PNG plots: line plots of time series, stacked panels, spectrogram heat
+//! maps and categorical heat maps on a diverging scale.
 //!
 //! Plots are drawn with `plotters` into an in-memory RGB bitmap and encoded
 //! with the `png` crate. Text uses the DejaVu Sans font embedded in the
@@ -17,8 +18,10 @@
 
 #![warn(missing_docs)]
 
+pub mod heat_map;
 pub mod panels;
 
+pub use heat_map::{diverging, heat_map_plot, HeatMap, HeatPanel};
 pub use panels::{envelope, stacked_plot, Band, Level, Mark, Panel};
 
 use std::fmt::Display;
@@ -31,6 +34,7 @@ use plotters::backend::{BitMapBackend, RGBPixel};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::{ReverseCoordTranslate, Shift};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::style::{register_font, FontStyle};
 
 use dsp::Spectrogram;
@@ -246,6 +250,53 @@ pub fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series:
     })
 }
 
+/// A second quantity shown along the top of a spectrogram: ticks at given
+/// times labelled with its value there (e.g. the rope length over a
+/// travel), and a description with the unit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopAxis {
+    /// Description with the unit, e.g. `rope length lw [m]`.
+    pub label: String,
+    /// `(time in s, text)` of each tick; ticks outside the time axis are
+    /// not drawn.
+    pub ticks: Vec<(f64, String)>,
+}
+
+impl TopAxis {
+    /// Ticks where `value` (sampled at `time_s`, same length) first reaches
+    /// each multiple of `step` between its first and last sample (linearly
+    /// interpolated between samples), labelled with the multiple
+    /// (`decimals` after the point). A value that does not move gives one
+    /// tick at its start; non-finite samples are skipped.
+    pub fn at_multiples(label: impl Into<String>, time_s: &[f64], value: &[f64], step: f64, decimals: usize) -> Self {
+        let points: Vec<(f64, f64)> =
+            time_s.iter().zip(value).filter(|(t, v)| t.is_finite() && v.is_finite()).map(|(t, v)| (*t, *v)).collect();
+        let mut ticks = Vec::new();
+        if let (Some(&(t0, v0)), true) = (points.first(), step > 0.0 && step.is_finite()) {
+            let v_end = points[points.len() - 1].1;
+            let (lo, hi) = (v0.min(v_end), v0.max(v_end));
+            let mut k = (lo / step).ceil() as i64;
+            while (k as f64) * step <= hi && ticks.len() < 1000 {
+                let target = k as f64 * step;
+                let crossing = points.windows(2).find_map(|w| {
+                    let ((ta, va), (tb, vb)) = (w[0], w[1]);
+                    let between = (va - target) * (vb - target) <= 0.0 && va != vb;
+                    between.then(|| ta + (tb - ta) * (target - va) / (vb - va))
+                });
+                let t = if (target - v0).abs() < 1e-12 * step.max(1.0) { Some(t0) } else { crossing };
+                if let Some(t) = t {
+                    ticks.push((t, format!("{target:.decimals$}")));
+                }
+                k += 1;
+            }
+            if ticks.is_empty() {
+                ticks.push((t0, format!("{v0:.decimals$}")));
+            }
+        }
+        Self { label: label.into(), ticks }
+    }
+}
+
 /// Spectrogram heat map into a 1200 x 700 PNG at `path`.
 ///
 /// * `path`: output file, must end in `.png`; missing parent directories
@@ -278,6 +329,24 @@ pub fn spectrogram_plot(
     overlays: &[Series],
     db_range: Option<(f64, f64)>,
 ) -> Result<(), PlotError> {
+    spectrogram_plot_with_top_axis(path, title, spectrogram, overlays, db_range, None)
+}
+
+/// [`spectrogram_plot`] with a second quantity along the top edge of the
+/// heat map (`top`, e.g. the rope length over a travel): its ticks drawn
+/// on the top edge at their times, labelled above it, and its description
+/// above the labels.
+///
+/// # Errors
+/// Those of [`spectrogram_plot`].
+pub fn spectrogram_plot_with_top_axis(
+    path: &Path,
+    title: &str,
+    spectrogram: &Spectrogram,
+    overlays: &[Series],
+    db_range: Option<(f64, f64)>,
+    top: Option<&TopAxis>,
+) -> Result<(), PlotError> {
     check_png_path(path)?;
     check_spectrogram(spectrogram)?;
     let (db_lo, db_hi) = spectrogram_db_range(spectrogram, db_range)?;
@@ -286,9 +355,16 @@ pub fn spectrogram_plot(
 
     render(path, |root| {
         let (main, bar_panel) = root.split_horizontally(PLOT_WIDTH_PX - COLORBAR_PANEL_PX);
-        let mut chart = ChartBuilder::on(&main)
-            .caption(title, (FONT_FAMILY, 26))
-            .margin(15)
+        // With a top axis the title goes above it, clear of its labels.
+        let (head, body) = main.split_vertically(if top.is_some() { 42 } else { 0 });
+        let mut builder = ChartBuilder::on(&body);
+        if top.is_some() {
+            head.titled(title, (FONT_FAMILY, 24)).map_err(draw_err)?;
+            builder.margin(15).margin_top(60);
+        } else {
+            builder.caption(title, (FONT_FAMILY, 24)).margin(15);
+        }
+        let mut chart = builder
             .x_label_area_size(55)
             .y_label_area_size(85)
             .build_cartesian_2d(axes.t_range.clone(), axes.f_range.clone())
@@ -304,9 +380,50 @@ pub fn spectrogram_plot(
             .axis_desc_style((FONT_FAMILY, 18))
             .draw()
             .map_err(draw_err)?;
+        if let Some(top) = top {
+            draw_top_axis(root, &chart, &axes, top)?;
+        }
         draw_overlays(&mut chart, overlays, &overlay_runs)?;
-        draw_colour_bar(&main, &bar_panel, py_range, (db_lo, db_hi))
+        draw_colour_bar(&main, &bar_panel, py_range, (db_lo, db_hi), "PSD [dB]")
     })
+}
+
+/// The ticks, their labels and the description of `top` along the top edge
+/// of `chart`'s plotting area (drawn on `root`).
+fn draw_top_axis(
+    root: &Area<'_>,
+    chart: &Chart<'_, '_>,
+    axes: &SpectrogramAxes,
+    top: &TopAxis,
+) -> Result<(), PlotError> {
+    let (px, py) = chart.plotting_area().get_pixel_range();
+    let style = ShapeStyle::from(BLACK).stroke_width(1);
+    root.draw(&PathElement::new(vec![(px.start, py.start), (px.end, py.start)], style)).map_err(draw_err)?;
+    let mut last_right = i32::MIN;
+    for (t, text) in &top.ticks {
+        if !(*t >= axes.t_range.start && *t <= axes.t_range.end) {
+            continue;
+        }
+        let (x, _) = chart.backend_coord(&(*t, axes.f_range.end));
+        root.draw(&PathElement::new(vec![(x, py.start), (x, py.start - 6)], style)).map_err(draw_err)?;
+        // Skip a label that would overlap the previous one.
+        let half_width = 5 * text.chars().count() as i32;
+        if x - half_width > last_right + 4 {
+            root.draw(&Text::new(
+                text.clone(),
+                (x, py.start - 8),
+                (FONT_FAMILY, 15).into_font().color(&BLACK).pos(Pos::new(HPos::Center, VPos::Bottom)),
+            ))
+            .map_err(draw_err)?;
+            last_right = x + half_width;
+        }
+    }
+    root.draw(&Text::new(
+        top.label.clone(),
+        ((px.start + px.end) / 2, py.start - 28),
+        (FONT_FAMILY, 17).into_font().color(&BLACK).pos(Pos::new(HPos::Center, VPos::Bottom)),
+    ))
+    .map_err(draw_err)
 }
 
 /// The drawing area of a plot.
@@ -426,12 +543,13 @@ fn draw_overlays<'a, 'b: 'a>(
 }
 
 /// The colour bar of the scale `(db_lo, db_hi)` dB in `bar_panel`, aligned
-/// with the plotting area's pixel rows `py_range` of `main`.
+/// with the plotting area's pixel rows `py_range` of `main`, labelled `label`.
 fn draw_colour_bar(
     main: &Area<'_>,
     bar_panel: &Area<'_>,
     py_range: Range<i32>,
     (db_lo, db_hi): (f64, f64),
+    label: &str,
 ) -> Result<(), PlotError> {
     let (_, main_h) = main.dim_in_pixel();
     let top = py_range.start.max(0) as u32;
@@ -453,7 +571,7 @@ fn draw_colour_bar(
     bar.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
-        .y_desc("PSD [dB]")
+        .y_desc(label)
         .label_style((FONT_FAMILY, 15))
         .axis_desc_style((FONT_FAMILY, 17))
         .draw()
@@ -988,6 +1106,59 @@ mod tests {
         assert_eq!(cell_index(&e, 4.0), Some(2));
         assert_eq!(cell_index(&e, f64::NAN), None);
         assert_eq!(cell_edges(&[2.0]), vec![1.5, 2.5]);
+    }
+
+    #[test]
+    fn top_axis_ticks_where_the_value_crosses_its_multiples() {
+        // A rope length at rest at 1.0 m for 1 s, then rising 0.5 m/s to
+        // 2.2 m, then at rest: ticks at 1.0 (its start), 1.5 and 2.0 m.
+        let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.1).collect();
+        let lw: Vec<f64> = t.iter().map(|&t| (1.0 + 0.5 * (t - 1.0).max(0.0)).min(2.2)).collect();
+        let axis = TopAxis::at_multiples("lw [m]", &t, &lw, 0.5, 1);
+        let want = [(0.0, "1.0"), (2.0, "1.5"), (3.0, "2.0")];
+        assert_eq!(axis.ticks.len(), want.len(), "{:?}", axis.ticks);
+        for ((t, text), (wt, wtext)) in axis.ticks.iter().zip(want) {
+            assert!((t - wt).abs() < 1e-9 && text == wtext, "{t} {text}");
+        }
+        // Falling values tick too; a constant one gets one tick at its start.
+        let down: Vec<f64> = lw.iter().map(|v| 3.0 - v).collect();
+        assert_eq!(TopAxis::at_multiples("x", &t, &down, 0.5, 1).ticks.len(), 3);
+        let flat = TopAxis::at_multiples("x", &t, &vec![1.23; t.len()], 0.5, 2);
+        assert_eq!(flat.ticks, vec![(0.0, "1.23".to_string())]);
+    }
+
+    #[test]
+    fn spectrogram_with_top_axis_draws_its_ticks_above_the_map() {
+        let dir = tempfile::tempdir().unwrap();
+        let (with, without) = (dir.path().join("top.png"), dir.path().join("plain.png"));
+        let s = Spectrogram {
+            times_s: (0..20).map(f64::from).collect(),
+            frequency_hz: (0..10).map(f64::from).collect(),
+            psd_db: vec![vec![-30.0; 10]; 20],
+        };
+        let top =
+            TopAxis { label: "lw [m]".to_string(), ticks: vec![(5.0, "2.0".to_string()), (15.0, "4.0".to_string())] };
+        spectrogram_plot_with_top_axis(&with, "t", &s, &[], None, Some(&top)).unwrap();
+        spectrogram_plot(&without, "t", &s, &[], None).unwrap();
+        let (w, _, a) = read_png(&with);
+        let (_, _, b) = read_png(&without);
+        // The heat map starts lower with the axis: its top row of colour is
+        // further down, and dark tick text sits above it.
+        let first_coloured_row = |rgb: &[u8]| {
+            (0..PLOT_HEIGHT_PX).find(|&y| {
+                pixel(rgb, w, 600, y) == {
+                    let c = viridis(1.0);
+                    (c.0, c.1, c.2)
+                }
+            })
+        };
+        let (ya, yb) = (first_coloured_row(&a).unwrap(), first_coloured_row(&b).unwrap());
+        assert!(ya > yb + 40, "{ya} {yb}");
+        let dark_above = (yb..ya).flat_map(|y| (100..1000).map(move |x| (x, y))).filter(|&(x, y)| {
+            let p = pixel(&a, w, x, y);
+            p.0 < 80 && p.1 < 80 && p.2 < 80
+        });
+        assert!(dark_above.count() > 30);
     }
 
     #[test]

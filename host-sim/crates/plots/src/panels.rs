@@ -36,8 +36,9 @@ pub struct Band {
     pub label: String,
 }
 
-/// A labelled point of a panel (a filled circle with its text beside it).
-#[derive(Debug, Clone, PartialEq)]
+/// A labelled point of a panel (a filled circle with its text beside it),
+/// with an error bar when `y_error` is given.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Mark {
     /// Abscissa, x-axis units.
     pub x: f64,
@@ -45,6 +46,9 @@ pub struct Mark {
     pub y: f64,
     /// Text drawn beside the point.
     pub label: String,
+    /// Half-width of a vertical error bar, the panel's y-axis units (`y -
+    /// e` to `y + e`, with caps); `None` for no bar. The axis spans the bar.
+    pub y_error: Option<f64>,
 }
 
 /// A labelled horizontal dashed segment of a panel at `y` from `x0` to `x1`.
@@ -138,7 +142,14 @@ fn draw_panel(
     bands: &[Band],
     legend_bands: bool,
 ) -> Result<(), PlotError> {
-    let extra = panel.marks.iter().map(|m| m.y).chain(panel.levels.iter().map(|l| l.y));
+    let extra = panel
+        .marks
+        .iter()
+        .flat_map(|m| {
+            let e = m.y_error.filter(|e| e.is_finite()).unwrap_or(0.0).abs();
+            [m.y - e, m.y + e]
+        })
+        .chain(panel.levels.iter().map(|l| l.y));
     let ys: Vec<(f64, f64)> =
         runs.iter().flatten().flatten().copied().chain(extra.map(|y| (x_range.start, y))).collect();
     let (_, _, y_min, y_max) = bounds(ys.iter()).ok_or(PlotError::NoFinitePoints)?;
@@ -206,6 +217,15 @@ fn draw_levels_and_marks(chart: &mut Chart<'_, '_>, panel: &Panel) -> Result<(),
     }
     let red = RGBColor(200, 0, 0);
     for mark in &panel.marks {
+        if let Some(e) = mark.y_error.filter(|e| e.is_finite() && *e > 0.0) {
+            let bar = ShapeStyle::from(red).stroke_width(2);
+            let (lo, hi) = (mark.y - e, mark.y + e);
+            chart
+                .draw_series(std::iter::once(PathElement::new(vec![(mark.x, lo), (mark.x, hi)], bar)))
+                .map_err(draw_err)?;
+            let caps = [lo, hi].map(|y| EmptyElement::at((mark.x, y)) + PathElement::new(vec![(-7, 0), (7, 0)], bar));
+            chart.draw_series(caps).map_err(draw_err)?;
+        }
         chart.draw_series(std::iter::once(Circle::new((mark.x, mark.y), 5, red.filled()))).map_err(draw_err)?;
         chart
             .draw_series(std::iter::once(Text::new(
@@ -321,7 +341,7 @@ mod tests {
         let panel = |label: &str| Panel {
             y_label: label.to_string(),
             series: vec![Series::new("trace", t.clone(), y.clone())],
-            marks: vec![Mark { x: 5.0, y: 1.0, label: "max 2.0".to_string() }],
+            marks: vec![Mark { x: 5.0, y: 1.0, label: "max 2.0".to_string(), y_error: Some(0.2) }],
             levels: vec![Level { y: 0.5, x0: 4.0, x1: 12.0, label: "A95/2".to_string() }],
         };
         let bands = [Band { x0: 4.0, x1: 12.0, label: "constant speed".to_string() }];
