@@ -199,7 +199,7 @@ fn blind_subset_effects_are_named_and_remove_the_held_out_gap() {
     blind(&SUBSET_EFFECTS);
 }
 
-/// The blind test on every effect of the library (about 14 min on two
+/// The blind test on every effect of the library (about 7 min on two
 /// cores): `cargo test --release -p host-sim --test integration -- --ignored
 /// blind_every_effect_is_named_and_removes_the_held_out_gap --nocapture`.
 #[test]

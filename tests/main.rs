@@ -18,5 +18,6 @@ mod gap;
 mod modes;
 mod observer;
 mod pil;
+mod pil_dcp;
 mod pil_faults;
 mod support;
