@@ -1,7 +1,7 @@
 //! Writing a [`Recording`] as `<stem>.toml` + `<stem>.csv`.
 
-use std::fmt::Write as _;
 use std::fs;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
@@ -141,20 +141,29 @@ fn rename(from: &Path, to: &Path) -> Result<(), RecordingError> {
 
 fn write_csv(tmp: &Path, final_path: &Path, recording: &Recording) -> Result<(), RecordingError> {
     let csv_err = |source| RecordingError::Csv { path: final_path.to_path_buf(), source };
+    let io_err = |source| RecordingError::Io { path: final_path.to_path_buf(), source };
     let mut writer = csv::WriterBuilder::new().has_headers(false).from_path(tmp).map_err(csv_err)?;
     writer.write_record(recording.columns.iter().map(|c| c.name.as_str())).map_err(csv_err)?;
+    // The samples are numbers, which never need quoting: each is written
+    // as the shortest text that reads back to the same f64 (`ryu`, the
+    // float formatting the `csv` crate itself uses), a row at a time.
+    let file = writer.into_inner().map_err(|e| io_err(e.into_error()))?;
+    let mut out = std::io::BufWriter::with_capacity(1 << 20, file);
     let rows = recording.columns.first().map_or(0, |c| c.values.len());
-    let mut text = String::with_capacity(32);
+    let mut numbers = ryu::Buffer::new();
+    let mut line = Vec::with_capacity(32 * recording.columns.len());
     for row in 0..rows {
-        for column in &recording.columns {
-            text.clear();
-            // Writing into a String cannot fail.
-            let _ = write!(text, "{:?}", column.values[row]);
-            writer.write_field(&text).map_err(csv_err)?;
+        line.clear();
+        for (i, column) in recording.columns.iter().enumerate() {
+            if i > 0 {
+                line.push(b',');
+            }
+            line.extend_from_slice(numbers.format(column.values[row]).as_bytes());
         }
-        writer.write_record(None::<&[u8]>).map_err(csv_err)?;
+        line.push(b'\n');
+        out.write_all(&line).map_err(io_err)?;
     }
-    writer.flush().map_err(|source| RecordingError::Io { path: final_path.to_path_buf(), source })
+    out.flush().map_err(io_err)
 }
 
 fn validate_stem(stem: &str) -> Result<(), RecordingError> {
