@@ -185,8 +185,8 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
             }
         }
     }
-    if let Some(why) = &report.attribution_refused {
-        outln!("attribution: {why}");
+    if let Some(note) = &report.attribution_note {
+        outln!("attribution: {note}");
     }
     for l in &report.left_out {
         outln!("left out: {}: {}", l.recording, l.reason);

@@ -28,7 +28,7 @@ use rayon::prelude::*;
 
 use super::measure::{gap, Tolerances};
 use super::signals::Channel;
-use super::simulate::{model_step_s, simulate_counterpart};
+use super::simulate::Counterpart;
 use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers, Segmentation};
 use plant::effects::{EffectKind, Effects, ParamScale};
 use recording::Recording;
@@ -67,6 +67,8 @@ pub struct Target {
     pub segmentation: Segmentation,
     /// Spectra of the nominal model's run.
     pub nominal: ChainSpectra,
+    /// How the model's counterpart is made (each effect's the same way).
+    pub counterpart: Counterpart,
 }
 
 /// What the attribution works on.
@@ -301,7 +303,9 @@ impl Lab<'_> {
             .par_iter()
             .map(|&(m, t)| {
                 let target = &self.targets[t];
-                simulate_counterpart(self.rig, &models[m], &target.recording, &target.stem, model_step_s(self.rig))
+                target
+                    .counterpart
+                    .simulate(self.rig, &models[m], &target.recording, &target.stem)
                     .ok()
                     .map(|signals| ChainSpectra::compute(&signals, &target.segmentation, self.bands))
             })

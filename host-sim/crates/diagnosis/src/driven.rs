@@ -19,10 +19,11 @@ use crate::error::{bail, Context, Result};
 
 use super::drive_law::{central_difference, SpeedController};
 use dsp::highpass_zero_phase;
+use plant::effects::{EffectKind, Effects};
+use plant::line::{BrakeAction, Line, MAX_NODES};
 use plant::mechanics::Chain;
 use plant::ripple::RippleTorque;
-use plant::rope::{CAR, CW, DOF, SHEAVE};
-use plant::{ChainParams, ChainState};
+use plant::ChainParams;
 use rig_config::RigConfig;
 
 /// Bandwidth of the tracking loop on the measured shaft angle, Hz: well
@@ -235,12 +236,21 @@ impl ModelEstimate {
     }
 }
 
-/// One classical Runge-Kutta step of `h` s from `state`; `deriv(s, frac)`
-/// is the state's rate at the fraction `frac` of the step.
-fn rk4_step(state: &ChainState, h: f64, deriv: impl Fn(&ChainState, f64) -> ChainState) -> ChainState {
-    let add = |s: &ChainState, d: &ChainState, f: f64| {
+/// Positions (m) and velocities (m/s) of the line's nodes
+/// ([`plant::line::Layout`]; the first `nodes` are used).
+#[derive(Clone, Copy, Debug, Default)]
+struct NodeState {
+    position_m: [f64; MAX_NODES],
+    velocity_mps: [f64; MAX_NODES],
+}
+
+/// One classical Runge-Kutta step of `h` s from `state` over the first
+/// `nodes` nodes; `deriv(s, frac)` is the state's rate at the fraction
+/// `frac` of the step.
+fn rk4_step(state: &NodeState, nodes: usize, h: f64, deriv: impl Fn(&NodeState, f64) -> NodeState) -> NodeState {
+    let add = |s: &NodeState, d: &NodeState, f: f64| {
         let mut o = *s;
-        for i in 0..DOF {
+        for i in 0..nodes {
             o.position_m[i] += f * d.position_m[i];
             o.velocity_mps[i] += f * d.velocity_mps[i];
         }
@@ -251,7 +261,7 @@ fn rk4_step(state: &ChainState, h: f64, deriv: impl Fn(&ChainState, f64) -> Chai
     let k3 = deriv(&add(state, &k2, 0.5 * h), 0.5);
     let k4 = deriv(&add(state, &k3, h), 1.0);
     let mut next = *state;
-    for i in 0..DOF {
+    for i in 0..nodes {
         next.position_m[i] +=
             h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
         next.velocity_mps[i] +=
@@ -260,25 +270,46 @@ fn rk4_step(state: &ChainState, h: f64, deriv: impl Fn(&ChainState, f64) -> Chai
     next
 }
 
-/// RK4 steps per sample of `h` s for `chain` over the travel whose sheave
-/// edge moves `travel_m` (m) from the start: enough for
-/// [`MAX_RATE_PER_STEP`] at the stiffer end of the travel.
-fn steps_per_sample(chain: &Chain, travel_m: f64, h: f64, max_rate_per_step: f64) -> usize {
-    let line = plant::line::Line::new(&plant::effects::Effects::none());
+/// RK4 steps per sample of `h` s for `line` on `chain` over the travel
+/// whose sheave edge moves `travel_m` (m) from the start: enough for
+/// `max_rate_per_step` at the stiffer end of the travel.
+fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_per_step: f64) -> usize {
     let omega = [0.0, travel_m].map(|u| line.omega_max_radps(chain, u, false)).into_iter().fold(0.0, f64::max);
     ((h * omega / max_rate_per_step).ceil() as usize).max(1)
 }
 
-/// Car and counterweight accelerations (m/s^2, positive up) of the nominal
-/// chain of `rig` driven by the measured torque of `travel` plus the ripple
-/// (RK4, [`MAX_RATE_PER_STEP`] steps per sample at least, the torque linear
-/// between samples).
+/// The effects of the library the torque-driven model can hold: the
+/// mechanical ones of [`Line`] while the rig moves, and the encoder's angle
+/// error (the model reads the true angle from the recorded one). Not:
+/// effects that act through the drive's currents (`dead_time`,
+/// `current_sensor_error`: the recorded currents, and so the torque that
+/// drives the model, already carry them), and `brake_stop`, which acts
+/// while the brake holds, where another drive's start and stop sequence is
+/// not compared.
+pub fn holds_effect(kind: EffectKind) -> bool {
+    !matches!(kind, EffectKind::DeadTime | EffectKind::CurrentSensorError | EffectKind::BrakeStop)
+}
+
+/// Car and counterweight accelerations (m/s^2, positive up) of the chain
+/// of `rig` with the mechanical `effects` ([`Line`]; the nominal 5-DOF
+/// chain without them) driven by the measured torque of `travel` plus the
+/// ripple (RK4, [`MAX_RATE_PER_STEP`] steps per sample at least, the
+/// torque linear between samples). With `encoder_error` the recorded angle
+/// is taken back to the true one first.
 pub fn torque_driven_accelerations(
     rig: &RigConfig,
     travel: &DrivenTravel,
     settings: &DrivenSettings,
+    effects: &Effects,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    torque_driven_accelerations_with(rig, travel, settings, MAX_RATE_PER_STEP)
+    torque_driven_accelerations_with(rig, travel, settings, effects, MAX_RATE_PER_STEP)
+}
+
+/// The true shaft angle (rad) from the recorded one under `effects`'
+/// encoder error (`theta_m - a sin(theta_m + phase)`, first order in `a`).
+fn true_shaft_angle_rad(recorded_rad: &[f64], effects: &Effects) -> Option<Vec<f64>> {
+    let e = effects.encoder_error.as_ref()?;
+    Some(recorded_rad.iter().map(|&t| t - e.eccentricity_rad * (t + e.phase_rad).sin()).collect())
 }
 
 /// [`torque_driven_accelerations`] with `max_rate_per_step` in place of
@@ -287,8 +318,16 @@ fn torque_driven_accelerations_with(
     rig: &RigConfig,
     travel: &DrivenTravel,
     settings: &DrivenSettings,
+    effects: &Effects,
     max_rate_per_step: f64,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
+    let corrected = true_shaft_angle_rad(travel.shaft_angle_rad, effects);
+    let travel = &DrivenTravel {
+        shaft_angle_rad: corrected.as_deref().unwrap_or(travel.shaft_angle_rad),
+        motion: travel.motion.clone(),
+        constant_speed: travel.constant_speed.clone(),
+        ..*travel
+    };
     let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
     if n < 2 {
         bail!("the travel has {n} samples; expected at least 2");
@@ -299,6 +338,9 @@ fn torque_driven_accelerations_with(
     let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
     params.m_cw_kg = travel.m_cw_kg;
     let chain = Chain::new(params, travel.lw_start_m);
+    let line = Line::new(effects);
+    let layout = line.layout;
+    let nodes = layout.nodes;
     let mut ripple = if settings.ripple_phases_from_torque {
         ripple_matched_to_the_drive(rig, travel)
     } else {
@@ -313,61 +355,62 @@ fn torque_driven_accelerations_with(
     let tracking = gains(1.0, settings.tracking_bandwidth_hz);
     let h = 1.0 / fs;
     let theta0 = travel.shaft_angle_rad[0];
-    let steps = steps_per_sample(&chain, (travel.shaft_angle_rad[n - 1] - theta0) * r, h, max_rate_per_step);
+    let steps = steps_per_sample(&line, &chain, (travel.shaft_angle_rad[n - 1] - theta0) * r, h, max_rate_per_step);
     let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
     // Accelerations at sample k + frac. While the rig moves, the tracking loop
     // acts on the rigid-body coordinate (the mass-weighted mean of the
-    // chain's displacements) as a force spread in proportion to mass: it
+    // line's displacements) as a force spread in proportion to mass: it
     // moves the rigid-body mode alone and neither drives nor damps the
     // elastic modes. At standstill the brake holds the sheave (rigid, as in
     // the nominal plant).
     // The rig drive's answer to the model's speed where it departs from
     // the rig's: `-Kp de - Ki integral(de)`, `de` the model's estimate
     // minus the rig's.
-    let deriv = |s: &ChainState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64)| {
+    let deriv = |s: &NodeState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64)| {
         let j = (k + 1).min(n - 1);
         let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k])
             - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
             - feedback.ki_nm_per_rad * departure_integral;
         let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
-        let theta = theta0 + s.position_m[SHEAVE] / r;
+        let theta = theta0 + s.position_m[layout.sheave] / r;
         let shaft = torque + ripple.torque_nm(theta);
-        let a = if travel.motion.contains(&k) {
-            let masses = chain.params.masses_kg(chain.counterweight_side_length_m(s));
+        let lumped = line.lumped(&chain, s.position_m[layout.sheave]);
+        let moving = travel.motion.contains(&k);
+        let brake = if moving { BrakeAction::Released } else { BrakeAction::Held };
+        let mut a = [0.0; MAX_NODES];
+        line.accelerations_of(&chain, &lumped, &s.position_m, &s.velocity_mps, shaft, brake, 0.0, &mut a);
+        if moving {
+            let masses = &lumped.masses_kg[..nodes];
             let total: f64 = masses.iter().sum();
-            let mean = |x: &[f64; DOF]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
+            let mean = |x: &[f64; MAX_NODES]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
             let (kp, kd) = tracking;
             let body = kp * (u - mean(&s.position_m)) + kd * (v - mean(&s.velocity_mps));
-            let mut a = chain.acceleration_mps2(s, shaft, false);
-            a.iter_mut().for_each(|a| *a += body);
-            a
-        } else {
-            chain.acceleration_mps2(s, shaft, true)
-        };
-        ChainState { position_m: s.velocity_mps, velocity_mps: a }
+            a[..nodes].iter_mut().for_each(|a| *a += body);
+        }
+        NodeState { position_m: s.velocity_mps, velocity_mps: a }
     };
-    let mut state = ChainState::default();
+    let mut state = NodeState::default();
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut estimate = ModelEstimate::new(&feedback, fs, travel.speed_estimate_radps[0]);
     for k in 0..n {
         if !travel.motion.contains(&k) {
-            state.velocity_mps[SHEAVE] = 0.0;
+            state.velocity_mps[layout.sheave] = 0.0;
             estimate.hold(travel.speed_estimate_radps[k]);
         }
         let e = (estimate.estimate_radps, estimate.departure_integral_rad);
         let a = deriv(&state, k, 0.0, e).velocity_mps;
-        car.push(a[CAR]);
-        cw.push(-a[CW]);
+        car.push(a[layout.body]);
+        cw.push(-a[layout.counterweight()]);
         if k + 1 == n {
             break;
         }
         let sub = 1.0 / steps as f64;
         for j in 0..steps {
             let start = j as f64 * sub;
-            state = rk4_step(&state, h * sub, |s, frac| deriv(s, k, start + frac * sub, e));
+            state = rk4_step(&state, nodes, h * sub, |s, frac| deriv(s, k, start + frac * sub, e));
         }
-        estimate.advance(state.velocity_mps[SHEAVE] / r, travel.speed_estimate_radps[k], h);
-        if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
+        estimate.advance(state.velocity_mps[layout.sheave] / r, travel.speed_estimate_radps[k], h);
+        if !state.position_m[..nodes].iter().chain(&state.velocity_mps[..nodes]).all(|x| x.is_finite()) {
             bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
         }
     }
@@ -424,7 +467,8 @@ mod tests {
             sample_rate_hz: fs,
         };
         let settings = DrivenSettings::default();
-        let run = |rate: f64| torque_driven_accelerations_with(&rig, &travel, &settings, rate).unwrap().0;
+        let run =
+            |rate: f64| torque_driven_accelerations_with(&rig, &travel, &settings, &Effects::none(), rate).unwrap().0;
         let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
         let diff = |a: &[f64], b: &[f64]| rms(&a.iter().zip(b).map(|(x, y)| x - y).collect::<Vec<_>>()) / rms(b);
         let (default, half) = (run(MAX_RATE_PER_STEP), run(0.5 * MAX_RATE_PER_STEP));

@@ -58,7 +58,9 @@ use plant::free_decay::eqn9_first_frequency_hz;
 use recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
 use rig_config::RigConfig;
 use signals::{chain_signals, decimation_factor, ChainSignals};
-use simulate::{model_step_s, simulate_counterpart};
+use simulate::{
+    driven_counterpart, highpass_accelerations, model_step_s, simulate_counterpart, Counterpart, DrivenInputs,
+};
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 
 /// Largest nominal excess gap (dB, mean over the recordings) that the
@@ -209,8 +211,8 @@ pub struct GapReport {
     /// Recordings not diagnosed, with the reason (the calibration's own
     /// left-out recordings are in [`Calibration::skipped`]).
     pub left_out: Vec<LeftOut>,
-    /// Why no effect was fitted, when the data cannot support the fit.
-    pub attribution_refused: Option<String>,
+    /// What the attribution left out, and why (under another drive).
+    pub attribution_note: Option<String>,
     /// The explaining effect (or pair) when `explained`.
     pub explained_by: Option<String>,
     /// The gap measure, in words, with its unit.
@@ -320,6 +322,8 @@ struct Prepared {
     /// Simulations run: the nominal model, its perturbations, the
     /// counterpart's alternatives and the noise response.
     simulations: usize,
+    /// How the counterpart is made, for the attribution's runs.
+    how: Counterpart,
 }
 
 /// `signal` plus white Gaussian noise of one-sided density `density`
@@ -463,29 +467,36 @@ fn counterpart(
     }
     let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
     let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
+    let none = Effects::none();
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
-        driven_counterpart(model, recording, &measured, (&torque, &speed, controller), settings)
+        driven_counterpart(model, recording, &measured, (&torque, &speed, controller), settings, &none)
     };
-    let run_closed =
-        |model: &RigConfig| simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
-    let (nominal, perturbed) = if driven {
+    let run_closed = |model: &RigConfig| simulate_counterpart(model, &none, recording, stem, model_step_s(model));
+    let (nominal, perturbed, how) = if driven {
         let settings = driven::DrivenSettings::default();
         let mut perturbed = vec![run_driven(models[1], &settings)?, run_driven(models[2], &settings)?];
         for alternative in driven::DrivenSettings::alternatives() {
             perturbed.push(run_driven(models[0], &alternative)?);
         }
-        (run_driven(models[0], &settings)?, perturbed)
+        let inputs = DrivenInputs {
+            measured: measured.clone(),
+            torque_nm: torque.clone(),
+            speed_estimate_radps: speed.clone(),
+            controller,
+        };
+        (run_driven(models[0], &settings)?, perturbed, Counterpart::Driven(std::sync::Arc::new(inputs)))
     } else {
-        let mut runs = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
+        let (mut nominal, mut perturbed) = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
+        let mut highpass_hz = 0.0;
         if drive == DriveModel::Foreign {
             // Another rig's data acquisition: its accelerometers' high-pass
             // found from the decay itself and applied to the model's.
-            let corner_hz = decay_highpass_hz(&measured, &runs.0)?;
-            for run in std::iter::once(&mut runs.0).chain(runs.1.iter_mut()) {
-                highpass_accelerations(run, corner_hz);
+            highpass_hz = decay_highpass_hz(&measured, &nominal)?;
+            for run in std::iter::once(&mut nominal).chain(perturbed.iter_mut()) {
+                highpass_accelerations(run, highpass_hz);
             }
         }
-        runs
+        (nominal, perturbed, Counterpart::Simulated { highpass_hz })
     };
     let noise_response = if driven {
         let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
@@ -495,13 +506,14 @@ fn counterpart(
             &measured,
             (&noisy, &speed, controller),
             &driven::DrivenSettings::default(),
+            &none,
         )?;
         Some(difference(&run, &nominal))
     } else {
         None
     };
     let simulations = 1 + perturbed.len() + usize::from(noise_response.is_some());
-    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop, simulations })
+    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop, simulations, how })
 }
 
 /// The first-order high-pass (corner, Hz) that brings the model's car
@@ -527,17 +539,6 @@ fn decay_highpass_hz(measured: &ChainSignals, model: &ChainSignals) -> Result<f6
     };
     let resampled: Vec<f64> = (0..data.len()).map_while(at).collect();
     acquisition::identify_highpass_hz(data, &resampled, measured.sample_rate_hz)
-}
-
-/// `signals`' accelerations through a first-order high-pass of corner
-/// `corner_hz` (none for 0).
-fn highpass_accelerations(signals: &mut ChainSignals, corner_hz: f64) {
-    let fs = signals.sample_rate_hz;
-    for (channel, values) in signals.channels.iter_mut() {
-        if channel.subsystem() == signals::Subsystem::Mechanical {
-            *values = acquisition::first_order_highpass(values, fs, corner_hz);
-        }
-    }
 }
 
 /// The rig drive's speed controller identified from the travel
@@ -573,55 +574,6 @@ fn rig_speed_controller(
         sample_rate_hz: measured.sample_rate_hz,
     };
     drive_law::identify_speed_controller(&data).map_err(|e| format!("{e:#}"))
-}
-
-/// The torque-driven counterpart of the travel `recording` whose measured
-/// chain signals (with the torque and the angle) are `measured`.
-fn driven_counterpart(
-    model: &RigConfig,
-    recording: &Recording,
-    measured: &ChainSignals,
-    (torque, speed, controller): (&[f64], &[f64], Option<drive_law::SpeedController>),
-    settings: &driven::DrivenSettings,
-) -> Result<ChainSignals> {
-    let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
-        bail!("not a travel");
-    };
-    let phase = |p: signals::Phase| measured.phases.iter().find(|(q, _)| *q == p).map(|(_, r)| r.clone());
-    let Some(constant) = phase(signals::Phase::Constant) else {
-        bail!("the travel has no constant-speed stage");
-    };
-    let travel = driven::DrivenTravel {
-        m_car_kg,
-        m_cw_kg,
-        lw_start_m,
-        torque_nm: torque,
-        shaft_angle_rad: &measured.angle_rad,
-        speed_estimate_radps: speed,
-        controller,
-        motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
-        constant_speed: constant,
-        sample_rate_hz: measured.sample_rate_hz,
-    };
-    let (car, cw) = driven::torque_driven_accelerations(model, &travel, settings)?;
-    // The rig's accelerometers high-pass what they record; the model's
-    // accelerations go through the same, its corner found from the data.
-    let fs = measured.sample_rate_hz;
-    let measured_car = measured.channel(signals::Channel::CarAcceleration).unwrap_or(&[]);
-    let corner_hz = acquisition::identify_highpass_hz(measured_car, &car, fs)?;
-    let (car, cw) =
-        (acquisition::first_order_highpass(&car, fs, corner_hz), acquisition::first_order_highpass(&cw, fs, corner_hz));
-    let mut channels = vec![(signals::Channel::CarAcceleration, car)];
-    if measured.channel(signals::Channel::CounterweightAcceleration).is_some() {
-        channels.push((signals::Channel::CounterweightAcceleration, cw));
-    }
-    Ok(ChainSignals {
-        sample_rate_hz: measured.sample_rate_hz,
-        channels,
-        phases: measured.phases.clone(),
-        noise_density: Vec::new(),
-        angle_rad: measured.angle_rad.clone(),
-    })
 }
 
 /// The measured cells of a recording from a rig with another drive, made
@@ -691,7 +643,7 @@ fn target_of(
     drive: DriveModel,
     model: &RigConfig,
 ) -> std::result::Result<(Target, ChainSignals, Bands), String> {
-    let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, .. } = prepared;
+    let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, how, .. } = prepared;
     let measured_for_perturbed = measured.clone();
     align_phases(&mut measured, &mut nominal);
     for p in perturbed.iter_mut() {
@@ -732,6 +684,7 @@ fn target_of(
         tolerances,
         segmentation: seg_model,
         nominal: nominal_spectra,
+        counterpart: how,
     };
     Ok((target, measured, bands))
 }
@@ -844,7 +797,7 @@ fn gap_after(model: &RigConfig, effects: &Effects, c: &Compared, recordings: &mu
         .targets
         .par_iter()
         .map(|t| {
-            let s = simulate_counterpart(model, effects, &t.recording, &t.stem, model_step_s(model)).ok()?;
+            let s = t.counterpart.simulate(model, effects, &t.recording, &t.stem).ok()?;
             let spectra = ChainSpectra::compute(&s, &t.segmentation, bands);
             Some(cell_gaps(&t.measured, &t.noise, &t.tolerances, &cell_powers(&[(&spectra, 1.0)], bands)))
         })
@@ -926,16 +879,21 @@ pub fn diagnose(
         progress: &report_progress,
     };
     let is_nominal = nominal_excess_db <= options.nominal_excess_db;
-    let attribution_refused = (drive.drive == DriveModel::Foreign && !is_nominal).then(|| {
-        "the library's effects are fitted with the project's drive in the loop, and the rig's drive is another: \
-         the effect is not attributed (the location above still holds)"
-            .to_string()
+    // Under another drive the counterpart is the torque-driven mechanics,
+    // which holds only some of the library's effects.
+    let (kinds, not_fitted): (Vec<EffectKind>, Vec<EffectKind>) =
+        options.effects.iter().partition(|k| drive.drive == DriveModel::Project || driven::holds_effect(**k));
+    let attribution_note = (!not_fitted.is_empty()).then(|| {
+        let names: Vec<&str> = not_fitted.iter().map(|k| k.name()).collect();
+        format!(
+            "the rig's drive is another, so the effects are fitted with the mechanics driven by its measured torque; \
+             not fitted: {} (the dead time and current-sensor errors act through the currents, which the measured \
+             torque already carries; the brake clamp acts at standstill, where another drive's start and stop are \
+             not compared)",
+            names.join(", ")
+        )
     });
-    let ranking = if options.effects.is_empty() || drive.drive == DriveModel::Foreign {
-        Vec::new()
-    } else {
-        attribute(&lab, &options.effects)
-    };
+    let ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
     let best = ranking.first();
     let verdict = verdict_of(is_nominal, best, options);
     let mut simulations =
@@ -954,7 +912,7 @@ pub fn diagnose(
         drive,
         rig_speed_loops: std::mem::take(&mut compared.rig_speed_loops),
         left_out,
-        attribution_refused,
+        attribution_note,
         explained_by,
         gap_measure: GAP_MEASURE.to_string(),
         nominal_excess_db,

@@ -234,7 +234,7 @@ fn verdict_text(verdict: Verdict, explained_by: Option<&str>, refused: bool) -> 
         Verdict::Explained => format!("**explained** by `{}`", explained_by.unwrap_or("?")),
         Verdict::Unexplained if refused => {
             "**unexplained**: the calibrated nominal model misses the data beyond noise and tolerance, and no effect \
-             was fitted (see Attribution)"
+             was fitted"
                 .to_string()
         }
         Verdict::Unexplained => {
@@ -247,9 +247,7 @@ fn verdict_text(verdict: Verdict, explained_by: Option<&str>, refused: bool) -> 
 fn drive_text(drive: DriveModel) -> &'static str {
     match drive {
         DriveModel::Project => "the project's drive core (closed loop, every channel compared)",
-        DriveModel::Foreign => {
-            "another drive (the nominal mechanics driven by the measured torque, accelerations compared)"
-        }
+        DriveModel::Foreign => "another drive (the mechanics driven by the measured torque, accelerations compared)",
     }
 }
 
@@ -258,12 +256,12 @@ fn drive_text(drive: DriveModel) -> &'static str {
 /// model's gap.
 fn overview(s: &mut String, r: &GapReport) {
     let _ = writeln!(s, "# Sim-to-real gap: {}\n", r.dataset);
-    let verdict = verdict_text(r.verdict, r.explained_by.as_deref(), r.attribution_refused.is_some());
+    let verdict = verdict_text(r.verdict, r.explained_by.as_deref(), r.ranking.is_empty());
     let _ = writeln!(s, "Verdict: {verdict}.\n");
     let _ = writeln!(s, "The rig's drive: {}; {}.\n", drive_text(r.drive.drive), r.drive.reason);
     speed_loops(s, &r.rig_speed_loops);
-    if let Some(why) = &r.attribution_refused {
-        let _ = writeln!(s, "Attribution: {why}.\n");
+    if let Some(note) = &r.attribution_note {
+        let _ = writeln!(s, "Attribution: {note}.\n");
     }
     for l in &r.left_out {
         let _ = writeln!(s, "Left out: `{}`: {}.\n", l.recording, l.reason);
@@ -468,7 +466,7 @@ mod tests {
         assert!(verdict_text(Verdict::Nominal, Some("x"), true).starts_with("**nominal**"));
         assert_eq!(verdict_text(Verdict::Explained, Some("dead_time"), false), "**explained** by `dead_time`");
         assert_eq!(verdict_text(Verdict::Explained, None, false), "**explained** by `?`");
-        assert!(verdict_text(Verdict::Unexplained, None, true).ends_with("no effect was fitted (see Attribution)"));
+        assert!(verdict_text(Verdict::Unexplained, None, true).ends_with("no effect was fitted"));
         assert!(verdict_text(Verdict::Unexplained, None, false).contains("nor a pair"));
     }
 

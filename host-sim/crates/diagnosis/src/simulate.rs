@@ -2,7 +2,10 @@
 //! (the project's controller on the plant with the given effects), or the
 //! same free decay, sampled at the analysis rate.
 
-use crate::error::{Context, Result};
+use std::sync::Arc;
+
+use crate::error::{bail, Context, Result};
+use crate::{acquisition, drive_law, driven, signals};
 
 use crate::identify::release_index;
 use drive_core::config::Direction;
@@ -104,6 +107,128 @@ pub fn simulate_recording(
                 },
                 columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, values)],
             })
+        }
+    }
+}
+
+/// How the model's counterpart of a recording is made, as the diagnosis
+/// found it for the nominal model: the attribution makes every effect's
+/// counterpart the same way.
+#[derive(Clone, Debug)]
+pub enum Counterpart {
+    /// Simulated ([`simulate_counterpart`]: the travel in closed loop with
+    /// the project's drive, or the free decay), its accelerations then
+    /// through the rig's accelerometer high-pass of corner `highpass_hz`
+    /// (Hz; 0 for none).
+    Simulated {
+        /// Corner of the first-order high-pass, Hz.
+        highpass_hz: f64,
+    },
+    /// A travel under another drive: the mechanics driven by its measured
+    /// torque ([`driven_counterpart`]).
+    Driven(Arc<DrivenInputs>),
+}
+
+/// What the torque-driven counterpart of a travel takes from the recording.
+#[derive(Clone, Debug)]
+pub struct DrivenInputs {
+    /// The measured chain signals (accelerations, phases, shaft angle).
+    pub measured: ChainSignals,
+    /// Machine torque from the measured currents, N m.
+    pub torque_nm: Vec<f64>,
+    /// The rig drive's speed estimate, rad/s.
+    pub speed_estimate_radps: Vec<f64>,
+    /// The rig drive's speed loop, where identified.
+    pub controller: Option<drive_law::SpeedController>,
+}
+
+impl Counterpart {
+    /// The counterpart of `measured` (named `stem`) on `rig` with `effects`.
+    pub fn simulate(
+        &self,
+        rig: &RigConfig,
+        effects: &Effects,
+        measured: &Recording,
+        stem: &str,
+    ) -> Result<ChainSignals> {
+        match self {
+            Counterpart::Simulated { highpass_hz } => {
+                let mut run = simulate_counterpart(rig, effects, measured, stem, model_step_s(rig))?;
+                if *highpass_hz > 0.0 {
+                    highpass_accelerations(&mut run, *highpass_hz);
+                }
+                Ok(run)
+            }
+            Counterpart::Driven(inputs) => driven_counterpart(
+                rig,
+                measured,
+                &inputs.measured,
+                (&inputs.torque_nm, &inputs.speed_estimate_radps, inputs.controller),
+                &driven::DrivenSettings::default(),
+                effects,
+            ),
+        }
+    }
+}
+
+/// The torque-driven counterpart of the travel `recording` whose measured
+/// chain signals (with the torque and the angle) are `measured`, the model
+/// with `effects` ([`driven::holds_effect`]).
+pub fn driven_counterpart(
+    model: &RigConfig,
+    recording: &Recording,
+    measured: &ChainSignals,
+    (torque, speed, controller): (&[f64], &[f64], Option<drive_law::SpeedController>),
+    settings: &driven::DrivenSettings,
+    effects: &Effects,
+) -> Result<ChainSignals> {
+    let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
+        bail!("not a travel");
+    };
+    let phase = |p: signals::Phase| measured.phases.iter().find(|(q, _)| *q == p).map(|(_, r)| r.clone());
+    let Some(constant) = phase(signals::Phase::Constant) else {
+        bail!("the travel has no constant-speed stage");
+    };
+    let travel = driven::DrivenTravel {
+        m_car_kg,
+        m_cw_kg,
+        lw_start_m,
+        torque_nm: torque,
+        shaft_angle_rad: &measured.angle_rad,
+        speed_estimate_radps: speed,
+        controller,
+        motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
+        constant_speed: constant,
+        sample_rate_hz: measured.sample_rate_hz,
+    };
+    let (car, cw) = driven::torque_driven_accelerations(model, &travel, settings, effects)?;
+    // The rig's accelerometers high-pass what they record; the model's
+    // accelerations go through the same, its corner found from the data.
+    let fs = measured.sample_rate_hz;
+    let measured_car = measured.channel(signals::Channel::CarAcceleration).unwrap_or(&[]);
+    let corner_hz = acquisition::identify_highpass_hz(measured_car, &car, fs)?;
+    let (car, cw) =
+        (acquisition::first_order_highpass(&car, fs, corner_hz), acquisition::first_order_highpass(&cw, fs, corner_hz));
+    let mut channels = vec![(signals::Channel::CarAcceleration, car)];
+    if measured.channel(signals::Channel::CounterweightAcceleration).is_some() {
+        channels.push((signals::Channel::CounterweightAcceleration, cw));
+    }
+    Ok(ChainSignals {
+        sample_rate_hz: measured.sample_rate_hz,
+        channels,
+        phases: measured.phases.clone(),
+        noise_density: Vec::new(),
+        angle_rad: measured.angle_rad.clone(),
+    })
+}
+
+/// `signals`' accelerations through a first-order high-pass of corner
+/// `corner_hz` (none for 0).
+pub fn highpass_accelerations(signals: &mut ChainSignals, corner_hz: f64) {
+    let fs = signals.sample_rate_hz;
+    for (channel, values) in signals.channels.iter_mut() {
+        if channel.subsystem() == signals::Subsystem::Mechanical {
+            *values = acquisition::first_order_highpass(values, fs, corner_hz);
         }
     }
 }
