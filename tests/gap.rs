@@ -87,7 +87,7 @@ fn car_change(a: &[(String, Recording)], b: &[(String, Recording)]) -> f64 {
 
 /// Random parameters of `kind`, in ranges a rig could show and the drive
 /// rides through.
-fn draw(kind: EffectKind, rng: &mut StdRng) -> Vec<f64> {
+pub(crate) fn draw(kind: EffectKind, rng: &mut StdRng) -> Vec<f64> {
     let mut v = kind.defaults();
     let log_uniform = |rng: &mut StdRng, lo: f64, hi: f64| (rng.gen_range(lo.ln()..hi.ln())).exp();
     match kind {

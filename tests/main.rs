@@ -15,6 +15,7 @@ mod effects;
 mod faults;
 mod fixed_point;
 mod gap;
+mod gap_foreign;
 mod modes;
 mod observer;
 mod pil;
