@@ -73,8 +73,9 @@ fn run(rig: &RigConfig, name: &str, dataset: &[(String, Recording)]) -> GapRepor
 }
 
 /// Largest RMS over the recordings of the difference of the car
-/// acceleration between two noise-free datasets, m/s^2.
-fn car_change(a: &[(String, Recording)], b: &[(String, Recording)]) -> f64 {
+/// acceleration between two datasets (noise-free, or with the same noise),
+/// m/s^2.
+pub(crate) fn car_change(a: &[(String, Recording)], b: &[(String, Recording)]) -> f64 {
     a.iter()
         .zip(b)
         .map(|((_, x), (_, y))| {

@@ -17,10 +17,10 @@ use diagnosis::{diagnose, GapOptions, GapReport, Verdict};
 use plant::effects::{EffectKind, Effects};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use recording::{Recording, ACC_CAR};
+use recording::Recording;
 use rig_config::RigConfig;
 
-use crate::gap::draw;
+use crate::gap::{car_change, draw};
 use crate::support::rig;
 
 /// One case of the sweep: what was drawn, what the diagnosis said.
@@ -41,20 +41,6 @@ fn foreign_dataset(truth: &RigConfig, foreign: &ForeignRig, effects: Effects) ->
         ..DatasetSpec::rig(truth)
     };
     make_foreign_dataset(truth, &spec, foreign).expect("foreign dataset")
-}
-
-/// Largest RMS difference of the car acceleration between two datasets of
-/// one foreign rig, m/s^2 (the acquisition's noise is drawn from the same
-/// seed in both, so it cancels).
-fn car_change(a: &[(String, Recording)], b: &[(String, Recording)]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|((_, x), (_, y))| {
-            let (x, y) = (&x.column(ACC_CAR).unwrap().values, &y.column(ACC_CAR).unwrap().values);
-            let n = x.len().min(y.len());
-            (x[..n].iter().zip(&y[..n]).map(|(p, q)| (p - q).powi(2)).sum::<f64>() / n as f64).sqrt()
-        })
-        .fold(0.0, f64::max)
 }
 
 /// The foreign rig of draw `d`: drive and acquisition at random, as
@@ -119,6 +105,8 @@ fn sweep_draw(d: u64, kinds: &[EffectKind], with_nominal: bool, cases: &mut Vec<
         let report = diagnosed(&model, &name, &data);
         cases.push(Case { draw: d, truth: name, change_mps2: car_change(&data, &nominal), report });
     }
+    // The acquisition's noise is drawn from the same seed in both datasets,
+    // so it cancels in the change.
     for &kind in kinds {
         let values = draw(kind, &mut rng);
         let mut effects = Effects::none();
