@@ -484,7 +484,9 @@ fn counterpart(
             speed_estimate_radps: speed.clone(),
             controller,
         };
-        (run_driven(models[0], &settings)?, perturbed, Counterpart::Driven(std::sync::Arc::new(inputs)))
+        // The nominal run made as the attribution makes every effect's.
+        let how = Counterpart::Driven(std::sync::Arc::new(inputs));
+        (how.simulate(models[0], &none, recording, stem)?, perturbed, how)
     } else {
         let (mut nominal, mut perturbed) = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
         let mut highpass_hz = 0.0;
