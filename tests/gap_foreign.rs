@@ -8,7 +8,8 @@
 //! the nominal and parameter-only rigs and every effect the torque-driven
 //! model holds is an ignored test that prints the whole table:
 //! `cargo test --release -p host-sim --test integration gap_foreign:: -- --ignored --nocapture`
-//! (`GAP_FOREIGN_DRAWS=N` draws, default 2).
+//! (`GAP_FOREIGN_DRAWS=N` draws, default 2, from `GAP_FOREIGN_FIRST`,
+//! default 100: the foreign rig of `--foreign-seed 100` and on).
 
 use closed_loop::foreign::ForeignRig;
 use closed_loop::synthetic::{make_foreign_dataset, DatasetSpec};
@@ -143,11 +144,12 @@ fn foreign_rig_tension_stiffening_is_named_first() {
 #[test]
 #[ignore = "full sweep: run with --ignored"]
 fn foreign_rigs_blind_sweep() {
-    let draws: u64 = std::env::var("GAP_FOREIGN_DRAWS").ok().and_then(|s| s.parse().ok()).unwrap_or(2);
+    let env = |name: &str, default: u64| std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default);
+    let (draws, first) = (env("GAP_FOREIGN_DRAWS", 2), env("GAP_FOREIGN_FIRST", 100));
     let kinds: Vec<EffectKind> = EffectKind::ALL.into_iter().filter(|k| holds_effect(*k)).collect();
     let mut cases = Vec::new();
     for d in 0..draws {
-        sweep_draw(100 + d, &kinds, true, &mut cases);
+        sweep_draw(first + d, &kinds, true, &mut cases);
         print_table(&cases);
     }
     let effects: Vec<&Case> = cases.iter().filter(|c| c.truth != "nominal" && !c.truth.starts_with("EA ")).collect();
