@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
 use recording::evimp::EVIMP_BOUNDS;
-use recording::{read_evimp, read_meta, RecordingKind, MAX_MASS_KG, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ};
+use recording::{
+    read_evimp, read_meta, RecordingKind, MAX_MASS_KG, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ, META_FIELDS,
+};
 use rig_config::RigConfig;
 
 /// Cases per target: enough to cover the strategies' shapes, small enough
@@ -153,20 +155,6 @@ direction = \"up\"
 lw_start_m = 1.0
 lw_end_m = 7.6
 ";
-
-const META_FIELDS: [&str; 11] = [
-    "format",
-    "kind",
-    "sample_rate_hz",
-    "description",
-    "m_car_kg",
-    "m_cw_kg",
-    "direction",
-    "lw_start_m",
-    "lw_end_m",
-    "mass_kg",
-    "rope_length_m",
-];
 
 /// A metadata file of random fields: each known field absent or with a
 /// random value, kinds and directions drawn from valid and invalid text,

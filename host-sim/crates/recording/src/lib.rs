@@ -22,7 +22,7 @@ pub mod read;
 pub mod write;
 
 pub use evimp::{read_evimp, EvimpRecording};
-pub use read::{read_columns, read_dataset, read_meta, read_recording, ReadError};
+pub use read::{read_columns, read_dataset, read_meta, read_recording, ReadError, META_FIELDS};
 pub use write::write_recording;
 
 /// Value of the metadata field `format` for version 1 of the format.

@@ -638,8 +638,9 @@ impl<'a> MetaFile<'a> {
     }
 }
 
-/// Every metadata field the specification defines.
-const META_FIELDS: [&str; 11] = [
+/// Every metadata field the specification defines
+/// (`measurement-format.md`), in its order.
+pub const META_FIELDS: [&str; 11] = [
     "format",
     "kind",
     "sample_rate_hz",
