@@ -5,8 +5,9 @@
 //! library's effects at random strengths.
 //!
 //! CI runs one case (tension stiffening on one draw); the sweep over draws,
-//! the nominal and parameter-only rigs and every effect the torque-driven
-//! model holds is an ignored test that prints the whole table:
+//! the nominal and parameter-only rigs and every effect of the library is
+//! an ignored test that prints the whole table (`GAP_FOREIGN_CASES` picks
+//! cases):
 //! `cargo test --release -p host-sim --test integration gap_foreign:: -- --ignored --nocapture`
 //! (`GAP_FOREIGN_DRAWS=N` draws, default 2, from `GAP_FOREIGN_FIRST`,
 //! default 100: the foreign rig of `--foreign-seed 100` and on).
@@ -87,16 +88,37 @@ fn print_table(cases: &[Case]) {
     }
 }
 
-/// One draw: the nominal rig, a parameter-only rig and each of `kinds`.
-fn sweep_draw(d: u64, kinds: &[EffectKind], with_nominal: bool, cases: &mut Vec<Case>) {
+/// The library's effects in the sweep's order: those the torque-driven
+/// model holds first, then the others, so that adding the others left every
+/// earlier case (parameters and noise) as it was.
+fn sweep_order() -> Vec<EffectKind> {
+    let (held, others): (Vec<EffectKind>, Vec<EffectKind>) =
+        EffectKind::ALL.into_iter().partition(|k| holds_effect(*k));
+    held.into_iter().chain(others).collect()
+}
+
+/// What the sweep runs, from `GAP_FOREIGN_CASES` (a comma-separated list of
+/// effect names and `nominal`, which stands for the nominal and the
+/// parameter-only rig); all of them when unset.
+fn selected(name: &str) -> bool {
+    std::env::var("GAP_FOREIGN_CASES").map_or(true, |list| list.split(',').any(|c| c.trim() == name))
+}
+
+/// One draw: the nominal rig, a parameter-only rig and each effect of the
+/// library, as [`selected`]. The parameters of every case are drawn in
+/// turn from one seed whatever is run, so that a case run alone is the same
+/// case as in the whole sweep. The dead time and the current-sensor errors
+/// act on the simulated machine's own phases, so their cases run with the
+/// draw's drive turned to a rotor starting at 0 deg.
+fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
     let model = rig();
     let foreign = foreign_rig(d);
     let mut rng = StdRng::seed_from_u64(1000 + d);
     let nominal = foreign_dataset(&model, &foreign, Effects::none());
-    if with_nominal {
+    let truth = parameter_only(&model, &mut rng);
+    if selected("nominal") {
         let report = diagnosed(&model, "nominal", &nominal);
         cases.push(Case { draw: d, truth: "nominal".into(), change_mps2: 0.0, report });
-        let truth = parameter_only(&model, &mut rng);
         let data = foreign_dataset(&truth, &foreign, Effects::none());
         let m = &truth.mechanics;
         let name = format!(
@@ -108,14 +130,26 @@ fn sweep_draw(d: u64, kinds: &[EffectKind], with_nominal: bool, cases: &mut Vec<
     }
     // The acquisition's noise is drawn from the same seed in both datasets,
     // so it cancels in the change.
-    for &kind in kinds {
+    for kind in sweep_order() {
         let values = draw(kind, &mut rng);
+        if !selected(kind.name()) {
+            continue;
+        }
         let mut effects = Effects::none();
         effects.set(kind, &values).expect("drawn parameters are in range");
-        let data = foreign_dataset(&model, &foreign, effects);
+        let mut rig_of_case = foreign;
+        let mut reference = None;
+        if matches!(kind, EffectKind::DeadTime | EffectKind::CurrentSensorError) {
+            if let Some(drive) = rig_of_case.drive.as_mut() {
+                drive.rotor_start_angle_deg = 0.0;
+            }
+            reference = Some(foreign_dataset(&model, &rig_of_case, Effects::none()));
+        }
+        let data = foreign_dataset(&model, &rig_of_case, effects);
         let truth = format!("{} {:?}", kind.name(), values.iter().map(|v| (v * 1e4).round() / 1e4).collect::<Vec<_>>());
         let report = diagnosed(&model, &truth, &data);
-        cases.push(Case { draw: d, truth, change_mps2: car_change(&data, &nominal), report });
+        let change_mps2 = car_change(&data, reference.as_deref().unwrap_or(&nominal));
+        cases.push(Case { draw: d, truth, change_mps2, report });
     }
 }
 
@@ -146,10 +180,9 @@ fn foreign_rig_tension_stiffening_is_named_first() {
 fn foreign_rigs_blind_sweep() {
     let env = |name: &str, default: u64| std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default);
     let (draws, first) = (env("GAP_FOREIGN_DRAWS", 2), env("GAP_FOREIGN_FIRST", 100));
-    let kinds: Vec<EffectKind> = EffectKind::ALL.into_iter().filter(|k| holds_effect(*k)).collect();
     let mut cases = Vec::new();
     for d in 0..draws {
-        sweep_draw(first + d, &kinds, true, &mut cases);
+        sweep_draw(first + d, &mut cases);
         print_table(&cases);
     }
     let effects: Vec<&Case> = cases.iter().filter(|c| c.truth != "nominal" && !c.truth.starts_with("EA ")).collect();

@@ -401,6 +401,39 @@ fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> f
     }
 }
 
+/// Largest relative difference between the mean speed of a travel's
+/// constant-speed stage and the project's drive's on the same travel for
+/// the rig to count as run by the project's drive: that drive holds its
+/// rated speed (integral action on the speed error) whatever the effect;
+/// another drive runs at its own.
+pub const PROFILE_SPEED_TOLERANCE: f64 = 0.02;
+
+/// Mean absolute value (of the speed channel, rad/s) over the
+/// constant-speed stage of `signals`, if it has both.
+fn constant_stage_speed_radps(signals: &ChainSignals) -> Option<f64> {
+    let speed = signals.channel(signals::Channel::Speed)?;
+    let stage = signals.phases.iter().find(|(p, _)| *p == signals::Phase::Constant)?.1.clone();
+    let stage = stage.start.min(speed.len())..stage.end.min(speed.len());
+    (!stage.is_empty()).then(|| speed[stage.clone()].iter().map(|v| v.abs()).sum::<f64>() / stage.len() as f64)
+}
+
+/// Why the travel `measured` was not run by the project's drive whose run
+/// of it is `closed`, judged by the speed it travels at
+/// ([`PROFILE_SPEED_TOLERANCE`]); `None` when the speeds agree or either is
+/// missing.
+fn speed_profile_mismatch(stem: &str, measured: &ChainSignals, closed: &ChainSignals) -> Option<String> {
+    let (m, c) = (constant_stage_speed_radps(measured)?, constant_stage_speed_radps(closed)?);
+    let relative = m / c - 1.0;
+    (c > 0.0 && relative.abs() > PROFILE_SPEED_TOLERANCE).then(|| {
+        format!(
+            "travel `{stem}` runs at {m:.3} rad/s at constant speed, the project's drive at {c:.3} rad/s \
+             ({:+.1} %, more than {:.0} %): another speed profile",
+            100.0 * relative,
+            100.0 * PROFILE_SPEED_TOLERANCE
+        )
+    })
+}
+
 /// Which drive the travels' model assumes, and why.
 fn decide_drive(
     option: DriveAssumption,
@@ -423,13 +456,16 @@ fn decide_drive(
             Err(e) => format!("the project's drive cannot run travel `{stem}` ({e:#})"),
             Ok(closed) => {
                 let d = start_stop_torque_gap_db(measured, closed);
-                if d <= DRIVE_MISMATCH_DB {
+                if d > DRIVE_MISMATCH_DB {
+                    format!(
+                        "the torque of travel `{stem}` at standstill (start and stop) lies {d:.1} dB (RMS) from the \
+                         project's drive (more than {DRIVE_MISMATCH_DB} dB): another start and stop sequence"
+                    )
+                } else if let Some(reason) = speed_profile_mismatch(stem, measured, closed) {
+                    reason
+                } else {
                     continue;
                 }
-                format!(
-                    "the torque of travel `{stem}` at standstill (start and stop) lies {d:.1} dB (RMS) from the \
-                     project's drive (more than {DRIVE_MISMATCH_DB} dB): another start and stop sequence"
-                )
             }
         };
         return DriveFinding { drive: DriveModel::Foreign, reason };
@@ -437,7 +473,9 @@ fn decide_drive(
     DriveFinding {
         drive: DriveModel::Project,
         reason: format!(
-            "the project's drive reproduces every travel's torque at standstill within {DRIVE_MISMATCH_DB} dB"
+            "the project's drive reproduces every travel's torque at standstill within {DRIVE_MISMATCH_DB} dB \
+             and its speed at constant speed within {:.0} %",
+            100.0 * PROFILE_SPEED_TOLERANCE
         ),
     }
 }
@@ -929,4 +967,46 @@ pub fn diagnose(
         runtime_s: started.elapsed().as_secs_f64(),
         simulations,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A travel's speed channel: a ramp to `top` rad/s, held, a ramp down.
+    fn travel(top: f64) -> ChainSignals {
+        let n = 3000;
+        let speed: Vec<f64> = (0..n)
+            .map(|k| match k {
+                0..=999 => top * k as f64 / 1000.0,
+                1000..=1999 => top,
+                _ => top * (n - k) as f64 / 1000.0,
+            })
+            .collect();
+        ChainSignals {
+            sample_rate_hz: 1000.0,
+            channels: vec![(signals::Channel::Speed, speed)],
+            phases: vec![
+                (signals::Phase::Acceleration, 0..1000),
+                (signals::Phase::Constant, 1000..2000),
+                (signals::Phase::Deceleration, 2000..3000),
+            ],
+            noise_density: Vec::new(),
+            angle_rad: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn another_speed_at_constant_speed_is_another_drive() {
+        let project = travel(6.15);
+        assert!((constant_stage_speed_radps(&project).unwrap() - 6.15).abs() < 1e-9);
+        assert!(speed_profile_mismatch("t", &travel(6.15 * 1.015), &project).is_none());
+        let reason = speed_profile_mismatch("t", &travel(5.70), &project).expect("7 % slower");
+        assert!(reason.contains("`t`") && reason.contains("-7.3 %"), "{reason}");
+        // The direction does not matter, a missing stage gives no verdict.
+        assert!(speed_profile_mismatch("t", &travel(-6.15), &project).is_none());
+        let mut no_stage = travel(5.0);
+        no_stage.phases.clear();
+        assert!(speed_profile_mismatch("t", &no_stage, &project).is_none());
+    }
 }
