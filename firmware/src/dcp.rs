@@ -121,17 +121,11 @@ async fn handle(uart: &mut BufferedUart<'static>, event: &PortEvent, pending: &m
     if let Some(refusal) = event.refused {
         warn!("DCP message answered with the error bit: {=str}", refusal_name(refusal));
     }
-    if event.unsupported.is_some() {
-        warn!("DCP speed-mode travel answered but not carried out: the controller has no speed-reference travel");
-    }
     if let Some(command) = event.command {
-        let command = match command {
-            ControllerCommand::Travel(travel) => Command::Travel(travel),
-            ControllerCommand::SafeStop(reason) => {
-                warn!("DCP safe stop: {=str}", reason_name(reason));
-                Command::SafeStop(reason)
-            }
-        };
+        if let ControllerCommand::SafeStop(reason) = command {
+            warn!("DCP safe stop: {=str}", reason_name(reason));
+        }
+        let command = Command::Drive(command);
         // A newer command replaces one still waiting for room in the queue.
         if let Err(command) = control::submit(command) {
             *pending = Some(command);

@@ -79,8 +79,8 @@ mod watchdog;
 
 use defmt::{error, info, warn};
 use defmt_rtt as _;
-use drive_core::dcp::{Mode, SlaveConfig, Speed};
-use drive_core::lift_drive::DcpPort;
+use drive_core::dcp::{Mode, SlaveConfig};
+use drive_core::lift_drive::{speed_table, DcpPort};
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::Controller;
@@ -109,15 +109,6 @@ fn offline_table() -> HarmonicTable {
         table.push_cosine(order, amplitude_nm, cos_phase, sin_phase);
     }
     table.negated()
-}
-
-/// The speeds the DCP slave offers: V4 (fast) at the rated speed, the
-/// speed of the drive's distance travels. The controller has no
-/// speed-reference travel, so no other speed is offered.
-fn dcp_speeds() -> [Option<f32>; 11] {
-    let mut speeds = [None; 11];
-    speeds[Speed::V4.index()] = Some(DRIVE_CONFIG.rated_speed_mps);
-    speeds
 }
 
 // rig-config derives the PWM period from its own idea of the timer clock
@@ -236,7 +227,7 @@ async fn main(spawner: Spawner) {
         Err(e) => error!("LPUART1 (service port) setup failed ({}): no service port", e),
     }
 
-    let slave = SlaveConfig::new(DCP_MODE, dcp_speeds(), LIFT_GEOMETRY.shaft_travel_mm);
+    let slave = SlaveConfig::new(DCP_MODE, speed_table(DRIVE_CONFIG.rated_speed_mps), LIFT_GEOMETRY.shaft_travel_mm);
     spawner.spawn(defmt::unwrap!(dcp::run(uart, DcpPort::new(slave, LIFT_GEOMETRY, m_car_kg))));
 }
 

@@ -149,7 +149,8 @@ pub enum Request {
         /// Car position at the start, mm above the lowest landing.
         start_position_mm: i32,
     },
-    /// A speed travel (DCP3, or inspection and re-levelling).
+    /// A speed travel (DCP3, or inspection and re-levelling) from
+    /// `start_position_mm` (mm above the lowest landing).
     Speed {
         /// Direction.
         direction: Travel,
@@ -157,9 +158,15 @@ pub enum Request {
         speed: Speed,
         /// Its car speed, m/s.
         speed_mps: f32,
+        /// Car position at the start, mm above the lowest landing.
+        start_position_mm: i32,
     },
-    /// Slow down to crawl speed V0 (DCP3 deceleration point).
-    Crawl,
+    /// Slow down to crawl speed V0 (DCP3 deceleration point), or stay at
+    /// the travel's speed if that is lower.
+    Crawl {
+        /// The car speed to go on at, m/s.
+        speed_mps: f32,
+    },
     /// Stop at the floor from crawl, brake applied (DCP3 stop).
     Stop,
     /// Stop now: inverter off, brake applied.
@@ -194,8 +201,8 @@ enum Phase {
     Enabled,
     /// A distance travel requested (`started` once the drive showed it running).
     Distance { direction: Travel, target_mm: i32, started: bool },
-    /// A speed travel requested or running.
-    SpeedTravel { direction: Travel, started: bool },
+    /// A speed travel requested or running at `speed_mps` (m/s).
+    SpeedTravel { direction: Travel, started: bool, speed_mps: f32 },
     /// Stopping at the end of a speed travel.
     Stopping,
     /// A travel ended or was refused: no new travel before a stop or idle message.
@@ -306,7 +313,9 @@ impl Slave {
             Phase::Distance { started, target_mm, .. } => (started, Some(target_mm)),
             Phase::SpeedTravel { started, .. } => (started, None),
             Phase::Stopping if !drive.travelling => {
+                // Where a speed travel ends is the master's business: forget the position.
                 self.phase = Phase::Done;
+                self.position_mm = None;
                 return;
             }
             _ => return,
@@ -377,13 +386,18 @@ impl Slave {
                     self.accepted = false;
                     return Ok(None);
                 };
+                // The drive's rope lengths (feed-forward) and shaft ends need the position.
+                let Some(start_position_mm) = self.position_mm else {
+                    self.accepted = false;
+                    return Ok(None);
+                };
                 if !drive.ready {
                     self.accepted = false;
                     return Ok(None);
                 }
                 self.accepted = true;
-                self.phase = Phase::SpeedTravel { direction, started: false };
-                Ok(Some(Request::Speed { direction, speed, speed_mps }))
+                self.phase = Phase::SpeedTravel { direction, started: false, speed_mps };
+                Ok(Some(Request::Speed { direction, speed, speed_mps, start_position_mm }))
             }
             (Kind::Travel | Kind::Relevel, Phase::SpeedTravel { direction: running, .. }) => {
                 if running != direction {
@@ -391,11 +405,19 @@ impl Slave {
                 }
                 Ok(None)
             }
-            (Kind::Decelerate, Phase::SpeedTravel { direction: running, .. }) => {
+            (Kind::Decelerate, Phase::SpeedTravel { direction: running, speed_mps, .. }) => {
                 if running != direction {
                     return Ok(Some(self.halt(StopReason::Inconsistent, drive)));
                 }
-                Ok(Some(Request::Crawl))
+                // Without a crawl speed, the deceleration point is the stop:
+                // short of the floor rather than past it.
+                match self.config.speeds_mps[Speed::V0.index()] {
+                    Some(crawl) => Ok(Some(Request::Crawl { speed_mps: crawl.min(speed_mps) })),
+                    None => {
+                        self.phase = Phase::Stopping;
+                        Ok(Some(Request::Stop))
+                    }
+                }
             }
             (Kind::Decelerate, Phase::Enabled) if self.config.mode == Mode::Dcp4 => {
                 let distance_mm = distance.unwrap_or(0);
