@@ -94,7 +94,7 @@ include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
 /// The compensation strategy installed when no valid parameter record is stored.
 pub const DEFAULT_STRATEGY: Strategy = Strategy::Table;
 
-/// The DCP variant: distance mode.
+/// The DCP variant without a stored record: distance mode.
 pub const DCP_MODE: Mode = Mode::Dcp4;
 
 bind_interrupts!(struct Irqs {
@@ -154,10 +154,10 @@ async fn main(spawner: Spawner) {
     );
     adc::init(p.ADC1, p.ADC2, p.PA0, p.PC1, p.PC0, p.PA1);
 
-    let stored = params::load(p.FLASH).await;
-    let (mut strategy, mut table, m_car_kg) = match stored {
-        Some(parameters) => (parameters.strategy, parameters.table, parameters.m_car_kg),
-        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG),
+    let (stored, params_status) = params::load(p.FLASH).await;
+    let (mut strategy, mut table, m_car_kg, dcp_mode) = match stored {
+        Some(parameters) => (parameters.strategy, parameters.table, parameters.m_car_kg, parameters.dcp_mode),
+        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG, DCP_MODE),
     };
     if strategy == Strategy::CarObserver {
         // Its chain observer runs in the controller's speed-loop tick: on the
@@ -191,6 +191,10 @@ async fn main(spawner: Spawner) {
             speed_radps: 0.0,
             travelling: false,
             strategy_settable: false,
+            dcp_mode,
+            params: params_status,
+            savable: false,
+            save_requested: false,
         });
     });
     control::start(controller, brake);
@@ -227,7 +231,7 @@ async fn main(spawner: Spawner) {
         Err(e) => error!("LPUART1 (service port) setup failed ({}): no service port", e),
     }
 
-    let slave = SlaveConfig::new(DCP_MODE, speed_table(DRIVE_CONFIG.rated_speed_mps), LIFT_GEOMETRY.shaft_travel_mm);
+    let slave = SlaveConfig::new(dcp_mode, speed_table(DRIVE_CONFIG.rated_speed_mps), LIFT_GEOMETRY.shaft_travel_mm);
     spawner.spawn(defmt::unwrap!(dcp::run(uart, DcpPort::new(slave, LIFT_GEOMETRY, m_car_kg))));
 }
 

@@ -13,6 +13,7 @@
 
 use defmt::{info, warn};
 use drive_core::param_store::{DriveParameters, RecordError, MAX_RECORD};
+use drive_core::service::ParamsStatus;
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::peripherals::FLASH;
@@ -40,8 +41,9 @@ fn store(flash: Peri<'static, FLASH>) -> Store {
     )
 }
 
-/// The stored parameters, if a record is stored and passes every check.
-pub async fn load(flash: Peri<'static, FLASH>) -> Option<DriveParameters> {
+/// The stored parameters, if a record is stored and passes every check,
+/// and what became of the record (for the service port's `get params`).
+pub async fn load(flash: Peri<'static, FLASH>) -> (Option<DriveParameters>, ParamsStatus) {
     let mut store = store(flash);
     // Key, value and the storage's own alignment.
     let mut buffer = [0u8; MAX_RECORD + 16];
@@ -51,21 +53,21 @@ pub async fn load(flash: Peri<'static, FLASH>) -> Option<DriveParameters> {
                 "parameters: none stored in the {=u32} pages at {=u32:#x}, running with the defaults",
                 STORE_PAGES, STORE_START
             );
-            None
+            (None, ParamsStatus::None)
         }
         Ok(Some(record)) => match DriveParameters::decode(record) {
             Ok(parameters) => {
-                info!("parameters: stored record read (version {=u8}, CRC ok)", drive_core::param_store::VERSION);
-                Some(parameters)
+                info!("parameters: stored record read (version {=u8}, CRC ok)", record[3]);
+                (Some(parameters), ParamsStatus::Stored)
             }
             Err(e) => {
                 warn!("parameters: stored record refused ({=str}): running with the defaults", record_error(e));
-                None
+                (None, ParamsStatus::Refused(e))
             }
         },
         Err(e) => {
             warn!("parameters: the store cannot be read ({}): running with the defaults", e);
-            None
+            (None, ParamsStatus::Unreadable)
         }
     }
 }

@@ -490,6 +490,13 @@ impl Controller {
         if !(speed_mps > 0.0 && speed_mps <= self.config.rated_speed_mps) {
             return Err(SpeedCommandError::OutOfRange);
         }
+        // The speed it is already going to: nothing to re-plan (a lift
+        // controller repeats its command every message).
+        if let Some(Travel { reference: Reference::Speed(s), .. }) = self.travel {
+            if !s.stopping && s.ramp.end().speed_mps == speed_mps && self.state.pwm_enabled() {
+                return Ok(());
+            }
+        }
         self.replan_speed(speed_mps)
     }
 
@@ -1005,9 +1012,14 @@ mod tests {
         assert!(ticks.last().unwrap().telemetry.ref_speed_mps < 0.4);
         ticks.extend(car.run(&mut c, 2.0));
         assert!(ticks[ticks.len() - 3000..].iter().all(|o| o.telemetry.ref_speed_mps == 0.4), "runs at V");
-        // Deceleration point: down to crawl, 1 s there.
+        // Deceleration point: down to crawl, 1 s there; the command repeated
+        // (as every message of the lift controller repeats it) changes nothing.
         c.command_speed(0.05).unwrap();
-        ticks.extend(car.run(&mut c, 2.5));
+        for _ in 0..10 {
+            ticks.extend(car.run(&mut c, 0.015));
+            c.command_speed(0.05).unwrap();
+        }
+        ticks.extend(car.run(&mut c, 2.35));
         assert_eq!(ticks.last().unwrap().telemetry.ref_speed_mps, 0.05);
         assert_eq!(c.state(), DriveState::Travel);
         let before_stop = car.position_m;

@@ -25,9 +25,14 @@ use crate::controller::{
     CommandError, ControlOutput, Controller, DriveState, SensorFrame, SpeedCommandError, SpeedTravelCommand,
     TravelCommand,
 };
-use crate::dcp::command::Speed;
+use crate::dcp::command::{Mode, Speed};
 use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, FRAME_LEN};
 use crate::dcp::slave::{DriveStatus, Outcome, Refusal, Request, Slave, SlaveConfig, StopReason, Travel};
+use crate::observer::ChainModel;
+use crate::param_store::DriveParameters;
+use crate::ripple::harmonics::HarmonicTable;
+use crate::ripple::Strategy;
+use crate::service::{ParamsStatus, ServiceState, FAULT_LOG, MAX_ANSWER, MAX_LINE};
 
 /// The speeds the drive offers for the DCP speed bits (order of
 /// [`crate::dcp::Speed::ALL`]), m/s, as fractions of the rated car speed
@@ -215,6 +220,18 @@ impl DcpPort {
         self.m_car_kg = m_car_kg;
     }
 
+    /// The car mass of the load weighing, kg.
+    pub fn car_mass_kg(&self) -> f32 {
+        self.m_car_kg
+    }
+
+    /// Restarts the slave speaking DCP variant `mode` (disabled, position
+    /// unknown, no message half received).
+    pub fn set_mode(&mut self, mode: Mode) {
+        self.receiver = FrameReceiver::default();
+        self.slave = Slave::new(SlaveConfig { mode, ..*self.slave.config() });
+    }
+
     /// One byte received at `now_us`, with the drive's status now.
     pub fn byte(&mut self, byte: u8, now_us: u32, drive: &DriveStatus) -> PortEvent {
         let finished = self.receiver.push(byte, now_us);
@@ -282,6 +299,34 @@ pub struct LiftDrive {
     config: DriveConfig,
     state: DriveState,
     speed_radps: f32,
+    /// What the service port reads and changes.
+    service: ServiceState,
+    /// The service request line being received.
+    line: [u8; MAX_LINE + 1],
+    line_len: usize,
+    /// The chain model compensation strategies are installed on.
+    chain: Option<ChainModel>,
+    /// The rotor alignment's encoder offset, counts (kept in the record).
+    encoder_offset_counts: u32,
+}
+
+/// Most service-port bytes one step takes (it stops after a line's end).
+pub const MAX_SERVICE_BYTES_PER_STEP: usize = 8;
+
+/// Longest service answer with its `\r\n`, bytes.
+pub const MAX_SERVICE_REPLY: usize = MAX_ANSWER + 2;
+
+/// The answer to one service request line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServiceReply {
+    /// The answer line and its `\r\n` (the first `len` bytes).
+    pub bytes: [u8; MAX_SERVICE_REPLY],
+    /// Bytes used.
+    pub len: usize,
+    /// The parameters to write to flash (a `save`): the caller writes
+    /// them and, if that fails, sends `error flash-write\r\n` instead of
+    /// this answer.
+    pub save: Option<DriveParameters>,
 }
 
 /// What one [`LiftDrive::step`] did besides the controller step.
@@ -299,8 +344,128 @@ pub struct StepDcp {
 
 impl LiftDrive {
     /// The application layer of `controller` with `port`; `config` is the controller's.
+    /// Its service port sets the strategy and the DCP variant, and cannot
+    /// save (see [`LiftDrive::set_savable`]); no parameters are installed
+    /// (see [`LiftDrive::install_parameters`]).
     pub fn new(controller: Controller, port: DcpPort, config: &DriveConfig) -> Self {
-        Self { controller, port, config: *config, state: DriveState::Idle, speed_radps: 0.0 }
+        let service = ServiceState {
+            strategy: Strategy::Off,
+            table: HarmonicTable::default(),
+            m_car_kg: port.car_mass_kg(),
+            faults: [0; FAULT_LOG],
+            fault_count: 0,
+            state_code: DriveState::Idle.code(),
+            speed_radps: 0.0,
+            travelling: false,
+            strategy_settable: true,
+            dcp_mode: port.slave().config().mode,
+            params: ParamsStatus::None,
+            savable: false,
+            save_requested: false,
+        };
+        Self {
+            controller,
+            port,
+            config: *config,
+            state: DriveState::Idle,
+            speed_radps: 0.0,
+            service,
+            line: [0; MAX_LINE + 1],
+            line_len: 0,
+            chain: None,
+            encoder_offset_counts: 0,
+        }
+    }
+
+    /// Installs the start-up parameters (the stored record's, or the
+    /// defaults) on the drive model `chain`: the compensation strategy with
+    /// its table, the car mass, the DCP variant; `status` is what became of
+    /// the stored record (`get params`).
+    pub fn install_parameters(&mut self, parameters: &DriveParameters, chain: &ChainModel, status: ParamsStatus) {
+        self.chain = Some(*chain);
+        self.controller.install_compensation(parameters.strategy, &parameters.table, chain);
+        self.port.set_car_mass(parameters.m_car_kg);
+        self.port.set_mode(parameters.dcp_mode);
+        self.encoder_offset_counts = parameters.encoder_offset_counts;
+        self.service.strategy = parameters.strategy;
+        self.service.table = parameters.table;
+        self.service.m_car_kg = parameters.m_car_kg;
+        self.service.dcp_mode = parameters.dcp_mode;
+        self.service.params = status;
+    }
+
+    /// Whether the service port's `save` is carried out (the caller has a flash store).
+    pub fn set_savable(&mut self, savable: bool) {
+        self.service.savable = savable;
+    }
+
+    /// The parameters as they stand: the strategy, the table in use (what
+    /// the compensator has learned, if one is installed), the car mass, the
+    /// encoder offset, the DCP variant.
+    pub fn parameters(&self) -> DriveParameters {
+        DriveParameters {
+            strategy: self.service.strategy,
+            table: self.controller.compensation().map_or(self.service.table, |c| c.table()),
+            m_car_kg: self.port.car_mass_kg(),
+            encoder_offset_counts: self.encoder_offset_counts,
+            dcp_mode: self.port.slave().config().mode,
+        }
+    }
+
+    /// One byte of the service port; the answer when it ends a request line.
+    /// A `set` takes effect at once (refused during a travel): the strategy
+    /// is installed over the table in use, the car mass is the next
+    /// travel's, a new DCP variant restarts the slave.
+    pub fn service_byte(&mut self, byte: u8) -> Option<ServiceReply> {
+        if byte != b'\n' {
+            // A line too long is answered `error line` once it ends.
+            if self.line_len < self.line.len() {
+                self.line[self.line_len] = byte;
+                self.line_len += 1;
+            }
+            return None;
+        }
+        let parameters = self.parameters();
+        let s = &mut self.service;
+        s.state_code = self.state.code();
+        s.speed_radps = self.speed_radps;
+        s.travelling = self.state.pwm_enabled() || self.state.brake_released();
+        s.table = parameters.table;
+        s.m_car_kg = parameters.m_car_kg;
+        s.dcp_mode = parameters.dcp_mode;
+        s.strategy_settable = self.chain.is_some();
+        let before = *s;
+        let answer = crate::service::answer(&self.line[..self.line_len], s);
+        self.line_len = 0;
+        let after = *s;
+        if after.strategy != before.strategy {
+            if let Some(chain) = self.chain {
+                self.controller.install_compensation(after.strategy, &after.table, &chain);
+            }
+        }
+        if after.m_car_kg != before.m_car_kg {
+            self.port.set_car_mass(after.m_car_kg);
+        }
+        if after.dcp_mode != before.dcp_mode {
+            self.port.set_mode(after.dcp_mode);
+        }
+        let save = if after.save_requested {
+            self.service.save_requested = false;
+            Some(self.parameters())
+        } else {
+            None
+        };
+        let mut reply = ServiceReply { bytes: [0; MAX_SERVICE_REPLY], len: 0, save };
+        let text = answer.as_bytes();
+        reply.bytes[..text.len()].copy_from_slice(text);
+        reply.bytes[text.len()..text.len() + 2].copy_from_slice(b"\r\n");
+        reply.len = text.len() + 2;
+        Some(reply)
+    }
+
+    /// Logs a fault code in the service port's fault log.
+    pub fn log_fault(&mut self, code: u8) {
+        self.service.log_fault(code);
     }
 
     /// The controller.
@@ -345,6 +510,11 @@ impl LiftDrive {
     /// The controller part of a period.
     pub fn control_step(&mut self, sensors: &SensorFrame) -> ControlOutput {
         let output = self.controller.step(sensors);
+        if let DriveState::Tripped(fault) = output.state {
+            if self.state != output.state {
+                self.service.log_fault(fault.code());
+            }
+        }
         self.state = output.state;
         self.speed_radps = output.telemetry.speed_radps;
         output

@@ -2,6 +2,8 @@
 //! emulated Cortex-M4F; every step checked bit for bit against the host
 //! build, and the cost of each step measured in instructions.
 
+pub mod dcp;
+
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
