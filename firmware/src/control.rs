@@ -268,6 +268,37 @@ fn enable_control_interrupt() {
     unsafe { interrupt::ADC1_2.enable() };
 }
 
+/// Pauses the control interrupt for a flash write if the drive is idle
+/// (running, no travel: inverter off, brake applied) or tripped; whether it
+/// did. Resume with [`resume`].
+pub fn pause_if_idle() -> bool {
+    critical_section::with(|cs| {
+        let drive = DRIVE.borrow_ref(cs);
+        let idle = drive.as_ref().is_some_and(|d| {
+            matches!(d.phase, Phase::Running(_))
+                && matches!(d.controller.state(), DriveState::Idle | DriveState::Tripped(_))
+        });
+        if idle {
+            interrupt::ADC1_2.disable();
+        }
+        idle
+    })
+}
+
+/// Resumes the control interrupt after [`pause_if_idle`]: the conversions
+/// that completed meanwhile are dropped and the controller does not count
+/// the pause as a missed deadline.
+pub fn resume() {
+    critical_section::with(|cs| {
+        adc::clear_flags();
+        interrupt::ADC1_2.unpend();
+        if let Some(drive) = DRIVE.borrow_ref_mut(cs).as_mut() {
+            drive.controller.resume_after_pause();
+        }
+    });
+    enable_control_interrupt();
+}
+
 /// Queues a command for the interrupt; gives it back if the queue is full.
 pub fn submit(command: Command) -> Result<(), Command> {
     critical_section::with(|cs| COMMANDS.borrow_ref_mut(cs).push_back(command))

@@ -84,6 +84,13 @@ pub async fn run(mut uart: BufferedUart<'static>, mut port: DcpPort) {
         if let Some(m_car_kg) = crate::service::car_mass_kg() {
             port.set_car_mass(m_car_kg);
         }
+        // The DCP variant of the service port: the slave restarts in it.
+        if let Some(mode) = crate::service::dcp_mode() {
+            if mode != port.slave().config().mode {
+                info!("DCP slave restarted in the other variant");
+                port.set_mode(mode);
+            }
+        }
         let event = match with_timeout(Duration::from_micros(POLL_US), uart.read(&mut buf)).await {
             Ok(Ok(n)) => {
                 for &byte in &buf[..n] {

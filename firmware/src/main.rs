@@ -154,10 +154,11 @@ async fn main(spawner: Spawner) {
     );
     adc::init(p.ADC1, p.ADC2, p.PA0, p.PC1, p.PC0, p.PA1);
 
-    let (stored, params_status) = params::load(p.FLASH).await;
-    let (mut strategy, mut table, m_car_kg, dcp_mode) = match stored {
-        Some(parameters) => (parameters.strategy, parameters.table, parameters.m_car_kg, parameters.dcp_mode),
-        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG, DCP_MODE),
+    let mut store = params::ParamStore::new(p.FLASH);
+    let (stored, params_status) = store.load().await;
+    let (mut strategy, mut table, m_car_kg, dcp_mode, encoder_offset) = match stored {
+        Some(p) => (p.strategy, p.table, p.m_car_kg, p.dcp_mode, p.encoder_offset_counts),
+        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG, DCP_MODE, 0),
     };
     if strategy == Strategy::CarObserver {
         // Its chain observer runs in the controller's speed-loop tick: on the
@@ -193,7 +194,7 @@ async fn main(spawner: Spawner) {
             strategy_settable: false,
             dcp_mode,
             params: params_status,
-            savable: false,
+            savable: true,
             save_requested: false,
         });
     });
@@ -227,7 +228,7 @@ async fn main(spawner: Spawner) {
     let service_tx = defmt::unwrap!(cortex_m::singleton!(: [u8; 512] = [0; 512]));
     let service_rx = defmt::unwrap!(cortex_m::singleton!(: [u8; 128] = [0; 128]));
     match usart::BufferedUart::new(p.LPUART1, p.PA3, p.PA2, service_tx, service_rx, Irqs, service::uart_config()) {
-        Ok(uart) => spawner.spawn(defmt::unwrap!(service::run(uart))),
+        Ok(uart) => spawner.spawn(defmt::unwrap!(service::run(uart, store, encoder_offset))),
         Err(e) => error!("LPUART1 (service port) setup failed ({}): no service port", e),
     }
 

@@ -28,12 +28,23 @@
 //! `drive_core::lift_drive::MAX_SERVICE_BYTES_PER_STEP`), and writes the
 //! answer to a finished line on UART2.
 //!
+//! Parameters: the drive's parameter record (`drive_core::param_store`)
+//! under key 0 of a `sequential-storage` map, as the firmware keeps it,
+//! over an emulated flash (`flash.rs`) that QEMU keeps in the file
+//! `pil-flash.bin` of its working directory. At start-up a record that
+//! passes every check is installed, otherwise the defaults (no
+//! compensation over the rig's offline table, the heaviest car, DCP4) and
+//! the service port's `get params` says why; the service port's `save`
+//! writes the record. Starting QEMU again in the same directory is a power
+//! cycle.
+//!
 //! Logging: defmt over semihosting (feature `semihosting`, the default) or
 //! RTT (feature `rtt`); the controller code is the same either way.
 #![no_std]
 #![no_main]
 #![deny(unsafe_code)]
 
+mod flash;
 mod uart;
 
 use cortex_m::peripheral::syst::SystClkSource;
@@ -44,11 +55,13 @@ use drive_core::frame::{command_result_code, encode, Decoder, Message, StepRepor
 use drive_core::lift_drive::{
     speed_table, DcpPort, LiftDrive, MAX_BYTES_PER_STEP, MAX_REPLY_PER_STEP, MAX_SERVICE_BYTES_PER_STEP,
 };
-use drive_core::param_store::DriveParameters;
+use drive_core::param_store::{DriveParameters, MAX_RECORD};
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
-use drive_core::service::ParamsStatus;
+use drive_core::service::{record_error_word, ParamsStatus};
 use drive_core::Controller;
+use sequential_storage::cache::{Cache, Uncached};
+use sequential_storage::map::{MapConfig, MapStorage};
 
 #[cfg(feature = "rtt")]
 use defmt_rtt as _;
@@ -58,6 +71,51 @@ use defmt_semihosting as _;
 include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
 include!(concat!(env!("OUT_DIR"), "/chain_model.rs"));
 include!(concat!(env!("OUT_DIR"), "/lift.rs"));
+include!(concat!(env!("OUT_DIR"), "/ripple.rs"));
+
+/// The map key of the parameter record (the firmware's).
+const KEY: u8 = 0;
+
+type Store = MapStorage<u8, flash::Flash, Cache<Uncached, Uncached, Uncached, u8>>;
+
+/// The offline compensation table: the rig's ripple (`RIPPLE`), negated (the firmware's).
+fn offline_table() -> HarmonicTable {
+    let mut table = HarmonicTable::default();
+    for (order, amplitude_nm, cos_phase, sin_phase) in RIPPLE {
+        table.push_cosine(order, amplitude_nm, cos_phase, sin_phase);
+    }
+    table.negated()
+}
+
+/// The stored parameters if a record passes every check, and what became of it.
+fn load(store: &mut Store) -> (Option<DriveParameters>, ParamsStatus) {
+    let mut buffer = [0u8; MAX_RECORD + 16];
+    match embassy_futures::block_on(store.fetch_item::<&[u8]>(&mut buffer, &KEY)) {
+        Ok(None) => (None, ParamsStatus::None),
+        Ok(Some(record)) => match DriveParameters::decode(record) {
+            Ok(parameters) => (Some(parameters), ParamsStatus::Stored),
+            Err(e) => (None, ParamsStatus::Refused(e)),
+        },
+        Err(e) => {
+            defmt::warn!("parameters: the store cannot be read: {}", e);
+            (None, ParamsStatus::Unreadable)
+        }
+    }
+}
+
+/// Writes `parameters` as the stored record.
+fn save(store: &mut Store, parameters: &DriveParameters) -> bool {
+    let mut record = [0u8; MAX_RECORD];
+    let n = parameters.encode(&mut record);
+    let mut buffer = [0u8; MAX_RECORD + 16];
+    match embassy_futures::block_on(store.store_item(&mut buffer, &KEY, &&record[..n])) {
+        Ok(()) => true,
+        Err(e) => {
+            defmt::warn!("parameters: not written: {}", e);
+            false
+        }
+    }
+}
 
 /// The DCP slave of the target: distance mode, the speeds of
 /// `drive_core::lift_drive::speed_table` (the firmware's configuration).
@@ -69,12 +127,12 @@ fn dcp_port() -> DcpPort {
     )
 }
 
-/// The parameters without a stored record: no compensation, the heaviest
-/// car, DCP4.
+/// The parameters without a stored record: no compensation (the rig's
+/// offline table ready for `set strategy`), the heaviest car, DCP4.
 fn default_parameters() -> DriveParameters {
     DriveParameters {
         strategy: Strategy::Off,
-        table: HarmonicTable::default(),
+        table: offline_table(),
         m_car_kg: DEFAULT_CAR_MASS_KG,
         encoder_offset_counts: 0,
         dcp_mode: Mode::Dcp4,
@@ -105,7 +163,19 @@ fn main() -> ! {
     let mut dcp_uart = uart::Polled::uart1();
     let mut service_uart = uart::Polled::uart2();
     let mut drive = LiftDrive::new(Controller::new(&DRIVE_CONFIG), dcp_port(), &DRIVE_CONFIG);
-    drive.install_parameters(&default_parameters(), &CHAIN_MODEL, ParamsStatus::None);
+    let mut store: Store =
+        MapStorage::new(flash::Flash::load(), const { MapConfig::new(0..flash::SIZE as u32) }, Cache::new_uncached());
+    let (stored, status) = load(&mut store);
+    match status {
+        ParamsStatus::Stored => defmt::info!("parameters: stored record installed"),
+        ParamsStatus::None => defmt::info!("parameters: none stored, running with the defaults"),
+        ParamsStatus::Refused(e) => {
+            defmt::warn!("parameters: stored record refused ({=str}), running with the defaults", record_error_word(e))
+        }
+        ParamsStatus::Unreadable => defmt::warn!("parameters: store unreadable, running with the defaults"),
+    }
+    drive.install_parameters(&stored.unwrap_or_else(default_parameters), &CHAIN_MODEL, status);
+    drive.set_savable(true);
     let mut record = [0u8; 3 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP + MAX_SERVICE_BYTES_PER_STEP];
     let mut decoder = Decoder::new();
     let mut frame = [0u8; MAX_FRAME];
@@ -123,7 +193,12 @@ fn main() -> ! {
                     service_taken[n_service] = byte;
                     n_service += 1;
                     if let Some(reply) = drive.service_byte(byte) {
-                        service_uart.write_all(&reply.bytes[..reply.len]);
+                        let written = reply.save.is_none_or(|p| save(&mut store, &p));
+                        if written {
+                            service_uart.write_all(&reply.bytes[..reply.len]);
+                        } else {
+                            service_uart.write_all(b"error flash-write\r\n");
+                        }
                         break;
                     }
                 }

@@ -531,6 +531,13 @@ impl Controller {
         Ok(())
     }
 
+    /// After the caller held the steps back on purpose (the firmware pauses
+    /// the idle drive while it writes its flash): the next step's interval
+    /// is not a missed deadline. Nothing else changes.
+    pub fn resume_after_pause(&mut self) {
+        self.last_time_us = None;
+    }
+
     /// Clears a latched fault (explicit operator action); back to `Idle`.
     pub fn reset(&mut self) {
         self.supervisor.reset();

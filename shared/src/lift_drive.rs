@@ -399,13 +399,27 @@ impl LiftDrive {
         self.service.savable = savable;
     }
 
-    /// The parameters as they stand: the strategy, the table in use (what
-    /// the compensator has learned, if one is installed), the car mass, the
-    /// encoder offset, the DCP variant.
+    /// The parameters as they stand: the strategy, the table (after a
+    /// travel with `Strategy::Adaptive` or `Strategy::CarObserver`, what it
+    /// learned: the calibration of `Strategy::Table`; otherwise the table
+    /// installed), the car mass, the encoder offset, the DCP variant.
     pub fn parameters(&self) -> DriveParameters {
+        let table = match self.controller.compensation() {
+            Some(c) => {
+                let learned = c.learned_table();
+                let learns = matches!(c.strategy(), Strategy::Adaptive | Strategy::CarObserver);
+                let n = learned.len.min(learned.torque_nm.len());
+                if learns && learned.torque_nm[..n].iter().any(|u| u.re != 0.0 || u.im != 0.0) {
+                    learned
+                } else {
+                    c.table()
+                }
+            }
+            None => self.service.table,
+        };
         DriveParameters {
             strategy: self.service.strategy,
-            table: self.controller.compensation().map_or(self.service.table, |c| c.table()),
+            table,
             m_car_kg: self.port.car_mass_kg(),
             encoder_offset_counts: self.encoder_offset_counts,
             dcp_mode: self.port.slave().config().mode,

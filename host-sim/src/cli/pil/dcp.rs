@@ -27,7 +27,6 @@ use drive_core::dcp::{MasterFrame, SlaveConfig, SlaveFrame};
 use drive_core::frame::{encode, Decoder, Message, StepReport, MAX_FRAME};
 use drive_core::lift_drive::{speed_table, DcpPort, LiftDrive, LiftGeometry};
 use drive_core::param_store::DriveParameters;
-use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::service::ParamsStatus;
 use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame};
@@ -47,11 +46,12 @@ pub fn geometry(rig: &RigConfig) -> (LiftGeometry, f32) {
 }
 
 /// The parameters the PIL target runs with when no record is stored: no
-/// compensation, the heaviest car, DCP4.
+/// compensation (the rig's offline table, its `[[ripple]]` negated, ready
+/// for `set strategy`), the heaviest car, DCP4.
 pub fn default_parameters(rig: &RigConfig) -> DriveParameters {
     DriveParameters {
         strategy: Strategy::Off,
-        table: HarmonicTable::default(),
+        table: closed_loop::compensation::rig_ripple_table(rig).negated(),
         m_car_kg: geometry(rig).1,
         encoder_offset_counts: 0,
         dcp_mode: Mode::Dcp4,
@@ -67,6 +67,8 @@ pub fn shadow(rig: &RigConfig, parameters: &DriveParameters, status: ParamsStatu
     let port = DcpPort::new(slave, geometry, m_car);
     let mut lift = LiftDrive::new(Controller::new(&drive), port, &drive);
     lift.install_parameters(parameters, &rig.observer_model(), status);
+    // The target writes its record (to the emulated flash).
+    lift.set_savable(true);
     lift
 }
 
@@ -208,6 +210,8 @@ pub struct LiftStep {
     pub dcp_replies: Vec<u8>,
     /// The service answers of the step.
     pub service_answers: Vec<u8>,
+    /// The parameters a `save` of the step wrote (the shadow's view).
+    pub saved: Option<DriveParameters>,
 }
 
 /// The lift: the plant, the chip and its shadow, stepped together (or the
@@ -288,9 +292,11 @@ impl Lift {
             None => self.take(dcp_out, service_out),
         };
         let mut expected_answers = Vec::new();
+        let mut saved = None;
         for &byte in &service_taken {
             if let Some(reply) = self.shadow.service_byte(byte) {
                 expected_answers.extend_from_slice(&reply.bytes[..reply.len]);
+                saved = saved.or(reply.save);
             }
         }
         let dcp = self.shadow.dcp_step(&dcp_taken, sensors.time_us);
@@ -312,7 +318,27 @@ impl Lift {
         self.plant.advance(1.0 / self.drive.current_loop_hz as f64, self.max_step_s);
         ensure!(self.plant.in_valid_range(), "step {k}: the plant left its valid range");
         self.steps += 1;
-        Ok(LiftStep { output, dcp_replies, service_answers })
+        Ok(LiftStep { output, dcp_replies, service_answers, saved })
+    }
+
+    /// Sends the service request `line` (without its `\n`) and steps until
+    /// its answer has come (at most `max_steps`): the answer without its
+    /// `\r\n`, and the parameters a `save` wrote. Nothing goes on the DCP line.
+    pub fn ask(&mut self, line: &str, max_steps: u64) -> anyhow::Result<(String, Option<DriveParameters>)> {
+        let mut request = line.as_bytes().to_vec();
+        request.push(b'\n');
+        let mut answer = Vec::new();
+        let mut saved = None;
+        for i in 0..max_steps {
+            let step = self.step(&[], if i == 0 { &request } else { &[] })?;
+            answer.extend_from_slice(&step.service_answers);
+            saved = saved.or(step.saved);
+            if answer.ends_with(b"\r\n") {
+                answer.truncate(answer.len() - 2);
+                return Ok((String::from_utf8_lossy(&answer).into_owned(), saved));
+            }
+        }
+        bail!("no answer to {line:?} within {max_steps} steps")
     }
 
     /// Host only: the bytes the chip would take this step.
