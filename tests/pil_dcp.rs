@@ -292,3 +292,44 @@ fn a_dcp3_speed_mode_travel_on_the_emulated_chip_is_bit_identical_to_the_host() 
     assert!(crawling(first, crawl) > 400 && crawling(second, -crawl) > 400, "no crawl before the stops");
     assert!(run.states.iter().all(|s| !matches!(s, DriveState::Tripped(_))));
 }
+
+#[test]
+fn host_sim_pil_dcp_runs_the_travels_and_prints_one_row_per_travel() {
+    let out = tempfile::tempdir().unwrap();
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args(["pil", "--dcp", "--landings", "1300,1100", "--start-mm", "1000", "--quiet", "--out"])
+        .arg(out.path())
+        .arg("--elf")
+        .arg(default_elf())
+        .output()
+        .expect("host-sim runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
+    println!("{stdout}");
+    assert!(stdout.contains("bit-identical to the host build"), "{stdout}");
+    // One row per travel: number, from, to, landed, error, steps, time, peak speed.
+    let rows: Vec<Vec<&str>> = stdout
+        .lines()
+        .map(|l| l.split_whitespace().collect::<Vec<_>>())
+        .filter(|w| w.len() == 8 && w[0].parse::<u32>().is_ok())
+        .collect();
+    assert_eq!(rows.len(), 2, "{stdout}");
+    for (row, target) in rows.iter().zip([1300.0, 1100.0]) {
+        assert_eq!(row[2].parse::<f64>().unwrap(), target);
+        let error: f64 = row[4].parse().unwrap();
+        assert!(error.abs() < 3.0, "landed {error} mm off: {row:?}");
+        let peak: f64 = row[7].parse().unwrap();
+        assert!(peak > 0.1 && peak < 0.45, "peak speed {peak} m/s");
+    }
+    let csv = std::fs::read_to_string(out.path().join("dcp_travels.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    // A landing outside the shaft: a clear error, no QEMU started.
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args(["pil", "--dcp", "--landings", "99999", "--out"])
+        .arg(out.path().join("bad"))
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("--landings: 99999 mm is out of range"), "{stderr}");
+}
