@@ -269,15 +269,17 @@ fn enable_control_interrupt() {
 }
 
 /// Pauses the control interrupt for a flash write if the drive is idle
-/// (running, no travel: inverter off, brake applied) or tripped; whether it
-/// did. Resume with [`resume`].
+/// (running, no travel: inverter off, brake applied) or tripped and no
+/// command waits for it; whether it did. Resume with [`resume`].
 pub fn pause_if_idle() -> bool {
     critical_section::with(|cs| {
         let drive = DRIVE.borrow_ref(cs);
-        let idle = drive.as_ref().is_some_and(|d| {
-            matches!(d.phase, Phase::Running(_))
-                && matches!(d.controller.state(), DriveState::Idle | DriveState::Tripped(_))
-        });
+        let waiting = !COMMANDS.borrow_ref(cs).is_empty();
+        let idle = !waiting
+            && drive.as_ref().is_some_and(|d| {
+                matches!(d.phase, Phase::Running(_))
+                    && matches!(d.controller.state(), DriveState::Idle | DriveState::Tripped(_))
+            });
         if idle {
             interrupt::ADC1_2.disable();
         }

@@ -36,7 +36,9 @@
 //!
 //! Travel commands come from a lift controller over DCP (`dcp.rs`: USART3,
 //! RS-485 half duplex with the USART driving the transceiver's DE): DCP4
-//! distance travels with the position message after each stop; the slave's
+//! distance travels with the position message after each stop, or DCP3
+//! speed-mode travels (the variant is a stored parameter, settable on the
+//! service port; DCP4 by default); the slave's
 //! timeout watchdog stops the drive safely (inverter off, brake applied)
 //! when the master falls silent. The car mass of the load weighing is a
 //! parameter (`params.rs`, settable on the service port), the heaviest car
@@ -45,7 +47,9 @@
 //!
 //! Service port (`service.rs`): LPUART1 on the ST-LINK virtual COM port,
 //! the line protocol of `drive_core::service` (`host-sim drive --port`):
-//! strategy, table, car mass (settable), fault log, state.
+//! strategy, table, car mass (settable), DCP variant (settable), fault
+//! log, state, the stored record's status, and `save` (writes the record
+//! with the drive idle).
 //!
 //! Compensation: the ripple-compensation strategy and its harmonic table
 //! are parameters, read at start-up from the parameter record in flash

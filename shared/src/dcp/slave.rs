@@ -37,15 +37,19 @@
 //! - DCP3 speed travel: speed mode (`1001`, the speed bit), travel (`0111`),
 //!   at the deceleration point B1 cleared (`0101`: slow down to V0 crawl), at
 //!   the floor B2 cleared (`0001`: stop), then B0 cleared. Re-levelling
-//!   (`0011`) is a travel at VN.
+//!   (`0011`) is a travel at VN. The crawl is requested once per travel
+//!   phase the master enters (it repeats its message; the drive ignores a
+//!   crawl it already runs at); a travel slower than V0 keeps its speed;
+//!   without a V0 the deceleration point is the stop (short of the floor
+//!   rather than past it).
 //! - B0 cleared during a travel is a travel interruption: safe stop.
 //!   So is, conservatively, a reversed direction or a cleared stop switch
 //!   before a distance travel has arrived (the texts do not cover them).
 //!
 //! Position: the master sends the car position after each stop (channel
-//! message `I9`, see [`super::channel`]); a distance travel needs it (the
-//! drive derives its rope lengths and the shaft limits from it), so until
-//! the first one arrives distance travels are refused. A distance travel's
+//! message `I9`, see [`super::channel`]); a distance or speed travel needs
+//! it (the drive derives its rope lengths and the shaft limits from it), so
+//! until the first one arrives travels are refused (answered, S5 clear). A distance travel's
 //! arrival moves the drive's position to its target; a speed travel or a
 //! safe stop forgets it until the next position message.
 
