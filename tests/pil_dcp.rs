@@ -45,6 +45,8 @@ struct Run {
     states: Vec<DriveState>,
     brake_released: Vec<bool>,
     ref_speed_mps: Vec<f32>,
+    /// The chip's controller step, instructions.
+    instructions: Vec<f64>,
     shadow: LiftDrive,
 }
 
@@ -74,6 +76,7 @@ fn run_lift(
     let mut states = Vec::new();
     let mut brake_released = Vec::new();
     let mut ref_speed_mps = Vec::new();
+    let mut instructions = Vec::new();
     let started = Instant::now();
     let mut k = 0;
     while k < max_steps {
@@ -83,13 +86,14 @@ fn run_lift(
         states.push(step.output.state);
         brake_released.push(step.output.brake_released);
         ref_speed_mps.push(step.output.telemetry.ref_speed_mps);
+        instructions.push(step.instructions.unwrap_or(0.0));
         k += 1;
         if done(k, &step.output.state) {
             break;
         }
     }
     println!("{k} DCP PIL steps in {:.1} s", started.elapsed().as_secs_f64());
-    Run { steps: k, states, brake_released, ref_speed_mps, shadow: *lift.shadow() }
+    Run { steps: k, states, brake_released, ref_speed_mps, instructions, shadow: *lift.shadow() }
 }
 
 fn master(mode: Mode, targets: &[i32]) -> Master {
@@ -291,6 +295,26 @@ fn a_dcp3_speed_mode_travel_on_the_emulated_chip_is_bit_identical_to_the_host() 
     println!("crawl: {} and {} steps", crawling(first, crawl), crawling(second, -crawl));
     assert!(crawling(first, crawl) > 400 && crawling(second, -crawl) > 400, "no crawl before the stops");
     assert!(run.states.iter().all(|s| !matches!(s, DriveState::Tripped(_))));
+    // The cost of a speed travel's speed-loop tick (its ramp, and the check
+    // that it can still stop before the shaft end) on the Cortex-M4F: within
+    // the PWM period of 170 MHz / 16 kHz = 10 625 cycles, counting one cycle
+    // per instruction (a lower bound of the cycles).
+    let divider = rig.drive_config().speed_loop_divider() as u64;
+    let offset = lift.steps() - run.steps;
+    let in_travel = |tick: bool| -> Vec<f64> {
+        (0..run.steps as usize)
+            .filter(|&i| run.states[i] == DriveState::Travel && ((offset + i as u64) % divider == 0) == tick)
+            .map(|i| run.instructions[i])
+            .collect()
+    };
+    let stats = |v: &[f64]| (v.len(), v.iter().sum::<f64>() / v.len() as f64, v.iter().copied().fold(0.0, f64::max));
+    let (ticks, tick_mean, tick_max) = stats(&in_travel(true));
+    let (steps, step_mean, step_max) = stats(&in_travel(false));
+    println!(
+        "instructions in Travel: speed-loop tick {ticks} steps mean {tick_mean:.0} max {tick_max:.0}; \
+         current loop only {steps} steps mean {step_mean:.0} max {step_max:.0}"
+    );
+    assert!(tick_max < 10_625.0, "a speed-loop tick of {tick_max} instructions");
 }
 
 #[test]

@@ -33,6 +33,10 @@ use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame};
 use plant::{Plant, PlantInputs};
 use rig_config::RigConfig;
 
+/// Instructions per SysTick tick: the 25 MHz tick is 40 ns, an instruction
+/// 2^5 ns under `-icount shift=5`.
+pub const INSTRUCTIONS_PER_TICK: f64 = 40.0 / 32.0;
+
 /// How long to wait for QEMU to connect or for the chip to answer.
 const TIMEOUT: Duration = Duration::from_secs(20);
 
@@ -212,6 +216,10 @@ pub struct LiftStep {
     pub service_answers: Vec<u8>,
     /// The parameters a `save` of the step wrote (the shadow's view).
     pub saved: Option<DriveParameters>,
+    /// The chip's controller step, instructions (SysTick ticks of the
+    /// 25 MHz clock under `-icount shift=5`: 1.25 instructions a tick);
+    /// `None` for the host build alone.
+    pub instructions: Option<f64>,
 }
 
 /// The lift: the plant, the chip and its shadow, stepped together (or the
@@ -302,6 +310,7 @@ impl Lift {
         let dcp = self.shadow.dcp_step(&dcp_taken, sensors.time_us);
         let output = self.shadow.control_step(&sensors);
         let dcp_replies = dcp.reply[..dcp.reply_len].to_vec();
+        let instructions = chip.as_ref().map(|c| c.report.cost_ticks as f64 * INSTRUCTIONS_PER_TICK);
         let service_answers = match (self.chip.as_mut(), chip) {
             (Some(c), Some(chip)) => {
                 let answers = c.read_service(expected_answers.len())?;
@@ -318,7 +327,7 @@ impl Lift {
         self.plant.advance(1.0 / self.drive.current_loop_hz as f64, self.max_step_s);
         ensure!(self.plant.in_valid_range(), "step {k}: the plant left its valid range");
         self.steps += 1;
-        Ok(LiftStep { output, dcp_replies, service_answers, saved })
+        Ok(LiftStep { output, dcp_replies, service_answers, saved, instructions })
     }
 
     /// Sends the service request `line` (without its `\n`) and steps until
