@@ -34,6 +34,32 @@ fn main() {
     let shaft_travel_mm = ((rig.travel.lw_high_m - rig.travel.lw_low_m) * 1000.0).round();
     assert!(shaft_travel_mm >= 1.0 && shaft_travel_mm <= u16::MAX as f64, "[travel]: {shaft_travel_mm} mm");
     let heaviest = rig.mechanics.m_car_kg.iter().cloned().fold(f64::MIN, f64::max) as f32;
+    // The rig's ripple, as the firmware's build script writes it: the
+    // offline compensation table is made from it.
+    let ripple: Vec<String> = rig
+        .ripple
+        .iter()
+        .map(|r| {
+            format!(
+                "({}, {:?}, {:?}, {:?})",
+                r.mechanical_order.min(u16::MAX as u32),
+                r.amplitude_nm as f32,
+                r.phase_rad.cos() as f32,
+                r.phase_rad.sin() as f32
+            )
+        })
+        .collect();
+    let path = out_dir.join("ripple.rs");
+    fs::write(
+        &path,
+        format!(
+            "/// The rig's torque ripple (`[[ripple]]`): mechanical order, amplitude N m, cos and sin of the phase.\n\
+             pub const RIPPLE: [(u16, f32, f32, f32); {}] = [{}];\n",
+            ripple.len(),
+            ripple.join(", ")
+        ),
+    )
+    .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
     let path = out_dir.join("lift.rs");
     fs::write(
         &path,

@@ -21,4 +21,5 @@ mod observer;
 mod pil;
 mod pil_dcp;
 mod pil_faults;
+mod pil_params;
 mod support;

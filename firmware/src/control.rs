@@ -34,11 +34,10 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::DWT;
 use critical_section::{CriticalSection, Mutex};
 use drive_core::alignment::{Alignment, AlignmentError, AlignmentParams, AlignmentStep, Injection};
-use drive_core::controller::{CommandError, Telemetry};
+use drive_core::controller::Telemetry;
 use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
-use drive_core::dcp::StopReason;
-use drive_core::lift_drive::{self, ControllerCommand};
-use drive_core::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
+use drive_core::lift_drive::{self, ApplyError, ControllerCommand};
+use drive_core::{ControlOutput, Controller, DriveState, SensorFrame};
 use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -68,12 +67,12 @@ const COMMAND_CAPACITY: usize = 4;
 /// A command from the task, applied by the interrupt at its next step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command {
-    /// Start a travel (accepted only when calibrated, fault-free and idle).
-    Travel(TravelCommand),
-    /// Stop now in the safe state (inverter off, brake applied): the DCP
-    /// slave's timeout or a travel interruption. Changes nothing when idle
-    /// or tripped, and never clears a fault.
-    SafeStop(StopReason),
+    /// A command of the DCP slave: a distance or speed travel (accepted
+    /// only when calibrated, fault-free and idle), a speed change or stop of
+    /// a speed travel, or a safe stop (inverter off, brake applied: the DCP
+    /// slave's timeout or a travel interruption; it changes nothing when
+    /// idle or tripped, and never clears a fault).
+    Drive(ControllerCommand),
     /// Clear latched faults: the controller's, and the firmware's overrun and
     /// break latches (not a failed calibration). Refused when nothing is
     /// latched, so that it can never stop a running travel.
@@ -88,7 +87,7 @@ pub enum Command {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Refusal {
     /// Refused by the controller.
-    Controller(CommandError),
+    Controller(ApplyError),
     /// The drive is still calibrating, or a firmware fault is latched.
     NotReady,
     /// Reset with no fault latched.
@@ -267,6 +266,39 @@ fn enable_control_interrupt() {
     // runs. Nothing relies on ADC1_2 staying masked (no embassy driver is
     // bound to it).
     unsafe { interrupt::ADC1_2.enable() };
+}
+
+/// Pauses the control interrupt for a flash write if the drive is idle
+/// (running, no travel: inverter off, brake applied) or tripped and no
+/// command waits for it; whether it did. Resume with [`resume`].
+pub fn pause_if_idle() -> bool {
+    critical_section::with(|cs| {
+        let drive = DRIVE.borrow_ref(cs);
+        let waiting = !COMMANDS.borrow_ref(cs).is_empty();
+        let idle = !waiting
+            && drive.as_ref().is_some_and(|d| {
+                matches!(d.phase, Phase::Running(_))
+                    && matches!(d.controller.state(), DriveState::Idle | DriveState::Tripped(_))
+            });
+        if idle {
+            interrupt::ADC1_2.disable();
+        }
+        idle
+    })
+}
+
+/// Resumes the control interrupt after [`pause_if_idle`]: the conversions
+/// that completed meanwhile are dropped and the controller does not count
+/// the pause as a missed deadline.
+pub fn resume() {
+    critical_section::with(|cs| {
+        adc::clear_flags();
+        interrupt::ADC1_2.unpend();
+        if let Some(drive) = DRIVE.borrow_ref_mut(cs).as_mut() {
+            drive.controller.resume_after_pause();
+        }
+    });
+    enable_control_interrupt();
 }
 
 /// Queues a command for the interrupt; gives it back if the queue is full.
@@ -496,15 +528,14 @@ impl Drive {
 
     fn apply(&mut self, cs: CriticalSection, command: Command) {
         let result = match command {
-            Command::Travel(travel) => {
-                if self.fault.is_some() || !matches!(self.phase, Phase::Running(_)) {
+            Command::Drive(command) => {
+                let starts = matches!(command, ControllerCommand::Travel(_) | ControllerCommand::SpeedTravel(_));
+                if starts && (self.fault.is_some() || !matches!(self.phase, Phase::Running(_))) {
                     Err(Refusal::NotReady)
                 } else {
-                    self.controller.command_travel(travel).map_err(Refusal::Controller)
+                    lift_drive::apply(command, &mut self.controller).map_err(Refusal::Controller)
                 }
             }
-            Command::SafeStop(reason) => lift_drive::apply(ControllerCommand::SafeStop(reason), &mut self.controller)
-                .map_err(Refusal::Controller),
             Command::Reset => {
                 let controller_tripped = matches!(self.controller.state(), DriveState::Tripped(_));
                 match self.fault {

@@ -84,6 +84,13 @@ pub async fn run(mut uart: BufferedUart<'static>, mut port: DcpPort) {
         if let Some(m_car_kg) = crate::service::car_mass_kg() {
             port.set_car_mass(m_car_kg);
         }
+        // The DCP variant of the service port: the slave restarts in it.
+        if let Some(mode) = crate::service::dcp_mode() {
+            if mode != port.slave().config().mode {
+                info!("DCP slave restarted in the other variant");
+                port.set_mode(mode);
+            }
+        }
         let event = match with_timeout(Duration::from_micros(POLL_US), uart.read(&mut buf)).await {
             Ok(Ok(n)) => {
                 for &byte in &buf[..n] {
@@ -121,17 +128,11 @@ async fn handle(uart: &mut BufferedUart<'static>, event: &PortEvent, pending: &m
     if let Some(refusal) = event.refused {
         warn!("DCP message answered with the error bit: {=str}", refusal_name(refusal));
     }
-    if event.unsupported.is_some() {
-        warn!("DCP speed-mode travel answered but not carried out: the controller has no speed-reference travel");
-    }
     if let Some(command) = event.command {
-        let command = match command {
-            ControllerCommand::Travel(travel) => Command::Travel(travel),
-            ControllerCommand::SafeStop(reason) => {
-                warn!("DCP safe stop: {=str}", reason_name(reason));
-                Command::SafeStop(reason)
-            }
-        };
+        if let ControllerCommand::SafeStop(reason) = command {
+            warn!("DCP safe stop: {=str}", reason_name(reason));
+        }
+        let command = Command::Drive(command);
         // A newer command replaces one still waiting for room in the queue.
         if let Err(command) = control::submit(command) {
             *pending = Some(command);

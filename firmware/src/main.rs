@@ -36,7 +36,9 @@
 //!
 //! Travel commands come from a lift controller over DCP (`dcp.rs`: USART3,
 //! RS-485 half duplex with the USART driving the transceiver's DE): DCP4
-//! distance travels with the position message after each stop; the slave's
+//! distance travels with the position message after each stop, or DCP3
+//! speed-mode travels (the variant is a stored parameter, settable on the
+//! service port; DCP4 by default); the slave's
 //! timeout watchdog stops the drive safely (inverter off, brake applied)
 //! when the master falls silent. The car mass of the load weighing is a
 //! parameter (`params.rs`, settable on the service port), the heaviest car
@@ -45,7 +47,9 @@
 //!
 //! Service port (`service.rs`): LPUART1 on the ST-LINK virtual COM port,
 //! the line protocol of `drive_core::service` (`host-sim drive --port`):
-//! strategy, table, car mass (settable), fault log, state.
+//! strategy, table, car mass (settable), DCP variant (settable), fault
+//! log, state, the stored record's status, and `save` (writes the record
+//! with the drive idle).
 //!
 //! Compensation: the ripple-compensation strategy and its harmonic table
 //! are parameters, read at start-up from the parameter record in flash
@@ -79,8 +83,8 @@ mod watchdog;
 
 use defmt::{error, info, warn};
 use defmt_rtt as _;
-use drive_core::dcp::{Mode, SlaveConfig, Speed};
-use drive_core::lift_drive::DcpPort;
+use drive_core::dcp::{Mode, SlaveConfig};
+use drive_core::lift_drive::{speed_table, DcpPort};
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::Controller;
@@ -94,7 +98,7 @@ include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
 /// The compensation strategy installed when no valid parameter record is stored.
 pub const DEFAULT_STRATEGY: Strategy = Strategy::Table;
 
-/// The DCP variant: distance mode.
+/// The DCP variant without a stored record: distance mode.
 pub const DCP_MODE: Mode = Mode::Dcp4;
 
 bind_interrupts!(struct Irqs {
@@ -109,15 +113,6 @@ fn offline_table() -> HarmonicTable {
         table.push_cosine(order, amplitude_nm, cos_phase, sin_phase);
     }
     table.negated()
-}
-
-/// The speeds the DCP slave offers: V4 (fast) at the rated speed, the
-/// speed of the drive's distance travels. The controller has no
-/// speed-reference travel, so no other speed is offered.
-fn dcp_speeds() -> [Option<f32>; 11] {
-    let mut speeds = [None; 11];
-    speeds[Speed::V4.index()] = Some(DRIVE_CONFIG.rated_speed_mps);
-    speeds
 }
 
 // rig-config derives the PWM period from its own idea of the timer clock
@@ -163,10 +158,11 @@ async fn main(spawner: Spawner) {
     );
     adc::init(p.ADC1, p.ADC2, p.PA0, p.PC1, p.PC0, p.PA1);
 
-    let stored = params::load(p.FLASH).await;
-    let (mut strategy, mut table, m_car_kg) = match stored {
-        Some(parameters) => (parameters.strategy, parameters.table, parameters.m_car_kg),
-        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG),
+    let mut store = params::ParamStore::new(p.FLASH);
+    let (stored, params_status) = store.load().await;
+    let (mut strategy, mut table, m_car_kg, dcp_mode, encoder_offset) = match stored {
+        Some(p) => (p.strategy, p.table, p.m_car_kg, p.dcp_mode, p.encoder_offset_counts),
+        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG, DCP_MODE, 0),
     };
     if strategy == Strategy::CarObserver {
         // Its chain observer runs in the controller's speed-loop tick: on the
@@ -200,6 +196,10 @@ async fn main(spawner: Spawner) {
             speed_radps: 0.0,
             travelling: false,
             strategy_settable: false,
+            dcp_mode,
+            params: params_status,
+            savable: true,
+            save_requested: false,
         });
     });
     control::start(controller, brake);
@@ -232,11 +232,11 @@ async fn main(spawner: Spawner) {
     let service_tx = defmt::unwrap!(cortex_m::singleton!(: [u8; 512] = [0; 512]));
     let service_rx = defmt::unwrap!(cortex_m::singleton!(: [u8; 128] = [0; 128]));
     match usart::BufferedUart::new(p.LPUART1, p.PA3, p.PA2, service_tx, service_rx, Irqs, service::uart_config()) {
-        Ok(uart) => spawner.spawn(defmt::unwrap!(service::run(uart))),
+        Ok(uart) => spawner.spawn(defmt::unwrap!(service::run(uart, store, encoder_offset))),
         Err(e) => error!("LPUART1 (service port) setup failed ({}): no service port", e),
     }
 
-    let slave = SlaveConfig::new(DCP_MODE, dcp_speeds(), LIFT_GEOMETRY.shaft_travel_mm);
+    let slave = SlaveConfig::new(dcp_mode, speed_table(DRIVE_CONFIG.rated_speed_mps), LIFT_GEOMETRY.shaft_travel_mm);
     spawner.spawn(defmt::unwrap!(dcp::run(uart, DcpPort::new(slave, LIFT_GEOMETRY, m_car_kg))));
 }
 

@@ -10,9 +10,20 @@
 //!
 //! A record that fails any check (magic, version, length, CRC, values) is
 //! refused whole: the drive runs with its defaults and the log says why.
+//!
+//! Writing (the service port's `save`): the G4's flash driver erases and
+//! programs inside a critical section, and a page erase takes tens of ms,
+//! so the service task writes only with the drive idle and the control
+//! interrupt paused (`control::pause_if_idle`, inverter off and brake
+//! applied throughout), then resumes it without counting the pause as a
+//! missed deadline. Untested on the board: the pause must stay under the
+//! independent watchdog's ~100 ms (a page erase is 22-40 ms on the G4), and
+//! DCP bytes arriving during it may be lost (the master repeats after the
+//! error answer).
 
 use defmt::{info, warn};
 use drive_core::param_store::{DriveParameters, RecordError, MAX_RECORD};
+use drive_core::service::ParamsStatus;
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::peripherals::FLASH;
@@ -32,17 +43,45 @@ const KEY: u8 = 0;
 
 type Store = MapStorage<u8, BlockingAsync<Flash<'static, Blocking>>, Cache<Uncached, Uncached, Uncached, u8>>;
 
-fn store(flash: Peri<'static, FLASH>) -> Store {
-    MapStorage::new(
-        BlockingAsync::new(Flash::new_blocking(flash)),
-        const { MapConfig::new(STORE_START..STORE_END) },
-        Cache::new_uncached(),
-    )
+/// The parameter store over the flash driver.
+pub struct ParamStore(Store);
+
+impl ParamStore {
+    /// The store in its flash pages.
+    pub fn new(flash: Peri<'static, FLASH>) -> Self {
+        Self(MapStorage::new(
+            BlockingAsync::new(Flash::new_blocking(flash)),
+            const { MapConfig::new(STORE_START..STORE_END) },
+            Cache::new_uncached(),
+        ))
+    }
+
+    /// The stored parameters, if a record is stored and passes every
+    /// check, and what became of the record (for the service port's `get params`).
+    pub async fn load(&mut self) -> (Option<DriveParameters>, ParamsStatus) {
+        load(&mut self.0).await
+    }
+
+    /// Writes `parameters` as the stored record (call with the control
+    /// interrupt paused, see the module doc); whether it was written.
+    pub async fn save(&mut self, parameters: &DriveParameters) -> bool {
+        let mut record = [0u8; MAX_RECORD];
+        let n = parameters.encode(&mut record);
+        let mut buffer = [0u8; MAX_RECORD + 16];
+        match self.0.store_item(&mut buffer, &KEY, &&record[..n]).await {
+            Ok(()) => {
+                info!("parameters: record written ({=usize} bytes)", n);
+                true
+            }
+            Err(e) => {
+                warn!("parameters: record not written: {}", e);
+                false
+            }
+        }
+    }
 }
 
-/// The stored parameters, if a record is stored and passes every check.
-pub async fn load(flash: Peri<'static, FLASH>) -> Option<DriveParameters> {
-    let mut store = store(flash);
+async fn load(store: &mut Store) -> (Option<DriveParameters>, ParamsStatus) {
     // Key, value and the storage's own alignment.
     let mut buffer = [0u8; MAX_RECORD + 16];
     match store.fetch_item::<&[u8]>(&mut buffer, &KEY).await {
@@ -51,21 +90,21 @@ pub async fn load(flash: Peri<'static, FLASH>) -> Option<DriveParameters> {
                 "parameters: none stored in the {=u32} pages at {=u32:#x}, running with the defaults",
                 STORE_PAGES, STORE_START
             );
-            None
+            (None, ParamsStatus::None)
         }
         Ok(Some(record)) => match DriveParameters::decode(record) {
             Ok(parameters) => {
-                info!("parameters: stored record read (version {=u8}, CRC ok)", drive_core::param_store::VERSION);
-                Some(parameters)
+                info!("parameters: stored record read (version {=u8}, CRC ok)", record[3]);
+                (Some(parameters), ParamsStatus::Stored)
             }
             Err(e) => {
                 warn!("parameters: stored record refused ({=str}): running with the defaults", record_error(e));
-                None
+                (None, ParamsStatus::Refused(e))
             }
         },
         Err(e) => {
             warn!("parameters: the store cannot be read ({}): running with the defaults", e);
-            None
+            (None, ParamsStatus::Unreadable)
         }
     }
 }

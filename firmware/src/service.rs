@@ -8,18 +8,24 @@
 //! trips, filled by the telemetry task) and the drive's state and speed (from
 //! the control interrupt's snapshot, refreshed before each answer).
 //! `set strategy` is answered `error unsupported`: installing another
-//! strategy between travels and writing the parameter record to flash are
-//! not implemented on the chip yet.
+//! strategy between travels is not implemented on the chip yet. `set
+//! dcp-mode` restarts the DCP slave in the other variant (the DCP task
+//! takes it). `save` writes the parameter record (strategy, table, car
+//! mass, the stored encoder offset, DCP variant) to flash with the drive
+//! idle and the control interrupt paused (`params.rs`); during a travel or
+//! the start-up it is answered `error busy`.
 
 use core::cell::RefCell;
 
 use critical_section::Mutex;
 use defmt::warn;
+use drive_core::param_store::DriveParameters;
 use drive_core::service::{answer, ServiceState, MAX_LINE};
 use embassy_stm32::usart::{self, BufferedUart};
 use embedded_io_async::{Read, Write};
 
 use crate::control;
+use crate::params::ParamStore;
 
 /// Baud rate of the service port.
 pub const BAUD: u32 = 115_200;
@@ -39,6 +45,11 @@ pub fn car_mass_kg() -> Option<f32> {
     critical_section::with(|cs| STATE.borrow_ref(cs).as_ref().map(|s| s.m_car_kg))
 }
 
+/// The DCP variant set on the service port (`None` before `main` set the state).
+pub fn dcp_mode() -> Option<drive_core::dcp::Mode> {
+    critical_section::with(|cs| STATE.borrow_ref(cs).as_ref().map(|s| s.dcp_mode))
+}
+
 /// Logs a controller fault code in the service port's fault log.
 pub fn log_fault(code: u8) {
     critical_section::with(|cs| {
@@ -48,9 +59,11 @@ pub fn log_fault(code: u8) {
     });
 }
 
-/// The service task: one answer line per request line.
+/// The service task: one answer line per request line; `store` keeps the
+/// parameters, `encoder_offset_counts` is the stored encoder offset (kept
+/// as it is in a new record).
 #[embassy_executor::task]
-pub async fn run(mut uart: BufferedUart<'static>) {
+pub async fn run(mut uart: BufferedUart<'static>, mut store: ParamStore, encoder_offset_counts: u32) {
     let mut line = [0u8; MAX_LINE + 1];
     let mut len = 0;
     let mut byte = [0u8; 1];
@@ -85,13 +98,34 @@ pub async fn run(mut uart: BufferedUart<'static>) {
         }
         state.speed_radps = snapshot.speed_radps;
         let reply = answer(&line[..len], &mut state);
+        let mut text: &[u8] = reply.as_bytes();
+        if state.save_requested {
+            state.save_requested = false;
+            let parameters = DriveParameters {
+                strategy: state.strategy,
+                table: state.table,
+                m_car_kg: state.m_car_kg,
+                encoder_offset_counts,
+                dcp_mode: state.dcp_mode,
+            };
+            if !control::pause_if_idle() {
+                text = b"error busy";
+            } else {
+                let written = store.save(&parameters).await;
+                control::resume();
+                if !written {
+                    text = b"error flash-write";
+                }
+            }
+        }
         critical_section::with(|cs| {
             if let Some(shared) = STATE.borrow_ref_mut(cs).as_mut() {
                 shared.m_car_kg = state.m_car_kg;
+                shared.dcp_mode = state.dcp_mode;
             }
         });
         len = 0;
-        if uart.write_all(reply.as_bytes()).await.is_err() || uart.write_all(b"\r\n").await.is_err() {
+        if uart.write_all(text).await.is_err() || uart.write_all(b"\r\n").await.is_err() {
             warn!("service port: answer not sent");
         }
     }

@@ -9,8 +9,9 @@
 
 use defmt::{debug, error, info, warn};
 use drive_core::alignment::AlignmentError;
-use drive_core::controller::CommandError;
+use drive_core::controller::{CommandError, SpeedCommandError};
 use drive_core::current_offset::OffsetError;
+use drive_core::lift_drive::{ApplyError, ControllerCommand};
 use drive_core::supervisor::Fault;
 use drive_core::DriveState;
 use embassy_time::{Duration, Instant, Ticker};
@@ -203,17 +204,24 @@ fn phase_name(phase: u8) -> &'static str {
 
 fn command_name(command: &Command) -> &'static str {
     match command {
-        Command::Travel(_) => "travel",
-        Command::SafeStop(_) => "safe stop",
+        Command::Drive(ControllerCommand::Travel(_)) => "distance travel",
+        Command::Drive(ControllerCommand::SpeedTravel(_)) => "speed travel",
+        Command::Drive(ControllerCommand::Speed(_)) => "speed change",
+        Command::Drive(ControllerCommand::Stop) => "stop",
+        Command::Drive(ControllerCommand::SafeStop(_)) => "safe stop",
         Command::Reset => "reset",
     }
 }
 
 fn refusal_name(refusal: Refusal) -> &'static str {
     match refusal {
-        Refusal::Controller(CommandError::NotIdle) => "drive not idle",
-        Refusal::Controller(CommandError::Profile(_)) => "no travel profile for that distance",
-        Refusal::Controller(CommandError::OutOfRange) => "travel outside the rig or car mass not positive",
+        Refusal::Controller(ApplyError::Travel(CommandError::NotIdle)) => "drive not idle",
+        Refusal::Controller(ApplyError::Travel(CommandError::Profile(_))) => "no travel profile for that distance",
+        Refusal::Controller(ApplyError::Travel(CommandError::OutOfRange)) => {
+            "travel outside the rig, speed out of range or car mass not positive"
+        }
+        Refusal::Controller(ApplyError::Speed(SpeedCommandError::NoSpeedTravel)) => "no speed travel running",
+        Refusal::Controller(ApplyError::Speed(SpeedCommandError::OutOfRange)) => "speed out of range",
         Refusal::NotReady => "drive not calibrated, or a firmware fault is latched",
         Refusal::NothingToReset => "no fault latched",
     }

@@ -16,11 +16,27 @@
 //! application layer (`drive_core::lift_drive::LiftDrive`: the DCP slave,
 //! the commands it gives the controller, then the controller step) with the
 //! frame's time stamp as the DCP clock, and writes one record per step on
-//! UART1: `n_in, the bytes taken, n_out, the reply bytes`. The host's
-//! lift controller reads its replies from the records, and the host shadow
-//! replays the same bytes at the same steps, so the chip and the host run
-//! the same application layer bit for bit whatever the emulator's timing
-//! of the bytes.
+//! UART1: `n_in, the bytes taken, n_out, the reply bytes, n_service, the
+//! service bytes taken`. The host's lift controller reads its replies from
+//! the records, and the host shadow replays the same bytes at the same
+//! steps, so the chip and the host run the same application layer bit for
+//! bit whatever the emulator's timing of the bytes.
+//!
+//! The service port (`drive_core::service`, one ASCII line per request) is
+//! UART2: before the DCP bytes of a step the target takes the service bytes
+//! that have arrived, up to the end of one line (at most
+//! `drive_core::lift_drive::MAX_SERVICE_BYTES_PER_STEP`), and writes the
+//! answer to a finished line on UART2.
+//!
+//! Parameters: the drive's parameter record (`drive_core::param_store`)
+//! under key 0 of a `sequential-storage` map, as the firmware keeps it,
+//! over an emulated flash (`flash.rs`) that QEMU keeps in the file
+//! `pil-flash.bin` of its working directory. At start-up a record that
+//! passes every check is installed, otherwise the defaults (no
+//! compensation over the rig's offline table, the heaviest car, DCP4) and
+//! the service port's `get params` says why; the service port's `save`
+//! writes the record. Starting QEMU again in the same directory is a power
+//! cycle.
 //!
 //! Logging: defmt over semihosting (feature `semihosting`, the default) or
 //! RTT (feature `rtt`); the controller code is the same either way.
@@ -28,15 +44,24 @@
 #![no_main]
 #![deny(unsafe_code)]
 
+mod flash;
 mod uart;
 
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
-use drive_core::dcp::{Mode, SlaveConfig, Speed};
+use drive_core::dcp::{Mode, SlaveConfig};
 use drive_core::frame::{command_result_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
-use drive_core::lift_drive::{DcpPort, LiftDrive, MAX_BYTES_PER_STEP, MAX_REPLY_PER_STEP};
+use drive_core::lift_drive::{
+    speed_table, DcpPort, LiftDrive, MAX_BYTES_PER_STEP, MAX_REPLY_PER_STEP, MAX_SERVICE_BYTES_PER_STEP,
+};
+use drive_core::param_store::{DriveParameters, MAX_RECORD};
+use drive_core::ripple::harmonics::HarmonicTable;
+use drive_core::ripple::Strategy;
+use drive_core::service::{record_error_word, ParamsStatus};
 use drive_core::Controller;
+use sequential_storage::cache::{Cache, Uncached};
+use sequential_storage::map::{MapConfig, MapStorage};
 
 #[cfg(feature = "rtt")]
 use defmt_rtt as _;
@@ -46,17 +71,72 @@ use defmt_semihosting as _;
 include!(concat!(env!("OUT_DIR"), "/drive_config.rs"));
 include!(concat!(env!("OUT_DIR"), "/chain_model.rs"));
 include!(concat!(env!("OUT_DIR"), "/lift.rs"));
+include!(concat!(env!("OUT_DIR"), "/ripple.rs"));
 
-/// The DCP slave of the target: distance mode, V4 at the rated speed (the
-/// firmware's configuration).
+/// The map key of the parameter record (the firmware's).
+const KEY: u8 = 0;
+
+type Store = MapStorage<u8, flash::Flash, Cache<Uncached, Uncached, Uncached, u8>>;
+
+/// The offline compensation table: the rig's ripple (`RIPPLE`), negated (the firmware's).
+fn offline_table() -> HarmonicTable {
+    let mut table = HarmonicTable::default();
+    for (order, amplitude_nm, cos_phase, sin_phase) in RIPPLE {
+        table.push_cosine(order, amplitude_nm, cos_phase, sin_phase);
+    }
+    table.negated()
+}
+
+/// The stored parameters if a record passes every check, and what became of it.
+fn load(store: &mut Store) -> (Option<DriveParameters>, ParamsStatus) {
+    let mut buffer = [0u8; MAX_RECORD + 16];
+    match embassy_futures::block_on(store.fetch_item::<&[u8]>(&mut buffer, &KEY)) {
+        Ok(None) => (None, ParamsStatus::None),
+        Ok(Some(record)) => match DriveParameters::decode(record) {
+            Ok(parameters) => (Some(parameters), ParamsStatus::Stored),
+            Err(e) => (None, ParamsStatus::Refused(e)),
+        },
+        Err(e) => {
+            defmt::warn!("parameters: the store cannot be read: {}", e);
+            (None, ParamsStatus::Unreadable)
+        }
+    }
+}
+
+/// Writes `parameters` as the stored record.
+fn save(store: &mut Store, parameters: &DriveParameters) -> bool {
+    let mut record = [0u8; MAX_RECORD];
+    let n = parameters.encode(&mut record);
+    let mut buffer = [0u8; MAX_RECORD + 16];
+    match embassy_futures::block_on(store.store_item(&mut buffer, &KEY, &&record[..n])) {
+        Ok(()) => true,
+        Err(e) => {
+            defmt::warn!("parameters: not written: {}", e);
+            false
+        }
+    }
+}
+
+/// The DCP slave of the target: distance mode, the speeds of
+/// `drive_core::lift_drive::speed_table` (the firmware's configuration).
 fn dcp_port() -> DcpPort {
-    let mut speeds = [None; 11];
-    speeds[Speed::V4.index()] = Some(DRIVE_CONFIG.rated_speed_mps);
     DcpPort::new(
-        SlaveConfig::new(Mode::Dcp4, speeds, LIFT_GEOMETRY.shaft_travel_mm),
+        SlaveConfig::new(Mode::Dcp4, speed_table(DRIVE_CONFIG.rated_speed_mps), LIFT_GEOMETRY.shaft_travel_mm),
         LIFT_GEOMETRY,
         DEFAULT_CAR_MASS_KG,
     )
+}
+
+/// The parameters without a stored record: no compensation (the rig's
+/// offline table ready for `set strategy`), the heaviest car, DCP4.
+fn default_parameters() -> DriveParameters {
+    DriveParameters {
+        strategy: Strategy::Off,
+        table: offline_table(),
+        m_car_kg: DEFAULT_CAR_MASS_KG,
+        encoder_offset_counts: 0,
+        dcp_mode: Mode::Dcp4,
+    }
 }
 
 /// SysTick reload: the full 24-bit range, ticks.
@@ -80,9 +160,23 @@ fn main() -> ! {
     let timing_overhead_ticks = first.wrapping_sub(second) & SYSTICK_RELOAD;
 
     let mut uart = uart::Uart0::enable();
-    let mut dcp_uart = uart::Uart1::enable();
+    let mut dcp_uart = uart::Polled::uart1();
+    let mut service_uart = uart::Polled::uart2();
     let mut drive = LiftDrive::new(Controller::new(&DRIVE_CONFIG), dcp_port(), &DRIVE_CONFIG);
-    let mut record = [0u8; 2 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP];
+    let mut store: Store =
+        MapStorage::new(flash::Flash::load(), const { MapConfig::new(0..flash::SIZE as u32) }, Cache::new_uncached());
+    let (stored, status) = load(&mut store);
+    match status {
+        ParamsStatus::Stored => defmt::info!("parameters: stored record installed"),
+        ParamsStatus::None => defmt::info!("parameters: none stored, running with the defaults"),
+        ParamsStatus::Refused(e) => {
+            defmt::warn!("parameters: stored record refused ({=str}), running with the defaults", record_error_word(e))
+        }
+        ParamsStatus::Unreadable => defmt::warn!("parameters: store unreadable, running with the defaults"),
+    }
+    drive.install_parameters(&stored.unwrap_or_else(default_parameters), &CHAIN_MODEL, status);
+    drive.set_savable(true);
+    let mut record = [0u8; 3 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP + MAX_SERVICE_BYTES_PER_STEP];
     let mut decoder = Decoder::new();
     let mut frame = [0u8; MAX_FRAME];
     defmt::info!("PIL target up: PWM {} Hz, waiting for frames on UART0", DRIVE_CONFIG.pwm_hz);
@@ -91,6 +185,23 @@ fn main() -> ! {
         let reply = match decoder.push(uart.read_byte()) {
             None => continue,
             Some(Ok(Message::Sense(sensors))) => {
+                // The service port: bytes up to the end of one line.
+                let mut service_taken = [0u8; MAX_SERVICE_BYTES_PER_STEP];
+                let mut n_service = 0;
+                while n_service < MAX_SERVICE_BYTES_PER_STEP {
+                    let Some(byte) = service_uart.try_read_byte() else { break };
+                    service_taken[n_service] = byte;
+                    n_service += 1;
+                    if let Some(reply) = drive.service_byte(byte) {
+                        let written = reply.save.is_none_or(|p| save(&mut store, &p));
+                        if written {
+                            service_uart.write_all(&reply.bytes[..reply.len]);
+                        } else {
+                            service_uart.write_all(b"error flash-write\r\n");
+                        }
+                        break;
+                    }
+                }
                 let mut taken = [0u8; MAX_BYTES_PER_STEP];
                 let mut n_in = 0;
                 while n_in < MAX_BYTES_PER_STEP {
@@ -113,8 +224,12 @@ fn main() -> ! {
                 record[0] = n_in as u8;
                 record[1..1 + n_in].copy_from_slice(&taken[..n_in]);
                 record[1 + n_in] = dcp.reply_len as u8;
-                record[2 + n_in..2 + n_in + dcp.reply_len].copy_from_slice(&dcp.reply[..dcp.reply_len]);
-                dcp_uart.write_all(&record[..2 + n_in + dcp.reply_len]);
+                let mut end = 2 + n_in + dcp.reply_len;
+                record[2 + n_in..end].copy_from_slice(&dcp.reply[..dcp.reply_len]);
+                record[end] = n_service as u8;
+                record[end + 1..end + 1 + n_service].copy_from_slice(&service_taken[..n_service]);
+                end += 1 + n_service;
+                dcp_uart.write_all(&record[..end]);
                 Message::Output(StepReport::new(&output, cost_ticks))
             }
             Some(Ok(Message::Travel(command))) => {

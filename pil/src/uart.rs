@@ -1,6 +1,6 @@
 //! The CMSDK APB UARTs of the MPS2 board (as QEMU emulates them), polled:
 //! UART0 (0x4000_4000) carries the PIL frames, UART1 (0x4000_5000) the DCP
-//! line of the lift controller.
+//! line of the lift controller, UART2 (0x4000_6000) the service port.
 //!
 //! Registers from the base: DATA (+0x00), STATE (+0x04: bit 0 TX full,
 //! bit 1 RX full), CTRL (+0x08: bit 0 TX enable, bit 1 RX enable, bit 3 RX
@@ -21,6 +21,8 @@ const INTCLEAR: usize = BASE + 0x0C;
 const BAUDDIV: usize = BASE + 0x10;
 /// UART1's registers: UART0's, 0x1000 further.
 const UART1_OFFSET: usize = 0x1000;
+/// UART2's registers: UART0's, 0x2000 further.
+const UART2_OFFSET: usize = 0x2000;
 /// NVIC interrupt number of the UART0 receiver on the MPS2.
 const UART0_RX_IRQ: u32 = 0;
 const NVIC_ISER0: usize = 0xE000_E100;
@@ -72,30 +74,42 @@ impl Uart0 {
     }
 }
 
-/// UART1, polled without interrupts: the DCP line.
-pub struct Uart1(());
+/// A UART polled without interrupts: UART1 (the DCP line) or UART2 (the service port).
+pub struct Polled {
+    offset: usize,
+}
 
-impl Uart1 {
-    /// Sets the baud divider and enables transmitter and receiver (no interrupt).
-    pub fn enable() -> Self {
-        write(BAUDDIV + UART1_OFFSET, 16);
-        write(CTRL + UART1_OFFSET, 0b0011);
-        Self(())
+impl Polled {
+    /// UART1, the DCP line: sets the baud divider and enables transmitter
+    /// and receiver (no interrupt). `main` creates it once.
+    pub fn uart1() -> Self {
+        Self::enable(UART1_OFFSET)
+    }
+
+    /// UART2, the service port, likewise.
+    pub fn uart2() -> Self {
+        Self::enable(UART2_OFFSET)
+    }
+
+    fn enable(offset: usize) -> Self {
+        write(BAUDDIV + offset, 16);
+        write(CTRL + offset, 0b0011);
+        Self { offset }
     }
 
     /// The received byte, if one is waiting.
     pub fn try_read_byte(&mut self) -> Option<u8> {
-        if read(STATE + UART1_OFFSET) & RX_FULL == 0 {
+        if read(STATE + self.offset) & RX_FULL == 0 {
             return None;
         }
-        Some(read(DATA + UART1_OFFSET) as u8)
+        Some(read(DATA + self.offset) as u8)
     }
 
     /// Sends `bytes`, waiting whenever the transmit buffer is full.
     pub fn write_all(&mut self, bytes: &[u8]) {
         for &byte in bytes {
-            while read(STATE + UART1_OFFSET) & TX_FULL != 0 {}
-            write(DATA + UART1_OFFSET, byte as u32);
+            while read(STATE + self.offset) & TX_FULL != 0 {}
+            write(DATA + self.offset, byte as u32);
         }
     }
 }

@@ -10,13 +10,23 @@
 //! position held) -> `Travel` (S-curve) -> `Hold` (position held at the
 //! landing) -> `BrakeSet` (brake applied, torque kept) -> `Idle` (PWM off).
 //! Any fault latches `Tripped`: PWM off, brake applied, until [`Controller::reset`].
+//!
+//! Two kinds of travel share that sequence. A distance travel
+//! ([`Controller::command_travel`]) follows an S-curve planned once to its
+//! target. A speed travel ([`Controller::command_speed_travel`], the lift
+//! controller's speed mode) has no target: it ramps (jerk-limited,
+//! [`SpeedRamp`]) to the commanded speed and runs at it until told to change
+//! speed ([`Controller::command_speed`], e.g. down to crawl at the
+//! deceleration point) or to stop ([`Controller::command_stop`]: a ramp to
+//! rest, then `Hold`); it stops by itself, with the same ramp, where going on
+//! would take the car beyond the end of the shaft it was given.
 
 use crate::config::{Direction, DriveConfig};
 use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
 use crate::fixed::{mul_int, q16, Q16};
 use crate::observer::{ChainModel, ChainObserver, ObserverEstimate, ObserverTuning};
 use crate::park_clarke::Abc;
-use crate::profile::{ProfileError, SCurve};
+use crate::profile::{ProfileError, ProfilePoint, SCurve, SpeedRamp};
 use crate::ripple::harmonics::HarmonicTable;
 use crate::ripple::{LearningInput, RippleCompensator, Strategy};
 use crate::speed_estimator::SpeedEstimator;
@@ -182,10 +192,67 @@ pub enum CommandError {
     OutOfRange,
 }
 
+/// A speed travel request (the lift controller's speed mode: crawl,
+/// inspection, re-levelling, the travel speeds) with the load weighing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedTravelCommand {
+    /// Car direction.
+    pub direction: Direction,
+    /// Car speed to run at, m/s (in `(0, rated speed]`).
+    pub speed_mps: f32,
+    /// Car mass from the load weighing, kg.
+    pub m_car_kg: f32,
+    /// Counterweight-side rope length at the start, m.
+    pub lw_start_m: f32,
+    /// Counterweight-side rope length the car must not pass in its
+    /// direction (the last landing), m: the drive starts its stop ramp in
+    /// time to come to rest there at the latest.
+    pub lw_limit_m: f32,
+}
+
+/// Why a speed change or a stop of a speed travel was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpeedCommandError {
+    /// No speed travel runs (idle, tripped, a distance travel, or the
+    /// travel is already stopping).
+    NoSpeedTravel,
+    /// The speed is not in `(0, rated speed]` m/s.
+    OutOfRange,
+}
+
+/// The reference of a speed travel: the ramp running and where it may go.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct SpeedReference {
+    /// The ramp running, in the travel coordinate (m from the start).
+    ramp: SpeedRamp,
+    /// Time in `Travel` at which the ramp starts, s.
+    ramp_start_s: f32,
+    /// The ramp ends at rest: the travel ends with it.
+    stopping: bool,
+    /// Distance the car may travel from its start, m.
+    limit_m: f32,
+}
+
+impl SpeedReference {
+    /// The reference at time `t_s` in `Travel`.
+    fn at(&self, t_s: f32) -> ProfilePoint {
+        self.ramp.at(t_s - self.ramp_start_s)
+    }
+}
+
+/// What a travel follows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Reference {
+    /// An S-curve to the target.
+    Distance(SCurve),
+    /// A commanded speed.
+    Speed(SpeedReference),
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Travel {
     command: TravelCommand,
-    profile: SCurve,
+    reference: Reference,
     start_counts: i64,
     /// Holding torque at the start (Eqn 4), N m.
     holding_torque_nm: f32,
@@ -370,13 +437,105 @@ impl Controller {
         self.speed_loop = SpeedLoop::new(c, inertia_kg_m2);
         self.travel = Some(Travel {
             command,
-            profile,
+            reference: Reference::Distance(profile),
             start_counts: self.estimator.position_counts(),
             holding_torque_nm: out_of_balance_torque_nm(c, command.m_car_kg, command.lw_start_m),
             inertia_kg_m2,
         });
         self.enter(DriveState::PreTorque);
         Ok(())
+    }
+
+    /// Starts a speed travel; accepted only in `Idle`. The ramp to the
+    /// speed starts when the brake is lifted.
+    pub fn command_speed_travel(&mut self, command: SpeedTravelCommand) -> Result<(), CommandError> {
+        if self.state != DriveState::Idle {
+            return Err(CommandError::NotIdle);
+        }
+        let c = &self.config;
+        let sign = command.direction.sign();
+        let inside = |lw: f32| lw > 0.0 && lw < c.rope_total_length_m;
+        let positive_mass = command.m_car_kg > 0.0 && command.m_car_kg.is_finite();
+        let speed_ok = command.speed_mps > 0.0 && command.speed_mps <= c.rated_speed_mps;
+        // Room ahead in the travel direction, m.
+        let limit_m = sign * (command.lw_limit_m - command.lw_start_m);
+        let room = limit_m > 0.0;
+        if !inside(command.lw_start_m) || !inside(command.lw_limit_m) || !positive_mass || !speed_ok || !room {
+            return Err(CommandError::OutOfRange);
+        }
+        let ramp = SpeedRamp::plan(ProfilePoint::default(), command.speed_mps, c.max_accel_mps2, c.max_jerk_mps3)
+            .map_err(CommandError::Profile)?;
+        let inertia_kg_m2 = equivalent_inertia_kg_m2(c, command.m_car_kg);
+        self.speed_loop = SpeedLoop::new(c, inertia_kg_m2);
+        let travel = TravelCommand {
+            direction: command.direction,
+            distance_m: limit_m,
+            m_car_kg: command.m_car_kg,
+            lw_start_m: command.lw_start_m,
+        };
+        self.travel = Some(Travel {
+            command: travel,
+            reference: Reference::Speed(SpeedReference { ramp, ramp_start_s: 0.0, stopping: false, limit_m }),
+            start_counts: self.estimator.position_counts(),
+            holding_torque_nm: out_of_balance_torque_nm(c, command.m_car_kg, command.lw_start_m),
+            inertia_kg_m2,
+        });
+        self.enter(DriveState::PreTorque);
+        Ok(())
+    }
+
+    /// Changes the speed of the running speed travel to `speed_mps` (m/s,
+    /// in `(0, rated speed]`): a jerk-limited ramp from the reference now.
+    pub fn command_speed(&mut self, speed_mps: f32) -> Result<(), SpeedCommandError> {
+        if !(speed_mps > 0.0 && speed_mps <= self.config.rated_speed_mps) {
+            return Err(SpeedCommandError::OutOfRange);
+        }
+        // The speed it is already going to: nothing to re-plan (a lift
+        // controller repeats its command every message).
+        if let Some(Travel { reference: Reference::Speed(s), .. }) = self.travel {
+            if !s.stopping && s.ramp.end().speed_mps == speed_mps && self.state.pwm_enabled() {
+                return Ok(());
+            }
+        }
+        self.replan_speed(speed_mps)
+    }
+
+    /// Stops the running speed travel: a jerk-limited ramp to rest from the
+    /// reference now, then `Hold` and the brake as at the end of any travel.
+    /// A stop of a travel already stopping changes nothing.
+    pub fn command_stop(&mut self) -> Result<(), SpeedCommandError> {
+        match self.travel.map(|t| t.reference) {
+            Some(Reference::Speed(s)) if s.stopping => Ok(()),
+            _ => self.replan_speed(0.0),
+        }
+    }
+
+    /// A new ramp to `speed_mps` (0: stop) from the reference of the latest speed-loop tick.
+    fn replan_speed(&mut self, speed_mps: f32) -> Result<(), SpeedCommandError> {
+        let running = matches!(self.state, DriveState::PreTorque | DriveState::BrakeLift | DriveState::Travel);
+        let t = self.state_time_s();
+        let state = self.state;
+        let c = self.config;
+        let Some(Travel { reference: Reference::Speed(s), .. }) = self.travel.as_mut() else {
+            return Err(SpeedCommandError::NoSpeedTravel);
+        };
+        if !running || s.stopping {
+            return Err(SpeedCommandError::NoSpeedTravel);
+        }
+        // Before the profile runs, the ramp starts from rest when it does.
+        let (from, start) = if state == DriveState::Travel { (s.at(t), t) } else { (ProfilePoint::default(), 0.0) };
+        s.ramp = SpeedRamp::plan(from, speed_mps, c.max_accel_mps2, c.max_jerk_mps3)
+            .map_err(|_| SpeedCommandError::OutOfRange)?;
+        s.ramp_start_s = start;
+        s.stopping = speed_mps == 0.0;
+        Ok(())
+    }
+
+    /// After the caller held the steps back on purpose (the firmware pauses
+    /// the idle drive while it writes its flash): the next step's interval
+    /// is not a missed deadline. Nothing else changes.
+    pub fn resume_after_pause(&mut self) {
+        self.last_time_us = None;
     }
 
     /// Clears a latched fault (explicit operator action); back to `Idle`.
@@ -429,6 +588,36 @@ impl Controller {
     /// Shaft angle within the revolution from the encoder, as a binary angle.
     fn shaft_angle(&self) -> Angle {
         ((self.estimator.revolution_counts() as u64 * self.binary_angle_per_count_q16) >> 16) as u32
+    }
+
+    /// The speed travel's reference at `t_s` in `Travel`; first, when
+    /// running on at it would not leave room to stop before the limit, the
+    /// ramp to rest from the reference at `t_s` (the travel ends there).
+    fn speed_reference_at(&mut self, s: SpeedReference, t_s: f32) -> ProfilePoint {
+        let p = s.at(t_s);
+        if s.stopping {
+            return p;
+        }
+        let (a, j) = (self.config.max_accel_mps2, self.config.max_jerk_mps3);
+        let Ok(stop) = SpeedRamp::plan(p, 0.0, a, j) else {
+            return p;
+        };
+        if stop.end().position_m < s.limit_m {
+            return p;
+        }
+        if let Some(Travel { reference: Reference::Speed(running), .. }) = self.travel.as_mut() {
+            *running = SpeedReference { ramp: stop, ramp_start_s: t_s, stopping: true, limit_m: s.limit_m };
+        }
+        p
+    }
+
+    /// Whether the travel's reference has come to its end at `t_s` in `Travel`.
+    fn reference_ended(&self, t_s: f32) -> bool {
+        match self.travel.map(|t| t.reference) {
+            Some(Reference::Distance(profile)) => t_s >= profile.duration_s(),
+            Some(Reference::Speed(s)) => s.stopping && t_s - s.ramp_start_s >= s.ramp.duration_s(),
+            None => true,
+        }
     }
 
     /// One PWM period.
@@ -555,10 +744,19 @@ impl Controller {
         // Reference in the car-up coordinate: position (m), speed (m/s), accel (m/s^2).
         let (position_ref, speed_ref, accel_ref) = match self.state {
             DriveState::Travel => {
-                let p = travel.profile.at(t);
+                let p = match travel.reference {
+                    Reference::Distance(profile) => profile.at(t),
+                    Reference::Speed(s) => self.speed_reference_at(s, t),
+                };
                 (sign * p.position_m, sign * p.speed_mps, sign * p.accel_mps2)
             }
-            DriveState::Hold | DriveState::BrakeSet => (sign * travel.profile.distance_m(), 0.0, 0.0),
+            DriveState::Hold | DriveState::BrakeSet => {
+                let end = match travel.reference {
+                    Reference::Distance(profile) => profile.distance_m(),
+                    Reference::Speed(s) => s.ramp.end().position_m,
+                };
+                (sign * end, 0.0, 0.0)
+            }
             _ => (0.0, 0.0, 0.0),
         };
         let moved_counts = self.estimator.position_counts().saturating_sub(travel.start_counts);
@@ -610,7 +808,7 @@ impl Controller {
                 self.iq_ref = iq;
                 let next = match self.state {
                     DriveState::BrakeLift if t >= BRAKE_LIFT_S => Some(DriveState::Travel),
-                    DriveState::Travel if t >= travel.profile.duration_s() => Some(DriveState::Hold),
+                    DriveState::Travel if self.reference_ended(t) => Some(DriveState::Hold),
                     DriveState::Hold if t >= HOLD_S => Some(DriveState::BrakeSet),
                     DriveState::BrakeSet if t >= BRAKE_SET_S => Some(DriveState::Idle),
                     _ => None,
@@ -743,5 +941,166 @@ mod tests {
         command = travel();
         command.m_car_kg = f32::NAN;
         assert_eq!(c.command_travel(command), Err(CommandError::OutOfRange));
+    }
+
+    /// The car as the drive wants it: the encoder follows the shaft speed
+    /// reference of each step exactly (currents stay at zero, below the
+    /// supervisor's tracking checks). Returns every output and the car
+    /// position (m, up positive) after each step.
+    struct IdealCar {
+        k: u32,
+        position_m: f64,
+    }
+
+    impl IdealCar {
+        fn step(&mut self, c: &mut Controller) -> (ControlOutput, f64) {
+            let config = rig();
+            let counts = self.position_m / config.sheave_radius_m as f64 / core::f64::consts::TAU
+                * config.encoder_counts_per_rev as f64;
+            let mut f = frame(self.k);
+            f.encoder_count = counts.round() as i64 as u32;
+            let out = c.step(&f);
+            self.k += 1;
+            let speed_mps = out.telemetry.speed_ref_radps as f64 * config.sheave_radius_m as f64;
+            if out.brake_released {
+                self.position_m += speed_mps / config.current_loop_hz as f64;
+            }
+            (out, self.position_m)
+        }
+
+        /// Steps for `seconds`; the outputs at the speed-loop ticks.
+        fn run(&mut self, c: &mut Controller, seconds: f32) -> std::vec::Vec<ControlOutput> {
+            let n = (seconds * rig().current_loop_hz) as u32;
+            let mut ticks = std::vec::Vec::new();
+            for _ in 0..n {
+                let out = self.step(c).0;
+                if (self.k - 1) % rig().speed_loop_divider() == 0 {
+                    ticks.push(out);
+                }
+            }
+            ticks
+        }
+    }
+
+    extern crate std;
+
+    fn speed_travel(direction: Direction, speed_mps: f32, lw_start_m: f32, lw_limit_m: f32) -> SpeedTravelCommand {
+        SpeedTravelCommand { direction, speed_mps, m_car_kg: 70.5, lw_start_m, lw_limit_m }
+    }
+
+    /// Acceleration and jerk of the reference speed over speed-loop ticks
+    /// (differences over 8 ticks, 4 ms: a few roundings of the f32 speed
+    /// make 1e-7 m/s, 0.8 % of the jerk limit over that spacing).
+    fn assert_limits(ticks: &[ControlOutput]) {
+        let config = rig();
+        let n = 8;
+        let dt = n as f32 / config.speed_loop_hz;
+        let v: std::vec::Vec<f32> = ticks.iter().map(|o| o.telemetry.ref_speed_mps).collect();
+        let a: std::vec::Vec<f32> = (n..v.len()).map(|i| (v[i] - v[i - n]) / dt).collect();
+        for i in n..a.len() {
+            assert!(a[i].abs() <= config.max_accel_mps2 * 1.001, "acceleration {} at tick {i}", a[i]);
+            let jerk = (a[i] - a[i - n]) / dt;
+            assert!(jerk.abs() <= config.max_jerk_mps3 * 1.02, "jerk {jerk} at tick {i}");
+        }
+    }
+
+    #[test]
+    fn a_speed_travel_runs_at_its_speed_crawls_and_stops_on_command() {
+        let config = rig();
+        let mut c = Controller::new(&config);
+        let mut car = IdealCar { k: 0, position_m: 0.0 };
+        car.run(&mut c, 0.01);
+        c.command_speed_travel(speed_travel(Direction::Up, 0.4, 2.0, 7.0)).unwrap();
+        assert_eq!(c.command_speed_travel(speed_travel(Direction::Up, 0.4, 2.0, 7.0)), Err(CommandError::NotIdle));
+        // Pre-torque and brake lift, then the run-up: v/a + a/j = 1.3 s; then 2 s at speed.
+        let mut ticks = car.run(&mut c, PRE_TORQUE_S + BRAKE_LIFT_S + 0.01);
+        assert_eq!(c.state(), DriveState::Travel);
+        ticks.extend(car.run(&mut c, 1.25));
+        assert!(ticks.last().unwrap().telemetry.ref_speed_mps < 0.4);
+        ticks.extend(car.run(&mut c, 2.0));
+        assert!(ticks[ticks.len() - 3000..].iter().all(|o| o.telemetry.ref_speed_mps == 0.4), "runs at V");
+        // Deceleration point: down to crawl, 1 s there; the command repeated
+        // (as every message of the lift controller repeats it) changes nothing.
+        c.command_speed(0.05).unwrap();
+        for _ in 0..10 {
+            ticks.extend(car.run(&mut c, 0.015));
+            c.command_speed(0.05).unwrap();
+        }
+        ticks.extend(car.run(&mut c, 2.35));
+        assert_eq!(ticks.last().unwrap().telemetry.ref_speed_mps, 0.05);
+        assert_eq!(c.state(), DriveState::Travel);
+        let before_stop = car.position_m;
+        c.command_stop().unwrap();
+        assert_eq!(c.command_stop(), Ok(()), "a second stop changes nothing");
+        assert_eq!(c.command_speed(0.4), Err(SpeedCommandError::NoSpeedTravel), "stopping");
+        // Stop from crawl: 2 sqrt(v/j) = 0.447 s, then hold and brake set.
+        ticks.extend(car.run(&mut c, 0.44));
+        assert_eq!(c.state(), DriveState::Travel);
+        ticks.extend(car.run(&mut c, 0.02));
+        assert_eq!(c.state(), DriveState::Hold);
+        assert_limits(&ticks);
+        ticks.extend(car.run(&mut c, HOLD_S + BRAKE_SET_S + 0.01));
+        assert_eq!(c.state(), DriveState::Idle);
+        // Stop distance from crawl: v * sqrt(v / j) (the mean speed v/2 for 2 sqrt(v/j)).
+        let stop_m = 0.05 * (0.05f64).sqrt();
+        assert!((car.position_m - before_stop - stop_m).abs() < 1e-3, "{} {}", car.position_m, before_stop);
+        assert_eq!(c.command_stop(), Err(SpeedCommandError::NoSpeedTravel));
+        assert_eq!(c.command_speed(0.05), Err(SpeedCommandError::NoSpeedTravel));
+    }
+
+    #[test]
+    fn a_speed_travel_stops_by_itself_at_the_last_landing() {
+        for (direction, start, limit) in [(Direction::Up, 2.0f32, 2.7f32), (Direction::Down, 2.7, 2.0)] {
+            let config = rig();
+            let mut c = Controller::new(&config);
+            let mut car = IdealCar { k: 0, position_m: 0.0 };
+            car.run(&mut c, 0.01);
+            c.command_speed_travel(speed_travel(direction, 0.4, start, limit)).unwrap();
+            let mut ticks = car.run(&mut c, 5.0);
+            assert_limits(&ticks);
+            ticks.extend(car.run(&mut c, 1.0));
+            assert_eq!(c.state(), DriveState::Idle, "{direction:?}");
+            let moved = car.position_m * direction.sign() as f64;
+            assert!((moved - 0.7).abs() < 1e-3, "{direction:?}: stopped {moved} m from the start, limit 0.7 m");
+            let peak = ticks.iter().map(|o| o.telemetry.ref_speed_mps.abs()).fold(0.0f32, f32::max);
+            assert_eq!(peak, 0.4, "reached the speed before the limit");
+        }
+    }
+
+    #[test]
+    fn a_stop_before_the_brake_is_lifted_ends_the_travel_without_moving() {
+        let mut c = Controller::new(&rig());
+        let mut car = IdealCar { k: 0, position_m: 0.0 };
+        car.run(&mut c, 0.01);
+        c.command_speed_travel(speed_travel(Direction::Down, 0.3, 3.0, 1.0)).unwrap();
+        car.run(&mut c, 0.1);
+        c.command_stop().unwrap();
+        car.run(&mut c, 1.5);
+        assert_eq!(c.state(), DriveState::Idle);
+        assert!(car.position_m.abs() < 1e-4, "{}", car.position_m);
+    }
+
+    #[test]
+    fn speed_travels_and_speed_changes_out_of_range_are_refused() {
+        let mut c = Controller::new(&rig());
+        let bad = [
+            speed_travel(Direction::Up, 0.5, 2.0, 7.0),   // above rated speed
+            speed_travel(Direction::Up, 0.0, 2.0, 7.0),   // no speed
+            speed_travel(Direction::Up, 0.4, 2.0, 1.0),   // limit behind the car
+            speed_travel(Direction::Down, 0.4, 2.0, 2.0), // no room
+            speed_travel(Direction::Up, 0.4, 2.0, 9.5),   // limit off the ropes
+            speed_travel(Direction::Up, f32::NAN, 2.0, 7.0),
+        ];
+        for command in bad {
+            assert_eq!(c.command_speed_travel(command), Err(CommandError::OutOfRange), "{command:?}");
+        }
+        assert_eq!(c.command_stop(), Err(SpeedCommandError::NoSpeedTravel));
+        c.command_travel(travel()).unwrap();
+        assert_eq!(c.command_speed(0.05), Err(SpeedCommandError::NoSpeedTravel), "a distance travel");
+        assert_eq!(c.command_stop(), Err(SpeedCommandError::NoSpeedTravel));
+        let mut c = Controller::new(&rig());
+        c.command_speed_travel(speed_travel(Direction::Up, 0.4, 2.0, 7.0)).unwrap();
+        assert_eq!(c.command_speed(0.0), Err(SpeedCommandError::OutOfRange));
+        assert_eq!(c.command_speed(0.41), Err(SpeedCommandError::OutOfRange));
     }
 }

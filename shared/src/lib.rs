@@ -36,4 +36,4 @@ pub mod svpwm;
 pub mod trig;
 
 pub use config::DriveConfig;
-pub use controller::{ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
+pub use controller::{ControlOutput, Controller, DriveState, SensorFrame, SpeedTravelCommand, TravelCommand};

@@ -11,18 +11,52 @@
 //!   controller's state and speed.
 //! - [`apply`] applies a [`ControllerCommand`] to a [`Controller`].
 //!
-//! What the controller cannot do yet: speed-mode travels (DCP3, inspection,
-//! re-levelling) need a travel at a commanded speed with a stop on command,
-//! which `Controller` does not offer (its travels are planned S-curves over a
-//! distance). Those requests are answered by the slave and then refused by
-//! the drive: no travel, S5 ("accepted") clear. The safe stop is the
-//! supervisor's safe state (inverter off, brake applied at once), the
-//! controller having no controlled stop on command.
+//! A distance travel (DCP4) becomes [`Controller::command_travel`]; a
+//! speed-mode travel (DCP3, inspection, re-levelling) becomes
+//! [`Controller::command_speed_travel`] at the selected speed, limited to
+//! the shaft (the drive stops by itself at the last landing), then
+//! [`Controller::command_speed`] at the deceleration point (crawl) and
+//! [`Controller::command_stop`] at the floor (a jerk-limited ramp to rest,
+//! then the brake). The safe stop is the supervisor's safe state (inverter
+//! off, brake applied at once).
 
 use crate::config::{Direction, DriveConfig};
-use crate::controller::{CommandError, ControlOutput, Controller, DriveState, SensorFrame, TravelCommand};
+use crate::controller::{
+    CommandError, ControlOutput, Controller, DriveState, SensorFrame, SpeedCommandError, SpeedTravelCommand,
+    TravelCommand,
+};
+use crate::dcp::command::{Mode, Speed};
 use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, FRAME_LEN};
 use crate::dcp::slave::{DriveStatus, Outcome, Refusal, Request, Slave, SlaveConfig, StopReason, Travel};
+use crate::observer::ChainModel;
+use crate::param_store::DriveParameters;
+use crate::ripple::harmonics::HarmonicTable;
+use crate::ripple::Strategy;
+use crate::service::{ParamsStatus, ServiceState, FAULT_LOG, MAX_ANSWER, MAX_LINE};
+
+/// The speeds the drive offers for the DCP speed bits (order of
+/// [`crate::dcp::Speed::ALL`]), m/s, as fractions of the rated car speed
+/// `rated_mps` (m/s), chosen for the lab rig, whose lift controller has no
+/// speed table of its own: V0 crawl 1/8, VN re-levelling 1/20, V1 1/4, VI
+/// inspection 3/4, V2 1/2, V3 3/4, V4 the rated speed (the speed of the
+/// distance travels); VF, V5, V6, V7 are not offered. (For a 0.4 m/s drive:
+/// 0.05, 0.02, 0.1, 0.3, 0.2, 0.3 and 0.4 m/s.) DCP4 refuses V1 and V2
+/// whatever the table says.
+pub fn speed_table(rated_mps: f32) -> [Option<f32>; 11] {
+    let mut speeds = [None; 11];
+    for (speed, fraction) in [
+        (Speed::V0, 0.125),
+        (Speed::Vn, 0.05),
+        (Speed::V1, 0.25),
+        (Speed::Vi, 0.75),
+        (Speed::V2, 0.5),
+        (Speed::V3, 0.75),
+        (Speed::V4, 1.0),
+    ] {
+        speeds[speed.index()] = Some(rated_mps * fraction);
+    }
+    speeds
+}
 
 /// Where the landings are in the drive's rope coordinate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -39,45 +73,71 @@ pub struct LiftGeometry {
 pub enum ControllerCommand {
     /// Start a distance travel.
     Travel(TravelCommand),
+    /// Start a speed travel.
+    SpeedTravel(SpeedTravelCommand),
+    /// Change the running speed travel's speed, m/s (the crawl at the deceleration point).
+    Speed(f32),
+    /// Stop the running speed travel (ramp to rest, then the brake).
+    Stop,
     /// Stop now in the safe state (inverter off, brake applied).
     SafeStop(StopReason),
 }
 
-/// Why a request has no controller command.
+/// Why the controller did not take a command.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Unsupported {
-    /// Speed-mode travel, crawl or stop on command: the controller has no speed-reference travel.
-    SpeedMode,
+pub enum ApplyError {
+    /// A travel refused.
+    Travel(CommandError),
+    /// A speed change or stop refused.
+    Speed(SpeedCommandError),
+}
+
+fn direction(travel: Travel) -> Direction {
+    match travel {
+        Travel::Up => Direction::Up,
+        Travel::Down => Direction::Down,
+    }
 }
 
 /// The controller command of a slave request, with the car mass from the load weighing (kg).
-pub fn controller_command(
-    request: Request,
-    geometry: &LiftGeometry,
-    m_car_kg: f32,
-) -> Result<ControllerCommand, Unsupported> {
+pub fn controller_command(request: Request, geometry: &LiftGeometry, m_car_kg: f32) -> ControllerCommand {
+    let lw_at = |position_mm: i32| geometry.lw_lowest_landing_m + position_mm as f32 / 1000.0;
     match request {
-        Request::Distance { direction, distance_mm, start_position_mm } => {
-            Ok(ControllerCommand::Travel(TravelCommand {
-                direction: match direction {
-                    Travel::Up => Direction::Up,
-                    Travel::Down => Direction::Down,
-                },
+        Request::Distance { direction: d, distance_mm, start_position_mm } => {
+            ControllerCommand::Travel(TravelCommand {
+                direction: direction(d),
                 distance_m: distance_mm as f32 / 1000.0,
                 m_car_kg,
-                lw_start_m: geometry.lw_lowest_landing_m + start_position_mm as f32 / 1000.0,
-            }))
+                lw_start_m: lw_at(start_position_mm),
+            })
         }
-        Request::SafeStop(reason) => Ok(ControllerCommand::SafeStop(reason)),
-        Request::Speed { .. } | Request::Crawl | Request::Stop => Err(Unsupported::SpeedMode),
+        Request::Speed { direction: d, speed_mps, start_position_mm, .. } => {
+            ControllerCommand::SpeedTravel(SpeedTravelCommand {
+                direction: direction(d),
+                speed_mps,
+                m_car_kg,
+                lw_start_m: lw_at(start_position_mm),
+                // The last landing in the travel's direction.
+                lw_limit_m: match d {
+                    Travel::Up => lw_at(geometry.shaft_travel_mm as i32),
+                    Travel::Down => geometry.lw_lowest_landing_m,
+                },
+            })
+        }
+        Request::Crawl { speed_mps } => ControllerCommand::Speed(speed_mps),
+        Request::Stop => ControllerCommand::Stop,
+        Request::SafeStop(reason) => ControllerCommand::SafeStop(reason),
     }
 }
 
 /// Applies `command` to `controller`. A safe stop of an idle or tripped
 /// drive changes nothing (it never clears a latched fault).
-pub fn apply(command: ControllerCommand, controller: &mut Controller) -> Result<(), CommandError> {
+pub fn apply(command: ControllerCommand, controller: &mut Controller) -> Result<(), ApplyError> {
     match command {
-        ControllerCommand::Travel(travel) => controller.command_travel(travel),
+        ControllerCommand::Travel(travel) => controller.command_travel(travel).map_err(ApplyError::Travel),
+        ControllerCommand::SpeedTravel(travel) => controller.command_speed_travel(travel).map_err(ApplyError::Travel),
+        ControllerCommand::Speed(speed_mps) => controller.command_speed(speed_mps).map_err(ApplyError::Speed),
+        ControllerCommand::Stop => controller.command_stop().map_err(ApplyError::Speed),
         ControllerCommand::SafeStop(_) => {
             if !matches!(controller.state(), DriveState::Idle | DriveState::Tripped(_)) {
                 controller.reset();
@@ -132,8 +192,6 @@ pub struct PortEvent {
     pub command: Option<ControllerCommand>,
     /// Why the finished message got the error answer, if it did.
     pub refused: Option<Refusal>,
-    /// A request the controller cannot carry out (answered, not acted on).
-    pub unsupported: Option<Unsupported>,
 }
 
 /// The DCP port of the drive: receiver, slave and the mapping to the controller.
@@ -160,6 +218,18 @@ impl DcpPort {
     /// Sets the car mass of the load weighing, kg (used from the next travel).
     pub fn set_car_mass(&mut self, m_car_kg: f32) {
         self.m_car_kg = m_car_kg;
+    }
+
+    /// The car mass of the load weighing, kg.
+    pub fn car_mass_kg(&self) -> f32 {
+        self.m_car_kg
+    }
+
+    /// Restarts the slave speaking DCP variant `mode` (disabled, position
+    /// unknown, no message half received).
+    pub fn set_mode(&mut self, mode: Mode) {
+        self.receiver = FrameReceiver::default();
+        self.slave = Slave::new(SlaveConfig { mode, ..*self.slave.config() });
     }
 
     /// One byte received at `now_us`, with the drive's status now.
@@ -205,10 +275,7 @@ impl DcpPort {
     }
 
     fn map(&self, request: Request, event: &mut PortEvent) {
-        match controller_command(request, &self.geometry, self.m_car_kg) {
-            Ok(command) => event.command = Some(command),
-            Err(e) => event.unsupported = Some(e),
-        }
+        event.command = Some(controller_command(request, &self.geometry, self.m_car_kg));
     }
 }
 
@@ -232,6 +299,34 @@ pub struct LiftDrive {
     config: DriveConfig,
     state: DriveState,
     speed_radps: f32,
+    /// What the service port reads and changes.
+    service: ServiceState,
+    /// The service request line being received.
+    line: [u8; MAX_LINE + 1],
+    line_len: usize,
+    /// The chain model compensation strategies are installed on.
+    chain: Option<ChainModel>,
+    /// The rotor alignment's encoder offset, counts (kept in the record).
+    encoder_offset_counts: u32,
+}
+
+/// Most service-port bytes one step takes (it stops after a line's end).
+pub const MAX_SERVICE_BYTES_PER_STEP: usize = 8;
+
+/// Longest service answer with its `\r\n`, bytes.
+pub const MAX_SERVICE_REPLY: usize = MAX_ANSWER + 2;
+
+/// The answer to one service request line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServiceReply {
+    /// The answer line and its `\r\n` (the first `len` bytes).
+    pub bytes: [u8; MAX_SERVICE_REPLY],
+    /// Bytes used.
+    pub len: usize,
+    /// The parameters to write to flash (a `save`): the caller writes
+    /// them and, if that fails, sends `error flash-write\r\n` instead of
+    /// this answer.
+    pub save: Option<DriveParameters>,
 }
 
 /// What one [`LiftDrive::step`] did besides the controller step.
@@ -242,15 +337,149 @@ pub struct StepDcp {
     /// Reply bytes used.
     pub reply_len: usize,
     /// A command applied to the controller this period, and its result.
-    pub applied: Option<(ControllerCommand, Result<(), CommandError>)>,
+    pub applied: Option<(ControllerCommand, Result<(), ApplyError>)>,
     /// A message got the error answer this period.
     pub refused: Option<Refusal>,
 }
 
 impl LiftDrive {
     /// The application layer of `controller` with `port`; `config` is the controller's.
+    /// Its service port sets the strategy and the DCP variant, and cannot
+    /// save (see [`LiftDrive::set_savable`]); no parameters are installed
+    /// (see [`LiftDrive::install_parameters`]).
     pub fn new(controller: Controller, port: DcpPort, config: &DriveConfig) -> Self {
-        Self { controller, port, config: *config, state: DriveState::Idle, speed_radps: 0.0 }
+        let service = ServiceState {
+            strategy: Strategy::Off,
+            table: HarmonicTable::default(),
+            m_car_kg: port.car_mass_kg(),
+            faults: [0; FAULT_LOG],
+            fault_count: 0,
+            state_code: DriveState::Idle.code(),
+            speed_radps: 0.0,
+            travelling: false,
+            strategy_settable: true,
+            dcp_mode: port.slave().config().mode,
+            params: ParamsStatus::None,
+            savable: false,
+            save_requested: false,
+        };
+        Self {
+            controller,
+            port,
+            config: *config,
+            state: DriveState::Idle,
+            speed_radps: 0.0,
+            service,
+            line: [0; MAX_LINE + 1],
+            line_len: 0,
+            chain: None,
+            encoder_offset_counts: 0,
+        }
+    }
+
+    /// Installs the start-up parameters (the stored record's, or the
+    /// defaults) on the drive model `chain`: the compensation strategy with
+    /// its table, the car mass, the DCP variant; `status` is what became of
+    /// the stored record (`get params`).
+    pub fn install_parameters(&mut self, parameters: &DriveParameters, chain: &ChainModel, status: ParamsStatus) {
+        self.chain = Some(*chain);
+        self.controller.install_compensation(parameters.strategy, &parameters.table, chain);
+        self.port.set_car_mass(parameters.m_car_kg);
+        self.port.set_mode(parameters.dcp_mode);
+        self.encoder_offset_counts = parameters.encoder_offset_counts;
+        self.service.strategy = parameters.strategy;
+        self.service.table = parameters.table;
+        self.service.m_car_kg = parameters.m_car_kg;
+        self.service.dcp_mode = parameters.dcp_mode;
+        self.service.params = status;
+    }
+
+    /// Whether the service port's `save` is carried out (the caller has a flash store).
+    pub fn set_savable(&mut self, savable: bool) {
+        self.service.savable = savable;
+    }
+
+    /// The parameters as they stand: the strategy, the table (after a
+    /// travel with `Strategy::Adaptive` or `Strategy::CarObserver`, what it
+    /// learned: the calibration of `Strategy::Table`; otherwise the table
+    /// installed), the car mass, the encoder offset, the DCP variant.
+    pub fn parameters(&self) -> DriveParameters {
+        let table = match self.controller.compensation() {
+            Some(c) => {
+                let learned = c.learned_table();
+                let learns = matches!(c.strategy(), Strategy::Adaptive | Strategy::CarObserver);
+                let n = learned.len.min(learned.torque_nm.len());
+                if learns && learned.torque_nm[..n].iter().any(|u| u.re != 0.0 || u.im != 0.0) {
+                    learned
+                } else {
+                    c.table()
+                }
+            }
+            None => self.service.table,
+        };
+        DriveParameters {
+            strategy: self.service.strategy,
+            table,
+            m_car_kg: self.port.car_mass_kg(),
+            encoder_offset_counts: self.encoder_offset_counts,
+            dcp_mode: self.port.slave().config().mode,
+        }
+    }
+
+    /// One byte of the service port; the answer when it ends a request line.
+    /// A `set` takes effect at once (refused during a travel): the strategy
+    /// is installed over the table in use, the car mass is the next
+    /// travel's, a new DCP variant restarts the slave.
+    pub fn service_byte(&mut self, byte: u8) -> Option<ServiceReply> {
+        if byte != b'\n' {
+            // A line too long is answered `error line` once it ends.
+            if self.line_len < self.line.len() {
+                self.line[self.line_len] = byte;
+                self.line_len += 1;
+            }
+            return None;
+        }
+        let parameters = self.parameters();
+        let s = &mut self.service;
+        s.state_code = self.state.code();
+        s.speed_radps = self.speed_radps;
+        s.travelling = self.state.pwm_enabled() || self.state.brake_released();
+        s.table = parameters.table;
+        s.m_car_kg = parameters.m_car_kg;
+        s.dcp_mode = parameters.dcp_mode;
+        s.strategy_settable = self.chain.is_some();
+        let before = *s;
+        let answer = crate::service::answer(&self.line[..self.line_len], s);
+        self.line_len = 0;
+        let after = *s;
+        if after.strategy != before.strategy {
+            if let Some(chain) = self.chain {
+                self.controller.install_compensation(after.strategy, &after.table, &chain);
+            }
+        }
+        if after.m_car_kg != before.m_car_kg {
+            self.port.set_car_mass(after.m_car_kg);
+        }
+        if after.dcp_mode != before.dcp_mode {
+            self.port.set_mode(after.dcp_mode);
+        }
+        let save = if after.save_requested {
+            self.service.save_requested = false;
+            Some(self.parameters())
+        } else {
+            None
+        };
+        let mut reply = ServiceReply { bytes: [0; MAX_SERVICE_REPLY], len: 0, save };
+        let text = answer.as_bytes();
+        reply.bytes[..text.len()].copy_from_slice(text);
+        reply.bytes[text.len()..text.len() + 2].copy_from_slice(b"\r\n");
+        reply.len = text.len() + 2;
+        Some(reply)
+    }
+
+    /// Logs a fault code in the service port's fault log.
+    pub fn log_fault(&mut self, code: u8) {
+        self.service.log_fault(code);
     }
 
     /// The controller.
@@ -295,6 +524,11 @@ impl LiftDrive {
     /// The controller part of a period.
     pub fn control_step(&mut self, sensors: &SensorFrame) -> ControlOutput {
         let output = self.controller.step(sensors);
+        if let DriveState::Tripped(fault) = output.state {
+            if self.state != output.state {
+                self.service.log_fault(fault.code());
+            }
+        }
         self.state = output.state;
         self.speed_radps = output.telemetry.speed_radps;
         output
@@ -383,22 +617,67 @@ mod tests {
         assert_eq!(c.state(), DriveState::Idle);
     }
 
+    /// Gives the port position `position_mm` over the channel of stop messages.
+    fn give_position(p: &mut DcpPort, t: &mut u32, position_mm: i32, drive: &DriveStatus) {
+        let mut channel = position_message(position_mm).to_vec();
+        for _ in 0..9 {
+            let mut comm = [0u8; 2];
+            for slot in comm.iter_mut() {
+                if !channel.is_empty() {
+                    *slot = channel.remove(0);
+                }
+            }
+            let frame = MasterFrame { command: command_byte(Kind::Stop, false), data: [0, 0], comm };
+            send(p, t, frame, drive);
+        }
+        assert_eq!(p.slave().position_mm(), Some(position_mm));
+    }
+
     #[test]
-    fn a_speed_mode_travel_is_answered_but_not_carried_out() {
+    fn a_speed_mode_travel_becomes_a_speed_travel_to_the_shaft_end_then_crawl_and_stop() {
         let rig = reference_rig();
         let mut p = port();
         let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
+        let moving = drive_status(DriveState::Travel, -0.3 / rig.sheave_radius_m, true, &rig);
         let mut t = 0;
-        let speed = MasterFrame { command: command_byte(Kind::SpeedMode, false), data: Speed::Vi.data(), comm: [0; 2] };
-        send(&mut p, &mut t, speed, &idle);
-        let travel = MasterFrame { command: command_byte(Kind::Travel, false), data: [0, 0], comm: [0; 2] };
-        let event = send(&mut p, &mut t, travel, &idle);
+        // Without the position: answered, not accepted, no travel.
+        let speed =
+            |down| MasterFrame { command: command_byte(Kind::SpeedMode, down), data: Speed::Vi.data(), comm: [0; 2] };
+        let travel = |down| MasterFrame { command: command_byte(Kind::Travel, down), data: [0, 0], comm: [0; 2] };
+        send(&mut p, &mut t, speed(true), &idle);
+        let event = send(&mut p, &mut t, travel(true), &idle);
         assert_eq!(event.command, None);
-        assert_eq!(event.unsupported, Some(Unsupported::SpeedMode));
-        // Next message: the drive did not start, so the travel is not accepted.
-        let event = send(&mut p, &mut t, travel, &idle);
-        let status = event.reply.unwrap()[0];
-        assert_eq!(status & crate::dcp::slave::S5_ACCEPTED, 0);
+        assert_eq!(event.reply.unwrap()[0] & crate::dcp::slave::S5_ACCEPTED, 0);
+        let idle_message = MasterFrame { command: command_byte(Kind::Idle, false), data: [0, 0], comm: [0; 2] };
+        send(&mut p, &mut t, idle_message, &idle);
+        give_position(&mut p, &mut t, 1200, &idle);
+        send(&mut p, &mut t, speed(true), &idle);
+        let event = send(&mut p, &mut t, travel(true), &idle);
+        let Some(ControllerCommand::SpeedTravel(command)) = event.command else { panic!("{event:?}") };
+        assert_eq!(command.direction, Direction::Down);
+        assert_eq!(command.speed_mps, 0.3);
+        assert_eq!(command.lw_start_m, 2.2);
+        assert_eq!(command.lw_limit_m, 1.0, "down to the lowest landing");
+        let mut c = Controller::new(&rig);
+        assert_eq!(apply(ControllerCommand::SpeedTravel(command), &mut c), Ok(()));
+        assert_eq!(c.state(), DriveState::PreTorque);
+        // The deceleration point (no crawl speed in this port: the stop).
+        let decelerate = MasterFrame { command: command_byte(Kind::Decelerate, true), data: [0, 0], comm: [0; 2] };
+        let event = send(&mut p, &mut t, decelerate, &moving);
+        assert_eq!(event.command, Some(ControllerCommand::Stop));
+        assert_eq!(apply(ControllerCommand::Stop, &mut c), Ok(()));
+        assert_eq!(
+            apply(ControllerCommand::Speed(0.05), &mut c),
+            Err(ApplyError::Speed(SpeedCommandError::NoSpeedTravel))
+        );
+        // Up: the limit is the highest landing.
+        let request = Request::Speed { direction: Travel::Up, speed: Speed::V4, speed_mps: 0.4, start_position_mm: 0 };
+        let ControllerCommand::SpeedTravel(up) = controller_command(request, &p.geometry, 70.5) else { panic!() };
+        assert_eq!((up.lw_start_m, up.lw_limit_m), (1.0, 7.6));
+        assert_eq!(
+            controller_command(Request::Crawl { speed_mps: 0.05 }, &p.geometry, 70.5),
+            ControllerCommand::Speed(0.05)
+        );
     }
 
     #[test]

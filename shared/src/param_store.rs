@@ -1,17 +1,21 @@
 //! The drive's parameters as one versioned, CRC-checked record: what the
 //! firmware keeps in flash across power cycles (the compensation strategy,
 //! the learned harmonic table, the car mass of the load weighing, the rotor
-//! alignment's encoder offset) and refuses whole when any check fails.
+//! alignment's encoder offset, the DCP variant) and refuses whole when any
+//! check fails.
 //!
 //! Record layout, little-endian: `magic` ("LDP", 3 bytes), `version` (1),
 //! `length` of the body (u16), body, CRC-32 (IEEE 802.3: polynomial
 //! 0x04C11DB7 reflected, init and final XOR 0xFFFFFFFF) of everything
 //! before it. Body: strategy code (u8), table length n (u8, at most
 //! [`MAX_HARMONICS`]), n times (order u16, re f32, im f32 in N m), car mass
-//! (f32, kg), encoder offset (u32, counts). A record is used only if magic,
-//! version, length, CRC, strategy code, table length and every value
-//! (finite numbers, car mass positive) check; otherwise the drive runs with
-//! its defaults and says why ([`RecordError`]).
+//! (f32, kg), encoder offset (u32, counts), DCP variant (u8: 3 or 4; version
+//! 2 on; a version 1 record, without it, reads as DCP4). A record is used
+//! only if magic, version, length, CRC, strategy code, table length and
+//! every value (finite numbers, car mass positive, DCP 3 or 4) check;
+//! otherwise the drive runs with its defaults and says why ([`RecordError`]).
+
+use crate::dcp::Mode;
 
 use crate::ripple::complex::Complex;
 use crate::ripple::harmonics::{HarmonicTable, MAX_HARMONICS};
@@ -20,11 +24,13 @@ use crate::ripple::Strategy;
 /// First bytes of a record.
 pub const MAGIC: [u8; 3] = *b"LDP";
 /// The record version this code reads and writes.
-pub const VERSION: u8 = 1;
+pub const VERSION: u8 = 2;
+/// The older version this code still reads (no DCP variant: DCP4).
+pub const VERSION_1: u8 = 1;
 /// Header bytes (magic, version, body length).
 const HEADER: usize = 6;
 /// Largest body, bytes.
-const MAX_BODY: usize = 2 + MAX_HARMONICS * 10 + 8;
+const MAX_BODY: usize = 2 + MAX_HARMONICS * 10 + 9;
 /// Largest record, bytes.
 pub const MAX_RECORD: usize = HEADER + MAX_BODY + 4;
 
@@ -52,6 +58,8 @@ pub struct DriveParameters {
     pub m_car_kg: f32,
     /// Encoder count at electrical angle zero from the rotor alignment, counts.
     pub encoder_offset_counts: u32,
+    /// The DCP variant the lift controller speaks.
+    pub dcp_mode: Mode,
 }
 
 /// Why a stored record is refused.
@@ -73,7 +81,7 @@ impl DriveParameters {
     /// The record of these parameters; its length in `out`.
     pub fn encode(&self, out: &mut [u8; MAX_RECORD]) -> usize {
         let n = self.table.len.min(MAX_HARMONICS);
-        let body_len = 2 + n * 10 + 8;
+        let body_len = 2 + n * 10 + 9;
         out[..3].copy_from_slice(&MAGIC);
         out[3] = VERSION;
         out[4..6].copy_from_slice(&(body_len as u16).to_le_bytes());
@@ -90,6 +98,10 @@ impl DriveParameters {
         }
         put(&self.m_car_kg.to_le_bytes());
         put(&self.encoder_offset_counts.to_le_bytes());
+        put(&[match self.dcp_mode {
+            Mode::Dcp3 => 3,
+            Mode::Dcp4 => 4,
+        }]);
         let end = HEADER + body_len;
         let crc = crc32(&out[..end]);
         out[end..end + 4].copy_from_slice(&crc.to_le_bytes());
@@ -104,9 +116,12 @@ impl DriveParameters {
         if record[..3] != MAGIC {
             return Err(RecordError::Magic);
         }
-        if record[3] != VERSION {
-            return Err(RecordError::Version(record[3]));
+        let version = record[3];
+        if version != VERSION && version != VERSION_1 {
+            return Err(RecordError::Version(version));
         }
+        // The DCP variant byte, from version 2 on.
+        let mode_len = if version == VERSION_1 { 0 } else { 1 };
         let body_len = u16::from_le_bytes([record[4], record[5]]) as usize;
         let end = HEADER + body_len;
         if body_len > MAX_BODY {
@@ -122,7 +137,7 @@ impl DriveParameters {
         let body = &record[HEADER..end];
         let strategy = Strategy::from_code(body[0]).ok_or(RecordError::Content)?;
         let n = body[1] as usize;
-        if n > MAX_HARMONICS || body_len != 2 + n * 10 + 8 {
+        if n > MAX_HARMONICS || body_len != 2 + n * 10 + 8 + mode_len {
             return Err(RecordError::Content);
         }
         let f32_at = |i: usize| f32::from_le_bytes([body[i], body[i + 1], body[i + 2], body[i + 3]]);
@@ -143,7 +158,13 @@ impl DriveParameters {
             return Err(RecordError::Content);
         }
         let encoder_offset_counts = u32::from_le_bytes([body[at + 4], body[at + 5], body[at + 6], body[at + 7]]);
-        Ok(Self { strategy, table, m_car_kg, encoder_offset_counts })
+        let dcp_mode = match body.get(at + 8).copied() {
+            None => Mode::Dcp4,
+            Some(3) => Mode::Dcp3,
+            Some(4) => Mode::Dcp4,
+            Some(_) => return Err(RecordError::Content),
+        };
+        Ok(Self { strategy, table, m_car_kg, encoder_offset_counts, dcp_mode })
     }
 }
 
@@ -158,7 +179,13 @@ mod tests {
         for (k, u) in table.torque_nm.iter_mut().take(5).enumerate() {
             *u = Complex::new(0.1 * k as f32 - 0.2, -1.5 + k as f32);
         }
-        DriveParameters { strategy: Strategy::Adaptive, table, m_car_kg: 70.5, encoder_offset_counts: 12_345 }
+        DriveParameters {
+            strategy: Strategy::Adaptive,
+            table,
+            m_car_kg: 70.5,
+            encoder_offset_counts: 12_345,
+            dcp_mode: Mode::Dcp3,
+        }
     }
 
     #[test]
@@ -172,7 +199,7 @@ mod tests {
         let p = sample();
         let mut buf = [0u8; MAX_RECORD];
         let n = p.encode(&mut buf);
-        assert_eq!(n, HEADER + 2 + 5 * 10 + 8 + 4);
+        assert_eq!(n, HEADER + 2 + 5 * 10 + 9 + 4);
         assert_eq!(DriveParameters::decode(&buf[..n]), Ok(p));
         let mut empty = p;
         empty.table = HarmonicTable::default();
@@ -189,8 +216,8 @@ mod tests {
         bad[0] = b'X';
         assert_eq!(DriveParameters::decode(&bad[..n]), Err(RecordError::Magic));
         let mut bad = buf;
-        bad[3] = 2;
-        assert_eq!(DriveParameters::decode(&bad[..n]), Err(RecordError::Version(2)));
+        bad[3] = 3;
+        assert_eq!(DriveParameters::decode(&bad[..n]), Err(RecordError::Version(3)));
         assert_eq!(DriveParameters::decode(&buf[..n - 1]), Err(RecordError::Truncated));
         assert_eq!(DriveParameters::decode(&buf[..5]), Err(RecordError::Truncated));
         // A valid CRC over invalid content: a NaN amplitude.
@@ -199,6 +226,28 @@ mod tests {
         let crc = crc32(&bad[..n - 4]);
         bad[n - 4..n].copy_from_slice(&crc.to_le_bytes());
         assert_eq!(DriveParameters::decode(&bad[..n]), Err(RecordError::Content));
+        // A DCP variant other than 3 or 4.
+        let mut bad = buf;
+        bad[n - 5] = 5;
+        let crc = crc32(&bad[..n - 4]);
+        bad[n - 4..n].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(DriveParameters::decode(&bad[..n]), Err(RecordError::Content));
+    }
+
+    #[test]
+    fn a_version_1_record_reads_as_dcp4() {
+        // Version 1: the same body without the DCP byte.
+        let mut buf = [0u8; MAX_RECORD];
+        let n = sample().encode(&mut buf);
+        let mut v1 = [0u8; MAX_RECORD];
+        v1[..n - 5].copy_from_slice(&buf[..n - 5]);
+        v1[3] = VERSION_1;
+        let body_len = u16::from_le_bytes([buf[4], buf[5]]) - 1;
+        v1[4..6].copy_from_slice(&body_len.to_le_bytes());
+        let crc = crc32(&v1[..n - 5]);
+        v1[n - 5..n - 1].copy_from_slice(&crc.to_le_bytes());
+        let expected = DriveParameters { dcp_mode: Mode::Dcp4, ..sample() };
+        assert_eq!(DriveParameters::decode(&v1[..n - 1]), Ok(expected));
     }
 
     proptest! {

@@ -130,6 +130,95 @@ impl SCurve {
     }
 }
 
+/// A jerk-limited change of speed (the speed-mode travels): from a point
+/// with speed `v0` (m/s) and acceleration `a0` (m/s^2) to a constant speed
+/// `v1` (m/s, >= 0). First the acceleration is brought to zero with the jerk
+/// limit (the speed keeps changing by `a0 |a0| / 2j`), then the speed goes to
+/// `v1` with jerk `+-j`, acceleration up to `a_max` and `-+j` (four phases,
+/// some of zero length); after the ramp the reference cruises at `v1`.
+/// Positions count from the ramp's start point. Closed form like [`SCurve`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedRamp {
+    /// Start time (s) and state at the start of each of the 4 phases, plus the end.
+    starts: [(f32, ProfilePoint); 5],
+    jerks: [f32; 4],
+}
+
+impl SpeedRamp {
+    /// Plans the change from `from` (position, m; speed, m/s; acceleration,
+    /// m/s^2) to speed `v1` (m/s, >= 0) with acceleration and jerk limits
+    /// `a_max` (m/s^2) and `j_max` (m/s^3).
+    pub fn plan(from: ProfilePoint, v1: f32, a_max: f32, j_max: f32) -> Result<Self, ProfileError> {
+        let valid = |x: f32| x > 0.0 && x.is_finite();
+        let finite = from.position_m.is_finite() && from.speed_mps.is_finite() && from.accel_mps2.is_finite();
+        if !(valid(a_max) && valid(j_max) && finite && v1 >= 0.0 && v1.is_finite()) {
+            return Err(ProfileError::NonPositiveLimit);
+        }
+        // Phase 0: acceleration to zero.
+        let a0 = from.accel_mps2;
+        let (j0, t0) = if a0 > 0.0 {
+            (-j_max, a0 / j_max)
+        } else if a0 < 0.0 {
+            (j_max, -a0 / j_max)
+        } else {
+            (0.0, 0.0)
+        };
+        let level = evolve(from, j0, t0);
+        // Phases 1-3: the speed change.
+        let dv = v1 - level.speed_mps;
+        let (sign, magnitude) = if dv < 0.0 { (-1.0f32, -dv) } else { (1.0f32, dv) };
+        let (a_peak, t_const) = if magnitude * j_max < a_max * a_max {
+            (sqrt_newton(magnitude * j_max), 0.0)
+        } else {
+            (a_max, magnitude / a_max - a_max / j_max)
+        };
+        let t_jerk = a_peak / j_max;
+        let durations = [t0, t_jerk, t_const.max(0.0), t_jerk];
+        let jerks = [j0, sign * j_max, 0.0, -sign * j_max];
+        let mut starts = [(0.0f32, from); 5];
+        for phase in 0..4 {
+            let (t, p) = starts[phase];
+            starts[phase + 1] = (t + durations[phase], evolve(p, jerks[phase], durations[phase]));
+        }
+        // The end is at `v1` with no acceleration: pin it against rounding.
+        starts[4].1.speed_mps = v1;
+        starts[4].1.accel_mps2 = 0.0;
+        Ok(Self { starts, jerks })
+    }
+
+    /// Duration of the change, s.
+    pub fn duration_s(&self) -> f32 {
+        self.starts[4].0
+    }
+
+    /// The point where the change ends (speed `v1`, no acceleration).
+    pub fn end(&self) -> ProfilePoint {
+        self.starts[4].1
+    }
+
+    /// The reference at `t_s` seconds after the start: the start point
+    /// before 0, cruising at the final speed after the end.
+    pub fn at(&self, t_s: f32) -> ProfilePoint {
+        if t_s <= 0.0 {
+            return self.starts[0].1;
+        }
+        let (t_end, end) = self.starts[4];
+        if t_s >= t_end {
+            return ProfilePoint {
+                position_m: end.position_m + end.speed_mps * (t_s - t_end),
+                speed_mps: end.speed_mps,
+                accel_mps2: 0.0,
+            };
+        }
+        let mut phase = 3;
+        while self.starts[phase].0 > t_s {
+            phase -= 1;
+        }
+        let (t0, p0) = self.starts[phase];
+        evolve(p0, self.jerks[phase], t_s - t0)
+    }
+}
+
 /// State after `dt` seconds of constant jerk `j` from `p`.
 fn evolve(p: ProfilePoint, j: f32, dt: f32) -> ProfilePoint {
     ProfilePoint {
@@ -186,6 +275,75 @@ mod tests {
     fn rejects_bad_limits() {
         assert_eq!(SCurve::plan(-1.0, 0.4, 0.5, 1.0), Err(ProfileError::NonPositiveLimit));
         assert_eq!(SCurve::plan(1.0, f32::NAN, 0.5, 1.0), Err(ProfileError::NonPositiveLimit));
+    }
+
+    fn check_ramp(ramp: &SpeedRamp, a: f32, j: f32) {
+        let dt = 1.0e-3f32;
+        let mut t = 0.0f32;
+        let mut previous = ramp.at(0.0);
+        while t < ramp.duration_s() + 0.05 {
+            t += dt;
+            let p = ramp.at(t);
+            assert!(p.accel_mps2.abs() <= a * 1.0001, "accel {p:?} at {t}");
+            let jerk = (p.accel_mps2 - previous.accel_mps2) / dt;
+            assert!(jerk.abs() <= j * 1.01, "jerk {jerk} at {t}");
+            // Position is the integral of the speed (trapezoid over 1 ms).
+            let integral = previous.position_m + 0.5 * (previous.speed_mps + p.speed_mps) * dt;
+            assert!((p.position_m - integral).abs() < 1e-6, "position {p:?} vs {integral} at {t}");
+            previous = p;
+        }
+    }
+
+    #[test]
+    fn a_speed_ramp_from_rest_reaches_the_speed_with_the_limits_and_then_cruises() {
+        let ramp = SpeedRamp::plan(ProfilePoint::default(), 0.4, 0.5, 1.0).unwrap();
+        check_ramp(&ramp, 0.5, 1.0);
+        // Half of the S-curve's run-up: 0.5 s of jerk, 0.3 s at 0.5 m/s^2, 0.5 s of jerk.
+        assert!((ramp.duration_s() - 1.3).abs() < 1e-5, "{}", ramp.duration_s());
+        // Distance of the run-up: half of v (v/a + a/j).
+        assert!((ramp.end().position_m - 0.26).abs() < 1e-5, "{:?}", ramp.end());
+        let later = ramp.at(ramp.duration_s() + 2.0);
+        assert_eq!(later.speed_mps, 0.4);
+        assert!((later.position_m - 1.06).abs() < 1e-5);
+        // A small change never reaches the acceleration limit: a_peak = sqrt(dv j).
+        let small = SpeedRamp::plan(ProfilePoint::default(), 0.04, 0.5, 1.0).unwrap();
+        check_ramp(&small, 0.5, 1.0);
+        assert!((small.duration_s() - 2.0 * 0.2).abs() < 1e-5);
+    }
+
+    #[test]
+    fn a_speed_ramp_from_an_acceleration_first_levels_it_then_slows_down_to_rest() {
+        // Mid-acceleration: 0.2 m/s at 0.5 m/s^2, down to crawl then to rest.
+        let from = ProfilePoint { position_m: 0.3, speed_mps: 0.2, accel_mps2: 0.5 };
+        let ramp = SpeedRamp::plan(from, 0.05, 0.5, 1.0).unwrap();
+        check_ramp(&ramp, 0.5, 1.0);
+        // The acceleration is levelled first: the speed rises by a^2 / 2j = 0.125.
+        let top = ramp.at(0.5);
+        assert!((top.speed_mps - 0.325).abs() < 1e-5 && top.accel_mps2.abs() < 1e-5, "{top:?}");
+        assert_eq!(ramp.end().speed_mps, 0.05);
+        let stop = SpeedRamp::plan(ramp.end(), 0.0, 0.5, 1.0).unwrap();
+        check_ramp(&stop, 0.5, 1.0);
+        let end = stop.at(stop.duration_s() + 1.0);
+        assert_eq!(end.speed_mps, 0.0);
+        // From 0.05 m/s: a_peak = sqrt(0.05), distance v a_peak / j... = 0.05 * sqrt(0.05).
+        let expected = ramp.end().position_m + 0.05 * sqrt_newton(0.05);
+        assert!((end.position_m - expected).abs() < 1e-5, "{end:?} vs {expected}");
+        // Monotonic speed down from the top: never below the target on the way.
+        let mut t = 0.5;
+        while t < ramp.duration_s() {
+            assert!(ramp.at(t).speed_mps >= 0.05 - 1e-5);
+            t += 0.01;
+        }
+    }
+
+    #[test]
+    fn a_speed_ramp_refuses_bad_limits() {
+        let rest = ProfilePoint::default();
+        assert_eq!(SpeedRamp::plan(rest, -0.1, 0.5, 1.0), Err(ProfileError::NonPositiveLimit));
+        assert_eq!(SpeedRamp::plan(rest, 0.1, 0.0, 1.0), Err(ProfileError::NonPositiveLimit));
+        assert_eq!(SpeedRamp::plan(rest, f32::NAN, 0.5, 1.0), Err(ProfileError::NonPositiveLimit));
+        let bad = ProfilePoint { speed_mps: f32::INFINITY, ..rest };
+        assert_eq!(SpeedRamp::plan(bad, 0.1, 0.5, 1.0), Err(ProfileError::NonPositiveLimit));
     }
 
     #[test]

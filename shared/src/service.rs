@@ -15,13 +15,20 @@
 //! | `get table` | `table <n> <order> <re N m> <im N m> ...` (numbers in Rust's shortest round-trip form) |
 //! | `get faults` | `faults <n> <code> ...` (oldest first, the fault codes of `supervisor::Fault`) |
 //! | `get state` | `state <code> speed <rad/s>` (`DriveState::code`) |
+//! | `get dcp-mode` | `dcp-mode <dcp3\|dcp4>` (the DCP variant the slave speaks) |
+//! | `set dcp-mode <dcp3\|dcp4>` | `ok dcp-mode <name>` (the slave restarts: disabled, position unknown) |
+//! | `get params` | `params stored`, `params none` (defaults), `params refused <reason>` or `params unreadable`: what became of the stored record at start-up |
+//! | `save` | `ok saved` once the parameters (strategy, the table in use, learned or not, car mass, encoder offset, DCP variant) are written to flash; `error flash-write` if the write failed |
 //!
-//! Anything else is answered `error <reason>`, never acted on. A `set` is
-//! refused while a travel runs (`error busy`); a drive that cannot install
-//! another strategy answers `set strategy` with `error unsupported`.
+//! Anything else is answered `error <reason>`, never acted on. A `set` or
+//! `save` is refused while a travel runs (`error busy`); a drive that cannot
+//! install another strategy answers `set strategy` with `error unsupported`,
+//! one that cannot write its flash answers `save` so.
 
 use core::fmt::Write;
 
+use crate::dcp::Mode;
+use crate::param_store::RecordError;
 use crate::ripple::harmonics::HarmonicTable;
 use crate::ripple::Strategy;
 
@@ -49,6 +56,46 @@ pub enum Request {
     GetFaults,
     /// `get state`.
     GetState,
+    /// `get dcp-mode`.
+    GetDcpMode,
+    /// `set dcp-mode <dcp3|dcp4>`.
+    SetDcpMode(Mode),
+    /// `get params`.
+    GetParams,
+    /// `save`.
+    Save,
+}
+
+/// The name of a DCP variant on the service port.
+pub fn mode_name(mode: Mode) -> &'static str {
+    match mode {
+        Mode::Dcp3 => "dcp3",
+        Mode::Dcp4 => "dcp4",
+    }
+}
+
+/// What became of the stored parameter record at start-up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamsStatus {
+    /// None stored: the drive runs with its defaults.
+    None,
+    /// A record passed every check and is in use.
+    Stored,
+    /// A record was refused (the drive runs with its defaults).
+    Refused(RecordError),
+    /// The store could not be read (the drive runs with its defaults).
+    Unreadable,
+}
+
+/// The reason word of a refused record.
+pub fn record_error_word(e: RecordError) -> &'static str {
+    match e {
+        RecordError::Truncated => "truncated",
+        RecordError::Magic => "magic",
+        RecordError::Version(_) => "version",
+        RecordError::Crc => "crc",
+        RecordError::Content => "content",
+    }
 }
 
 /// Why a request line is refused.
@@ -64,8 +111,11 @@ pub enum RequestError {
     Mass,
     /// A `set` while a travel runs.
     Busy,
-    /// A request this drive does not carry out (see [`ServiceState::strategy_settable`]).
+    /// A request this drive does not carry out (see
+    /// [`ServiceState::strategy_settable`], [`ServiceState::savable`]).
     Unsupported,
+    /// A DCP variant that does not exist.
+    DcpMode,
 }
 
 impl RequestError {
@@ -78,6 +128,7 @@ impl RequestError {
             RequestError::Mass => "mass-out-of-range",
             RequestError::Busy => "busy",
             RequestError::Unsupported => "unsupported",
+            RequestError::DcpMode => "unknown-dcp-mode",
         }
     }
 }
@@ -96,6 +147,14 @@ pub fn parse(line: &[u8]) -> Result<Request, RequestError> {
         (Some("get"), Some("table"), None) => Request::GetTable,
         (Some("get"), Some("faults"), None) => Request::GetFaults,
         (Some("get"), Some("state"), None) => Request::GetState,
+        (Some("get"), Some("dcp-mode"), None) => Request::GetDcpMode,
+        (Some("get"), Some("params"), None) => Request::GetParams,
+        (Some("save"), None, None) => Request::Save,
+        (Some("set"), Some("dcp-mode"), Some(name)) => Request::SetDcpMode(match name {
+            "dcp3" => Mode::Dcp3,
+            "dcp4" => Mode::Dcp4,
+            _ => return Err(RequestError::DcpMode),
+        }),
         (Some("set"), Some("strategy"), Some(name)) => Request::SetStrategy(
             Strategy::ALL.iter().copied().find(|s| s.name() == name).ok_or(RequestError::Strategy)?,
         ),
@@ -135,6 +194,15 @@ pub struct ServiceState {
     pub travelling: bool,
     /// Whether `set strategy` is carried out (false: answered `error unsupported`).
     pub strategy_settable: bool,
+    /// The DCP variant the slave speaks.
+    pub dcp_mode: Mode,
+    /// What became of the stored record at start-up.
+    pub params: ParamsStatus,
+    /// Whether `save` is carried out (false: answered `error unsupported`).
+    pub savable: bool,
+    /// Set by a valid `save`: the caller writes the record, then clears it
+    /// (and answers `error flash-write` instead if the write fails).
+    pub save_requested: bool,
 }
 
 impl ServiceState {
@@ -182,10 +250,13 @@ impl Write for Answer {
 pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
     let mut out = Answer::new();
     let result = parse(line).and_then(|request| {
-        let is_set = matches!(request, Request::SetStrategy(_) | Request::SetMass(_));
+        let is_set =
+            matches!(request, Request::SetStrategy(_) | Request::SetMass(_) | Request::SetDcpMode(_) | Request::Save);
         if is_set && state.travelling {
             Err(RequestError::Busy)
-        } else if matches!(request, Request::SetStrategy(_)) && !state.strategy_settable {
+        } else if (matches!(request, Request::SetStrategy(_)) && !state.strategy_settable)
+            || (request == Request::Save && !state.savable)
+        {
             Err(RequestError::Unsupported)
         } else {
             Ok(request)
@@ -216,6 +287,21 @@ pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
             state.faults[..state.fault_count].iter().try_for_each(|c| write!(out, " {c}"))
         }
         Ok(Request::GetState) => write!(out, "state {} speed {:?}", state.state_code, state.speed_radps),
+        Ok(Request::GetDcpMode) => write!(out, "dcp-mode {}", mode_name(state.dcp_mode)),
+        Ok(Request::SetDcpMode(mode)) => {
+            state.dcp_mode = mode;
+            write!(out, "ok dcp-mode {}", mode_name(mode))
+        }
+        Ok(Request::GetParams) => match state.params {
+            ParamsStatus::None => write!(out, "params none"),
+            ParamsStatus::Stored => write!(out, "params stored"),
+            ParamsStatus::Refused(e) => write!(out, "params refused {}", record_error_word(e)),
+            ParamsStatus::Unreadable => write!(out, "params unreadable"),
+        },
+        Ok(Request::Save) => {
+            state.save_requested = true;
+            write!(out, "ok saved")
+        }
     };
     out
 }
@@ -238,6 +324,10 @@ mod tests {
             speed_radps: 0.0,
             travelling: false,
             strategy_settable: true,
+            dcp_mode: Mode::Dcp4,
+            params: ParamsStatus::Refused(RecordError::Crc),
+            savable: true,
+            save_requested: false,
         }
     }
 
@@ -263,6 +353,13 @@ mod tests {
         s.state_code = 3;
         s.speed_radps = 6.125;
         assert_eq!(ask("get state", &mut s), "state 3 speed 6.125");
+        assert_eq!(ask("get dcp-mode", &mut s), "dcp-mode dcp4");
+        assert_eq!(ask("set dcp-mode dcp3", &mut s), "ok dcp-mode dcp3");
+        assert_eq!(s.dcp_mode, Mode::Dcp3);
+        assert_eq!(ask("get params", &mut s), "params refused crc");
+        assert!(!s.save_requested);
+        assert_eq!(ask("save", &mut s), "ok saved");
+        assert!(s.save_requested);
     }
 
     #[test]
@@ -278,6 +375,8 @@ mod tests {
             ("set mass 1e9", "mass-out-of-range"),
             ("set  mass 3", "unknown-request"),
             ("gét state", "line"),
+            ("set dcp-mode dcp5", "unknown-dcp-mode"),
+            ("save now", "unknown-request"),
         ] {
             assert_eq!(ask(line, &mut s), std::format!("error {word}"), "{line}");
         }
@@ -285,7 +384,12 @@ mod tests {
         assert_eq!(answer(&long, &mut s).as_bytes(), b"error line");
         s.travelling = true;
         assert_eq!(ask("set mass 50", &mut s), "error busy");
+        assert_eq!(ask("set dcp-mode dcp3", &mut s), "error busy");
+        assert_eq!(ask("save", &mut s), "error busy");
         s.travelling = false;
+        s.savable = false;
+        assert_eq!(ask("save", &mut s), "error unsupported");
+        s.savable = true;
         s.strategy_settable = false;
         assert_eq!(ask("set strategy off", &mut s), "error unsupported");
         s.strategy_settable = true;

@@ -136,6 +136,10 @@ mod tests {
                 speed_radps: 0.0,
                 travelling: false,
                 strategy_settable: true,
+                dcp_mode: drive_core::dcp::Mode::Dcp4,
+                params: drive_core::service::ParamsStatus::None,
+                savable: false,
+                save_requested: false,
             };
             let mut line = Vec::new();
             let mut served = 0;

@@ -1,6 +1,10 @@
 //! `host-sim pil`: the plant in the simulator, the drive core in the
 //! emulated Cortex-M4F; every step checked bit for bit against the host
-//! build, and the cost of each step measured in instructions.
+//! build, and the cost of each step measured in instructions. With
+//! `--dcp`, the chip runs the drive's application layer and this side
+//! plays the lift controller on its DCP line ([`dcp`]).
+
+pub mod dcp;
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -56,6 +60,31 @@ pub struct PilArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Play the lift controller on the DCP line instead: the chip runs the
+    /// drive's application layer (DCP slave on its UART1, service port on
+    /// UART2, controller), and host-sim sends DCP4 travels to each of
+    /// `--landings` in turn from `--start-mm` (the position message, the
+    /// speed, the remaining distance, stop and idle, one message every
+    /// 15 ms), closed around the plant, every step checked bit for bit
+    /// against the host build. Prints a summary per travel and writes
+    /// `dcp_travels.csv`. `--steps`, `--direction` and `--compensation` do
+    /// not apply; `--m-car` is the car's mass and is set as the drive's load
+    /// weighing on the service port.
+    #[arg(long)]
+    pub dcp: bool,
+    /// With `--dcp`: the landings to travel to in turn, mm above the lowest
+    /// landing (within the rig's `[travel]`), comma separated.
+    #[arg(
+        long,
+        value_name = "MM,...",
+        value_delimiter = ',',
+        default_value = "1600,1300,2000",
+        allow_negative_numbers = true
+    )]
+    pub landings: Vec<i32>,
+    /// With `--dcp`: where the car starts, mm above the lowest landing.
+    #[arg(long = "start-mm", value_name = "MM", default_value_t = 1000.0, allow_negative_numbers = true)]
+    pub start_mm: f64,
 }
 
 /// Cost of one class of steps, instructions.
@@ -82,6 +111,9 @@ fn summarize(costs: impl Iterator<Item = f64>) -> Option<CostSummary> {
 pub fn run(rig: &RigConfig, args: &PilArgs) -> anyhow::Result<()> {
     let m_car = args.m_car_kg.unwrap_or_else(|| default_car_mass_kg(rig));
     check_open_range("--m-car", m_car, 0.0, 1.0e5)?;
+    if args.dcp {
+        return run_dcp(rig, args, m_car);
+    }
     anyhow::ensure!(
         (1..=10).contains(&args.icount_shift),
         "--icount-shift = {} is out of range: expected 1 to 10",
@@ -192,4 +224,193 @@ fn run_in(
     }
     csv.flush()?;
     Ok(())
+}
+
+/// One travel of `pil --dcp`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TravelSummary {
+    /// Where the car started, mm above the lowest landing.
+    pub from_mm: f64,
+    /// The target landing, mm.
+    pub target_mm: i32,
+    /// Where the car stopped, mm.
+    pub landed_mm: f64,
+    /// Control steps from the position message to the stop.
+    pub steps: u64,
+    /// Largest car speed measured by the drive, m/s.
+    pub peak_speed_mps: f64,
+}
+
+/// Checks the `--dcp` landings: inside the shaft of `shaft_mm` mm, each
+/// at least 10 mm from the one before (the first from `start_mm`).
+pub fn check_landings(landings: &[i32], start_mm: f64, shaft_mm: u32) -> anyhow::Result<()> {
+    anyhow::ensure!(!landings.is_empty(), "--landings is empty: expected at least one landing");
+    anyhow::ensure!(
+        start_mm.is_finite() && (0.0..=shaft_mm as f64).contains(&start_mm),
+        "--start-mm = {start_mm} is out of range: expected 0 to {shaft_mm} mm (the rig's [travel])"
+    );
+    let mut previous = start_mm;
+    for &landing in landings {
+        anyhow::ensure!(
+            (0..=shaft_mm as i64).contains(&(landing as i64)),
+            "--landings: {landing} mm is out of range: expected 0 to {shaft_mm} mm (the rig's [travel])"
+        );
+        anyhow::ensure!(
+            (landing as f64 - previous).abs() >= 10.0,
+            "--landings: {landing} mm is less than 10 mm from the car's position before it ({previous} mm)"
+        );
+        previous = landing as f64;
+    }
+    Ok(())
+}
+
+/// Runs `pil --dcp`.
+fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
+    use drive_core::dcp::command::{Mode, Speed};
+    use drive_core::service::ParamsStatus;
+
+    anyhow::ensure!(
+        args.compensation.strategy() == drive_core::ripple::Strategy::Off,
+        "--compensation does not apply with --dcp (the chip starts with its stored or default parameters)"
+    );
+    let (geometry, _) = dcp::geometry(rig);
+    check_landings(&args.landings, args.start_mm, geometry.shaft_travel_mm)?;
+    let out = output_dir(&args.out, args.force)?;
+    out.refuse_existing(["dcp_travels.csv"])?;
+    // QEMU's working directory (where the target would keep its flash file):
+    // fresh, so the chip starts with no stored parameters.
+    let chip_dir = out.path("chip");
+    std::fs::create_dir_all(&chip_dir).with_context(|| format!("cannot create {}", chip_dir.display()))?;
+    let elf = args.elf.clone().unwrap_or_else(dcp::default_elf);
+    let chip = dcp::Chip::launch(&elf, &args.qemu, &chip_dir)?;
+    let lw_start = geometry.lw_lowest_landing_m as f64 + args.start_mm / 1000.0;
+    let mut lift = dcp::Lift::new(rig, Some(chip), &dcp::default_parameters(rig), ParamsStatus::None, m_car, lw_start)?;
+    let (answer, _) = lift.ask(&format!("set mass {}", m_car as f32), 2_000)?;
+    anyhow::ensure!(answer.starts_with("ok mass"), "the drive refused the car mass: {answer}");
+
+    let drive = rig.drive_config();
+    let trips = args.landings.iter().map(|&target_mm| dcp::Trip { target_mm, speed: Speed::V4 }).collect();
+    let mut master = dcp::Master::new(Mode::Dcp4, trips, &drive);
+    // Each travel within its time at rated speed plus 10 s of sequence.
+    let mut budget = 0.0;
+    let mut from = args.start_mm;
+    for &landing in &args.landings {
+        budget += (landing as f64 - from).abs() / 1000.0 / drive.rated_speed_mps as f64 + 10.0;
+        from = landing as f64;
+    }
+    let max_steps = (budget * drive.current_loop_hz as f64) as u64;
+    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(max_steps) };
+    bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos} steps {elapsed_precise}")?);
+    bar.set_message("PIL, DCP");
+    let started = Instant::now();
+    let mut peak = 0.0f64;
+    let mut peaks = Vec::new();
+    let mut k = 0;
+    while master.phase() != dcp::Phase::Done {
+        anyhow::ensure!(k < max_steps, "the travels did not finish within {max_steps} steps");
+        let bytes = master.bytes(k, lift.position_mm());
+        let step = lift.step(&bytes, &[])?;
+        master.receive(&step.dcp_replies)?;
+        peak = peak.max((step.output.telemetry.speed_radps * drive.sheave_radius_m).abs() as f64);
+        if master.arrivals.len() > peaks.len() {
+            peaks.push(peak);
+            peak = 0.0;
+        }
+        k += 1;
+        if k % 1600 == 0 {
+            bar.set_position(k);
+        }
+    }
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+    let mut from = args.start_mm;
+    let summaries: Vec<TravelSummary> = master
+        .arrivals
+        .iter()
+        .zip(&peaks)
+        .map(|(a, &peak_speed_mps)| {
+            let s = TravelSummary {
+                from_mm: from,
+                target_mm: a.trip.target_mm,
+                landed_mm: a.position_mm,
+                steps: a.step - a.start_step,
+                peak_speed_mps,
+            };
+            from = a.position_mm;
+            s
+        })
+        .collect();
+    outln!(
+        "{k} control steps ({:.2} s) of DCP4 travels on the emulated Cortex-M4F in {wall:.1} s, m_car = {m_car} kg: \
+         every output, DCP reply and service answer bit-identical to the host build",
+        k as f64 / drive.current_loop_hz as f64
+    );
+    outln!(
+        "{:>7} {:>9} {:>9} {:>10} {:>9} {:>8} {:>8} {:>10}",
+        "travel",
+        "from mm",
+        "to mm",
+        "landed mm",
+        "error mm",
+        "steps",
+        "time s",
+        "peak m/s"
+    );
+    for (i, s) in summaries.iter().enumerate() {
+        outln!(
+            "{:>7} {:>9.1} {:>9} {:>10.2} {:>+9.2} {:>8} {:>8.2} {:>10.3}",
+            i + 1,
+            s.from_mm,
+            s.target_mm,
+            s.landed_mm,
+            s.landed_mm - s.target_mm as f64,
+            s.steps,
+            s.steps as f64 / drive.current_loop_hz as f64,
+            s.peak_speed_mps
+        );
+    }
+    let path = out.path("dcp_travels.csv");
+    let mut csv = std::io::BufWriter::new(
+        std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
+    );
+    writeln!(csv, "travel,from_mm,target_mm,landed_mm,error_mm,steps,time_s,peak_speed_mps")?;
+    for (i, s) in summaries.iter().enumerate() {
+        writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{}",
+            i + 1,
+            s.from_mm,
+            s.target_mm,
+            s.landed_mm,
+            s.landed_mm - s.target_mm as f64,
+            s.steps,
+            s.steps as f64 / drive.current_loop_hz as f64,
+            s.peak_speed_mps
+        )?;
+    }
+    csv.flush()?;
+    drop(csv);
+    drop(lift);
+    std::fs::remove_dir(&chip_dir).ok();
+    out.commit()?;
+    outln!("per travel: {}", args.out.join("dcp_travels.csv").display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn landings_outside_the_shaft_or_too_close_are_refused_by_name() {
+        assert!(check_landings(&[1600, 1300, 2000], 1000.0, 6600).is_ok());
+        let e = check_landings(&[7000], 1000.0, 6600).unwrap_err().to_string();
+        assert!(e.contains("--landings: 7000 mm is out of range"), "{e}");
+        let e = check_landings(&[1005], 1000.0, 6600).unwrap_err().to_string();
+        assert!(e.contains("less than 10 mm"), "{e}");
+        let e = check_landings(&[], 1000.0, 6600).unwrap_err().to_string();
+        assert!(e.contains("--landings is empty"), "{e}");
+        let e = check_landings(&[100], f64::NAN, 6600).unwrap_err().to_string();
+        assert!(e.contains("--start-mm"), "{e}");
+    }
 }

@@ -37,15 +37,19 @@
 //! - DCP3 speed travel: speed mode (`1001`, the speed bit), travel (`0111`),
 //!   at the deceleration point B1 cleared (`0101`: slow down to V0 crawl), at
 //!   the floor B2 cleared (`0001`: stop), then B0 cleared. Re-levelling
-//!   (`0011`) is a travel at VN.
+//!   (`0011`) is a travel at VN. The crawl is requested once per travel
+//!   phase the master enters (it repeats its message; the drive ignores a
+//!   crawl it already runs at); a travel slower than V0 keeps its speed;
+//!   without a V0 the deceleration point is the stop (short of the floor
+//!   rather than past it).
 //! - B0 cleared during a travel is a travel interruption: safe stop.
 //!   So is, conservatively, a reversed direction or a cleared stop switch
 //!   before a distance travel has arrived (the texts do not cover them).
 //!
 //! Position: the master sends the car position after each stop (channel
-//! message `I9`, see [`super::channel`]); a distance travel needs it (the
-//! drive derives its rope lengths and the shaft limits from it), so until
-//! the first one arrives distance travels are refused. A distance travel's
+//! message `I9`, see [`super::channel`]); a distance or speed travel needs
+//! it (the drive derives its rope lengths and the shaft limits from it), so
+//! until the first one arrives travels are refused (answered, S5 clear). A distance travel's
 //! arrival moves the drive's position to its target; a speed travel or a
 //! safe stop forgets it until the next position message.
 
@@ -149,7 +153,8 @@ pub enum Request {
         /// Car position at the start, mm above the lowest landing.
         start_position_mm: i32,
     },
-    /// A speed travel (DCP3, or inspection and re-levelling).
+    /// A speed travel (DCP3, or inspection and re-levelling) from
+    /// `start_position_mm` (mm above the lowest landing).
     Speed {
         /// Direction.
         direction: Travel,
@@ -157,9 +162,15 @@ pub enum Request {
         speed: Speed,
         /// Its car speed, m/s.
         speed_mps: f32,
+        /// Car position at the start, mm above the lowest landing.
+        start_position_mm: i32,
     },
-    /// Slow down to crawl speed V0 (DCP3 deceleration point).
-    Crawl,
+    /// Slow down to crawl speed V0 (DCP3 deceleration point), or stay at
+    /// the travel's speed if that is lower.
+    Crawl {
+        /// The car speed to go on at, m/s.
+        speed_mps: f32,
+    },
     /// Stop at the floor from crawl, brake applied (DCP3 stop).
     Stop,
     /// Stop now: inverter off, brake applied.
@@ -194,8 +205,8 @@ enum Phase {
     Enabled,
     /// A distance travel requested (`started` once the drive showed it running).
     Distance { direction: Travel, target_mm: i32, started: bool },
-    /// A speed travel requested or running.
-    SpeedTravel { direction: Travel, started: bool },
+    /// A speed travel requested or running at `speed_mps` (m/s).
+    SpeedTravel { direction: Travel, started: bool, speed_mps: f32 },
     /// Stopping at the end of a speed travel.
     Stopping,
     /// A travel ended or was refused: no new travel before a stop or idle message.
@@ -306,7 +317,9 @@ impl Slave {
             Phase::Distance { started, target_mm, .. } => (started, Some(target_mm)),
             Phase::SpeedTravel { started, .. } => (started, None),
             Phase::Stopping if !drive.travelling => {
+                // Where a speed travel ends is the master's business: forget the position.
                 self.phase = Phase::Done;
+                self.position_mm = None;
                 return;
             }
             _ => return,
@@ -377,13 +390,18 @@ impl Slave {
                     self.accepted = false;
                     return Ok(None);
                 };
+                // The drive's rope lengths (feed-forward) and shaft ends need the position.
+                let Some(start_position_mm) = self.position_mm else {
+                    self.accepted = false;
+                    return Ok(None);
+                };
                 if !drive.ready {
                     self.accepted = false;
                     return Ok(None);
                 }
                 self.accepted = true;
-                self.phase = Phase::SpeedTravel { direction, started: false };
-                Ok(Some(Request::Speed { direction, speed, speed_mps }))
+                self.phase = Phase::SpeedTravel { direction, started: false, speed_mps };
+                Ok(Some(Request::Speed { direction, speed, speed_mps, start_position_mm }))
             }
             (Kind::Travel | Kind::Relevel, Phase::SpeedTravel { direction: running, .. }) => {
                 if running != direction {
@@ -391,11 +409,19 @@ impl Slave {
                 }
                 Ok(None)
             }
-            (Kind::Decelerate, Phase::SpeedTravel { direction: running, .. }) => {
+            (Kind::Decelerate, Phase::SpeedTravel { direction: running, speed_mps, .. }) => {
                 if running != direction {
                     return Ok(Some(self.halt(StopReason::Inconsistent, drive)));
                 }
-                Ok(Some(Request::Crawl))
+                // Without a crawl speed, the deceleration point is the stop:
+                // short of the floor rather than past it.
+                match self.config.speeds_mps[Speed::V0.index()] {
+                    Some(crawl) => Ok(Some(Request::Crawl { speed_mps: crawl.min(speed_mps) })),
+                    None => {
+                        self.phase = Phase::Stopping;
+                        Ok(Some(Request::Stop))
+                    }
+                }
             }
             (Kind::Decelerate, Phase::Enabled) if self.config.mode == Mode::Dcp4 => {
                 let distance_mm = distance.unwrap_or(0);

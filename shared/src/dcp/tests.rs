@@ -231,25 +231,54 @@ fn a_reversed_direction_or_an_early_stop_switch_stops_the_travel() {
 fn a_dcp3_travel_runs_at_the_selected_speed_then_crawls_and_stops_on_command() {
     let mut s = slave(Mode::Dcp3);
     let mut m = Master::new();
-    m.send(&mut s, frame(Kind::Stop, true, [0, 0]), &idle_drive());
+    with_position(&mut s, &mut m, 3000);
     let out = m.send(&mut s, frame(Kind::SpeedMode, true, Speed::V3.data()), &idle_drive());
     assert_eq!(out.request, None);
     let out = m.send(&mut s, frame(Kind::Travel, true, [0, 0]), &idle_drive());
-    assert_eq!(out.request, Some(Request::Speed { direction: Travel::Down, speed: Speed::V3, speed_mps: 0.3 }));
+    let expected =
+        Request::Speed { direction: Travel::Down, speed: Speed::V3, speed_mps: 0.3, start_position_mm: 3000 };
+    assert_eq!(out.request, Some(expected));
     assert_eq!(m.send(&mut s, frame(Kind::Travel, true, [0, 0]), &moving_drive()).request, None);
     let out = m.send(&mut s, frame(Kind::Decelerate, true, [0, 0]), &moving_drive());
-    assert_eq!(out.request, Some(Request::Crawl));
+    assert_eq!(out.request, Some(Request::Crawl { speed_mps: 0.05 }));
     assert_eq!(out.reply.data, [0, 0], "no deceleration distance in DCP3");
     let out = m.send(&mut s, frame(Kind::Stop, true, [0, 0]), &moving_drive());
     assert_eq!(out.request, Some(Request::Stop));
     m.send(&mut s, frame(Kind::Stop, true, [0, 0]), &idle_drive());
     m.send(&mut s, frame(Kind::Idle, true, [0, 0]), &idle_drive());
+    // After a speed travel the position is unknown: the next travel waits for it.
+    assert_eq!(s.position_mm(), None);
+    m.send(&mut s, frame(Kind::SpeedMode, false, Speed::V3.data()), &idle_drive());
+    let out = m.send(&mut s, frame(Kind::Travel, false, [0, 0]), &idle_drive());
+    assert_eq!(out.request, None);
+    assert_eq!(out.reply.status & S5_ACCEPTED, 0);
+    m.send(&mut s, frame(Kind::Idle, false, [0, 0]), &idle_drive());
     // Inspection and re-levelling are speed travels too; a speed the drive lacks is a bad speed word.
-    m.send(&mut s, frame(Kind::Stop, false, [0, 0]), &idle_drive());
+    with_position(&mut s, &mut m, 2000);
     let out = m.send(&mut s, frame(Kind::SpeedMode, false, Speed::V7.data()), &idle_drive());
     assert_eq!(out.refused, Some(Refusal::Command(super::command::CommandError::BadSpeed)));
     let out = m.send(&mut s, frame(Kind::Relevel, false, [0, 0]), &idle_drive());
-    assert_eq!(out.request, Some(Request::Speed { direction: Travel::Up, speed: Speed::Vn, speed_mps: 0.02 }));
+    let expected = Request::Speed { direction: Travel::Up, speed: Speed::Vn, speed_mps: 0.02, start_position_mm: 2000 };
+    assert_eq!(out.request, Some(expected));
+    // Crawl is never faster than the travel's own speed.
+    let out = m.send(&mut s, frame(Kind::Decelerate, false, [0, 0]), &moving_drive());
+    assert_eq!(out.request, Some(Request::Crawl { speed_mps: 0.02 }));
+}
+
+#[test]
+fn without_a_crawl_speed_the_deceleration_point_is_the_stop() {
+    let mut speeds = speeds();
+    speeds[Speed::V0.index()] = None;
+    let mut s = Slave::new(SlaveConfig::new(Mode::Dcp3, speeds, 6600));
+    let mut m = Master::new();
+    with_position(&mut s, &mut m, 1000);
+    m.send(&mut s, frame(Kind::SpeedMode, false, Speed::V4.data()), &idle_drive());
+    let out = m.send(&mut s, frame(Kind::Travel, false, [0, 0]), &idle_drive());
+    assert!(matches!(out.request, Some(Request::Speed { speed: Speed::V4, .. })), "{out:?}");
+    let out = m.send(&mut s, frame(Kind::Decelerate, false, [0, 0]), &moving_drive());
+    assert_eq!(out.request, Some(Request::Stop));
+    // The stop message that follows changes nothing more.
+    assert_eq!(m.send(&mut s, frame(Kind::Stop, false, [0, 0]), &moving_drive()).request, None);
 }
 
 #[test]

@@ -1,0 +1,662 @@
+//! The processor in the loop with a lift controller on the DCP line: the
+//! emulated chip (QEMU mps2-an386, the `pil/` target) runs the drive's
+//! application layer (`drive_core::lift_drive::LiftDrive`: the service
+//! port, the DCP slave, the commands it gives, the controller) with the PIL
+//! frames on UART0, the DCP line on UART1 and the service port on UART2;
+//! this side plays the lift controller ([`Master`]) and closes the loop
+//! around the plant ([`Lift`]). A host build of the same application layer
+//! (the shadow) takes the DCP and service bytes the chip reports it took at
+//! each step, and every step's outputs, telemetry digest, DCP replies and
+//! service answers must be equal bit for bit, or the step fails with both
+//! printed.
+//!
+//! Used by `host-sim pil --dcp` and by the integration tests
+//! (`tests/pil_dcp.rs`).
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, ensure, Context};
+use drive_core::dcp::channel::position_message;
+use drive_core::dcp::command::{command_byte, Kind, Mode, Speed};
+use drive_core::dcp::slave::{S1_TRAVEL, S6_BRAKE_OPEN};
+use drive_core::dcp::{MasterFrame, SlaveConfig, SlaveFrame};
+use drive_core::frame::{encode, Decoder, Message, StepReport, MAX_FRAME};
+use drive_core::lift_drive::{speed_table, DcpPort, LiftDrive, LiftGeometry};
+use drive_core::param_store::DriveParameters;
+use drive_core::ripple::Strategy;
+use drive_core::service::ParamsStatus;
+use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame};
+use plant::{Plant, PlantInputs};
+use rig_config::RigConfig;
+
+/// Instructions per SysTick tick: the 25 MHz tick is 40 ns, an instruction
+/// 2^5 ns under `-icount shift=5`.
+pub const INSTRUCTIONS_PER_TICK: f64 = 40.0 / 32.0;
+
+/// How long to wait for QEMU to connect or for the chip to answer.
+const TIMEOUT: Duration = Duration::from_secs(20);
+
+/// The landings and the load weighing as the PIL target's build script
+/// derives them from the rig: the lowest landing at `[travel].lw_low_m`,
+/// the shaft up to `lw_high_m` (mm), and the heaviest car (kg).
+pub fn geometry(rig: &RigConfig) -> (LiftGeometry, f32) {
+    let shaft_travel_mm = ((rig.travel.lw_high_m - rig.travel.lw_low_m) * 1000.0).round() as u32;
+    let heaviest = rig.mechanics.m_car_kg.iter().cloned().fold(f64::MIN, f64::max) as f32;
+    (LiftGeometry { lw_lowest_landing_m: rig.travel.lw_low_m as f32, shaft_travel_mm }, heaviest)
+}
+
+/// The parameters the PIL target runs with when no record is stored: no
+/// compensation (the rig's offline table, its `[[ripple]]` negated, ready
+/// for `set strategy`), the heaviest car, DCP4.
+pub fn default_parameters(rig: &RigConfig) -> DriveParameters {
+    DriveParameters {
+        strategy: Strategy::Off,
+        table: closed_loop::compensation::rig_ripple_table(rig).negated(),
+        m_car_kg: geometry(rig).1,
+        encoder_offset_counts: 0,
+        dcp_mode: Mode::Dcp4,
+    }
+}
+
+/// The host shadow: the target's application layer, built for the host,
+/// started with `parameters` (what became of the stored record: `status`).
+pub fn shadow(rig: &RigConfig, parameters: &DriveParameters, status: ParamsStatus) -> LiftDrive {
+    let drive = rig.drive_config();
+    let (geometry, m_car) = geometry(rig);
+    let slave = SlaveConfig::new(Mode::Dcp4, speed_table(drive.rated_speed_mps), geometry.shaft_travel_mm);
+    let port = DcpPort::new(slave, geometry, m_car);
+    let mut lift = LiftDrive::new(Controller::new(&drive), port, &drive);
+    lift.install_parameters(parameters, &rig.observer_model(), status);
+    // The target writes its record (to the emulated flash).
+    lift.set_savable(true);
+    lift
+}
+
+/// What the chip did in one step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChipStep {
+    /// The step's outputs.
+    pub report: StepReport,
+    /// The DCP bytes it took this step.
+    pub dcp_taken: Vec<u8>,
+    /// Its DCP replies.
+    pub dcp_replies: Vec<u8>,
+    /// The service bytes it took this step.
+    pub service_taken: Vec<u8>,
+}
+
+/// QEMU running the PIL target with three sockets: PIL frames, DCP, service port.
+pub struct Chip {
+    qemu: Child,
+    frames: TcpStream,
+    dcp: TcpStream,
+    service: TcpStream,
+    decoder: Decoder,
+}
+
+impl Drop for Chip {
+    fn drop(&mut self) {
+        let _ = self.qemu.kill();
+        let _ = self.qemu.wait();
+    }
+}
+
+fn accept(listener: &TcpListener, qemu: &mut Child) -> anyhow::Result<TcpStream> {
+    listener.set_nonblocking(true)?;
+    let started = Instant::now();
+    loop {
+        match listener.accept() {
+            Ok((stream, _)) => {
+                stream.set_nonblocking(false)?;
+                stream.set_nodelay(true)?;
+                stream.set_read_timeout(Some(TIMEOUT))?;
+                return Ok(stream);
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                if let Some(status) = qemu.try_wait()? {
+                    bail!("QEMU exited before connecting: {status}");
+                }
+                ensure!(started.elapsed() < TIMEOUT, "QEMU did not connect within {} s", TIMEOUT.as_secs());
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Err(e) => return Err(e).context("accepting QEMU's connection"),
+        }
+    }
+}
+
+impl Chip {
+    /// Starts `qemu` (`qemu-system-arm`) on the target `elf` in the working
+    /// directory `dir` (where the target keeps its emulated flash file).
+    pub fn launch(elf: &Path, qemu: &Path, dir: &Path) -> anyhow::Result<Self> {
+        ensure!(elf.is_file(), "PIL target {} not found: build pil/ (scripts/test.sh does)", elf.display());
+        ensure!(dir.is_dir(), "{} is not a directory", dir.display());
+        let elf = elf.canonicalize().with_context(|| format!("cannot resolve {}", elf.display()))?;
+        let listeners =
+            [TcpListener::bind("127.0.0.1:0")?, TcpListener::bind("127.0.0.1:0")?, TcpListener::bind("127.0.0.1:0")?];
+        let mut command = Command::new(qemu);
+        command.args(["-M", "mps2-an386", "-nographic", "-monitor", "none"]);
+        for (i, listener) in listeners.iter().enumerate() {
+            let port = listener.local_addr()?.port();
+            command
+                .arg("-chardev")
+                .arg(format!("socket,id=uart{i},host=127.0.0.1,port={port},nodelay=on"))
+                .arg("-serial")
+                .arg(format!("chardev:uart{i}"));
+        }
+        let mut qemu = command
+            .args(["-icount", "shift=5", "-semihosting-config", "enable=on,target=native", "-kernel"])
+            .arg(&elf)
+            .current_dir(dir)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .with_context(|| format!("cannot start {} (apt-get install -y qemu-system-arm)", qemu.display()))?;
+        let frames = accept(&listeners[0], &mut qemu)?;
+        let dcp = accept(&listeners[1], &mut qemu)?;
+        let service = accept(&listeners[2], &mut qemu)?;
+        Ok(Self { qemu, frames, dcp, service, decoder: Decoder::new() })
+    }
+
+    /// Puts `dcp_out` on the DCP line and `service_out` on the service
+    /// port, runs one step on `sensors`.
+    pub fn step(&mut self, dcp_out: &[u8], service_out: &[u8], sensors: &SensorFrame) -> anyhow::Result<ChipStep> {
+        if !service_out.is_empty() {
+            self.service.write_all(service_out)?;
+        }
+        if !dcp_out.is_empty() {
+            self.dcp.write_all(dcp_out)?;
+        }
+        let mut frame = [0u8; MAX_FRAME];
+        let n = encode(&Message::Sense(*sensors), &mut frame);
+        self.frames.write_all(&frame[..n])?;
+        let report = loop {
+            let mut byte = [0u8; 1];
+            self.frames.read_exact(&mut byte).context("no output frame from the chip")?;
+            match self.decoder.push(byte[0]) {
+                Some(Ok(Message::Output(report))) => break report,
+                Some(other) => bail!("unexpected reply from the chip: {other:?}"),
+                None => {}
+            }
+        };
+        let mut read = |n: usize| -> anyhow::Result<Vec<u8>> {
+            let mut buf = vec![0u8; n];
+            self.dcp.read_exact(&mut buf).context("no DCP record of the step from the chip")?;
+            Ok(buf)
+        };
+        let n_in = read(1)?[0] as usize;
+        let dcp_taken = read(n_in)?;
+        let n_out = read(1)?[0] as usize;
+        let dcp_replies = read(n_out)?;
+        let n_service = read(1)?[0] as usize;
+        let service_taken = read(n_service)?;
+        Ok(ChipStep { report, dcp_taken, dcp_replies, service_taken })
+    }
+
+    /// `n` bytes the chip sent on the service port.
+    pub fn read_service(&mut self, n: usize) -> anyhow::Result<Vec<u8>> {
+        let mut buf = vec![0u8; n];
+        self.service.read_exact(&mut buf).context("no service answer from the chip")?;
+        Ok(buf)
+    }
+}
+
+/// One step of [`Lift`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiftStep {
+    /// The outputs (the chip's and the shadow's: equal).
+    pub output: ControlOutput,
+    /// The DCP replies of the step.
+    pub dcp_replies: Vec<u8>,
+    /// The service answers of the step.
+    pub service_answers: Vec<u8>,
+    /// The parameters a `save` of the step wrote (the shadow's view).
+    pub saved: Option<DriveParameters>,
+    /// The chip's controller step, instructions (SysTick ticks of the
+    /// 25 MHz clock under `-icount shift=5`: 1.25 instructions a tick);
+    /// `None` for the host build alone.
+    pub instructions: Option<f64>,
+}
+
+/// The lift: the plant, the chip and its shadow, stepped together (or the
+/// host build alone, [`Lift::host_only`]).
+pub struct Lift {
+    plant: Plant,
+    chip: Option<Chip>,
+    /// Host only: the bytes on the lines not taken yet (DCP, service).
+    pending: (std::collections::VecDeque<u8>, std::collections::VecDeque<u8>),
+    shadow: LiftDrive,
+    drive: DriveConfig,
+    max_step_s: f64,
+    lw_lowest_landing_m: f64,
+    steps: u64,
+}
+
+impl Lift {
+    /// The plant with the car at `lw_start_m` (m of counterweight-side rope)
+    /// and mass `m_car_kg`, the chip (started by [`Chip::launch`]; `None`:
+    /// the host build alone, which takes the bytes on the lines as the chip
+    /// does, at most 8 DCP bytes and one service line a step) and its shadow
+    /// started with `parameters` (`status`: what became of the stored
+    /// record, as the chip is expected to find it).
+    pub fn new(
+        rig: &RigConfig,
+        chip: Option<Chip>,
+        parameters: &DriveParameters,
+        status: ParamsStatus,
+        m_car_kg: f64,
+        lw_start_m: f64,
+    ) -> anyhow::Result<Self> {
+        let (geometry, _) = geometry(rig);
+        let lw_low = geometry.lw_lowest_landing_m as f64;
+        let lw_high = lw_low + geometry.shaft_travel_mm as f64 / 1000.0;
+        ensure!(
+            (lw_low..=lw_high).contains(&lw_start_m),
+            "the car must start between the landings: lw {lw_start_m} m is outside [{lw_low}, {lw_high}] m"
+        );
+        Ok(Self {
+            plant: Plant::new(rig, m_car_kg, lw_start_m),
+            chip,
+            pending: Default::default(),
+            shadow: shadow(rig, parameters, status),
+            drive: rig.drive_config(),
+            max_step_s: closed_loop::SimOptions::for_rig(rig).max_step_s,
+            lw_lowest_landing_m: lw_low,
+            steps: 0,
+        })
+    }
+
+    /// The car position measured in the shaft, mm above the lowest landing.
+    pub fn position_mm(&self) -> f64 {
+        (self.plant.observe().counterweight_side_length_m - self.lw_lowest_landing_m) * 1000.0
+    }
+
+    /// Steps run.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The shadow (state, parameters, DCP port).
+    pub fn shadow(&self) -> &LiftDrive {
+        &self.shadow
+    }
+
+    /// One PWM period: `dcp_out` on the DCP line, `service_out` on the
+    /// service port, the chip's step checked against the shadow's, the
+    /// plant advanced.
+    pub fn step(&mut self, dcp_out: &[u8], service_out: &[u8]) -> anyhow::Result<LiftStep> {
+        let k = self.steps;
+        let sensors = closed_loop::sensor_frame(&self.plant);
+        let chip = match self.chip.as_mut() {
+            Some(chip) => Some(chip.step(dcp_out, service_out, &sensors).with_context(|| format!("step {k}"))?),
+            None => None,
+        };
+        let (dcp_taken, service_taken) = match &chip {
+            Some(chip) => (chip.dcp_taken.clone(), chip.service_taken.clone()),
+            None => self.take(dcp_out, service_out),
+        };
+        let mut expected_answers = Vec::new();
+        let mut saved = None;
+        for &byte in &service_taken {
+            if let Some(reply) = self.shadow.service_byte(byte) {
+                expected_answers.extend_from_slice(&reply.bytes[..reply.len]);
+                saved = saved.or(reply.save);
+            }
+        }
+        let dcp = self.shadow.dcp_step(&dcp_taken, sensors.time_us);
+        let output = self.shadow.control_step(&sensors);
+        let dcp_replies = dcp.reply[..dcp.reply_len].to_vec();
+        let instructions = chip.as_ref().map(|c| c.report.cost_ticks as f64 * INSTRUCTIONS_PER_TICK);
+        let service_answers = match (self.chip.as_mut(), chip) {
+            (Some(c), Some(chip)) => {
+                let answers = c.read_service(expected_answers.len())?;
+                Self::compare(k, &sensors, &chip, &answers, &expected_answers, &dcp_replies, &output)?;
+                answers
+            }
+            _ => expected_answers,
+        };
+        self.plant.set_inputs(PlantInputs {
+            pwm_compare: output.pwm_compare,
+            pwm_enabled: output.pwm_enabled,
+            brake_engaged: !output.brake_released,
+        });
+        self.plant.advance(1.0 / self.drive.current_loop_hz as f64, self.max_step_s);
+        ensure!(self.plant.in_valid_range(), "step {k}: the plant left its valid range");
+        self.steps += 1;
+        Ok(LiftStep { output, dcp_replies, service_answers, saved, instructions })
+    }
+
+    /// Sends the service request `line` (without its `\n`) and steps until
+    /// its answer has come (at most `max_steps`): the answer without its
+    /// `\r\n`, and the parameters a `save` wrote. Nothing goes on the DCP line.
+    pub fn ask(&mut self, line: &str, max_steps: u64) -> anyhow::Result<(String, Option<DriveParameters>)> {
+        let mut request = line.as_bytes().to_vec();
+        request.push(b'\n');
+        let mut answer = Vec::new();
+        let mut saved = None;
+        for i in 0..max_steps {
+            let step = self.step(&[], if i == 0 { &request } else { &[] })?;
+            answer.extend_from_slice(&step.service_answers);
+            saved = saved.or(step.saved);
+            if answer.ends_with(b"\r\n") {
+                answer.truncate(answer.len() - 2);
+                return Ok((String::from_utf8_lossy(&answer).into_owned(), saved));
+            }
+        }
+        bail!("no answer to {line:?} within {max_steps} steps")
+    }
+
+    /// Host only: the bytes the chip would take this step.
+    fn take(&mut self, dcp_out: &[u8], service_out: &[u8]) -> (Vec<u8>, Vec<u8>) {
+        let (dcp, service) = &mut self.pending;
+        dcp.extend(dcp_out);
+        service.extend(service_out);
+        let n = dcp.len().min(drive_core::lift_drive::MAX_BYTES_PER_STEP);
+        let dcp_taken: Vec<u8> = dcp.drain(..n).collect();
+        let mut service_taken = Vec::new();
+        while service_taken.len() < drive_core::lift_drive::MAX_SERVICE_BYTES_PER_STEP {
+            let Some(byte) = service.pop_front() else { break };
+            service_taken.push(byte);
+            if byte == b'\n' {
+                break;
+            }
+        }
+        (dcp_taken, service_taken)
+    }
+
+    /// The chip's step against the shadow's.
+    fn compare(
+        k: u64,
+        sensors: &SensorFrame,
+        chip: &ChipStep,
+        service_answers: &[u8],
+        expected_answers: &[u8],
+        dcp_replies: &[u8],
+        output: &ControlOutput,
+    ) -> anyhow::Result<()> {
+        ensure!(
+            service_answers == expected_answers,
+            "step {k}: service answers differ: chip {:?}, host {:?}",
+            String::from_utf8_lossy(service_answers),
+            String::from_utf8_lossy(expected_answers)
+        );
+        ensure!(
+            chip.dcp_replies == dcp_replies,
+            "step {k}: DCP replies differ: chip {:02x?}, host {:02x?}",
+            chip.dcp_replies,
+            dcp_replies
+        );
+        ensure!(
+            chip.report.matches(output),
+            "step {k}: first differing step\n  inputs {sensors:?}\n  host   {:?}\n  target {:?}",
+            StepReport::new(output, chip.report.cost_ticks),
+            chip.report
+        );
+        Ok(())
+    }
+}
+
+/// PWM periods between two messages of the lift controller: 15 ms.
+pub const CYCLE_STEPS: u64 = 240;
+
+/// A travel the lift controller asks for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trip {
+    /// Target landing, mm above the lowest landing.
+    pub target_mm: i32,
+    /// The speed bit it selects (DCP4: V4, the drive's travel speed).
+    pub speed: Speed,
+}
+
+/// Where the lift controller is in its sequence.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Phase {
+    /// Sending the position message (messages sent so far).
+    Position(u32),
+    /// Selecting the speed.
+    Select,
+    /// DCP4: the remaining distance, until the drive has stopped.
+    Distance {
+        /// The drive showed the travel running.
+        started: bool,
+    },
+    /// DCP3: travel at the selected speed, until the deceleration point.
+    Travel {
+        /// The drive showed the travel running.
+        started: bool,
+    },
+    /// DCP3: deceleration to crawl, until the stopping point.
+    Crawl,
+    /// DCP3: stop (stop switch cleared), until the drive has stopped.
+    Stopping,
+    /// After the arrival: the stop message.
+    Stop,
+    /// Drive enable cleared; then the next trip.
+    Idle,
+    /// Every trip done: idle messages.
+    Done,
+}
+
+/// One finished trip.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Arrival {
+    /// The trip.
+    pub trip: Trip,
+    /// Step at which the drive had stopped (brake applied, inverter off).
+    pub step: u64,
+    /// Car position then, mm above the lowest landing.
+    pub position_mm: f64,
+    /// Step at which the trip began (first message of its position message).
+    pub start_step: u64,
+}
+
+/// A lift controller: one message every 15 ms ([`CYCLE_STEPS`]); before
+/// each trip the car position (message `I9`) and the speed; in DCP4 the
+/// remaining distance to the target until the drive has stopped; in DCP3
+/// the travel command until the deceleration point, the deceleration to
+/// crawl until the stopping point, then the stop. The deceleration and
+/// stopping points come from the drive's speeds (`speed_table`) and its
+/// acceleration and jerk limits, as a lift controller is set up for its
+/// drive, and from the car position measured in the shaft.
+pub struct Master {
+    mode: Mode,
+    trips: Vec<Trip>,
+    phase: Phase,
+    next_message_step: u64,
+    channel: Vec<u8>,
+    last_status: u8,
+    /// Every reply, in order.
+    pub replies: Vec<SlaveFrame>,
+    /// The finished trips.
+    pub arrivals: Vec<Arrival>,
+    /// Stop talking at this step (the silent master).
+    pub silent_from: Option<u64>,
+    /// Step of the last message sent.
+    pub last_sent: u64,
+    trip_start: u64,
+    /// The trip's direction, fixed when it begins.
+    down: bool,
+    speeds: [Option<f32>; 11],
+    accel_mps2: f32,
+    jerk_mps3: f32,
+}
+
+/// Distance to change speed from `from` to `to` (m/s) from and to zero
+/// acceleration with limits `a` (m/s^2) and `j` (m/s^3), m.
+fn ramp_distance_m(from: f64, to: f64, a: f64, j: f64) -> f64 {
+    let dv = (from - to).abs();
+    let duration = if dv * j >= a * a { dv / a + a / j } else { 2.0 * (dv / j).sqrt() };
+    0.5 * (from + to) * duration
+}
+
+/// Crawl run before the stopping point, m: time for the messages to follow.
+const CRAWL_M: f64 = 0.03;
+
+impl Master {
+    /// A controller speaking `mode` to a drive of `drive`'s limits, for `trips` in turn.
+    pub fn new(mode: Mode, trips: Vec<Trip>, drive: &DriveConfig) -> Self {
+        Self {
+            mode,
+            trips,
+            phase: Phase::Position(0),
+            next_message_step: 0,
+            channel: Vec::new(),
+            last_status: 0,
+            replies: Vec::new(),
+            arrivals: Vec::new(),
+            silent_from: None,
+            last_sent: 0,
+            trip_start: 0,
+            down: false,
+            speeds: speed_table(drive.rated_speed_mps),
+            accel_mps2: drive.max_accel_mps2,
+            jerk_mps3: drive.max_jerk_mps3,
+        }
+    }
+
+    /// Where it is in its sequence.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    fn message(&mut self, kind: Kind, down: bool, data: [u8; 2]) -> Vec<u8> {
+        let mut comm = [0u8; 2];
+        for slot in comm.iter_mut() {
+            if !self.channel.is_empty() {
+                *slot = self.channel.remove(0);
+            }
+        }
+        MasterFrame { command: command_byte(kind, down), data, comm }.encode().to_vec()
+    }
+
+    fn speed_mps(&self, speed: Speed) -> f64 {
+        self.speeds[speed.index()].unwrap_or(0.0) as f64
+    }
+
+    /// The bytes to put on the line at step `k` with the car `position_mm` above the lowest landing.
+    pub fn bytes(&mut self, k: u64, position_mm: f64) -> Vec<u8> {
+        if k < self.next_message_step || self.silent_from.is_some_and(|s| k >= s) {
+            return Vec::new();
+        }
+        self.next_message_step = k + CYCLE_STEPS;
+        self.last_sent = k;
+        let trip = self.trips.first().copied();
+        if self.phase == Phase::Position(0) {
+            self.down = trip.is_some_and(|t| (t.target_mm as f64) < position_mm);
+        }
+        let down = self.down;
+        // Distance ahead in the travel's direction, m (negative once past).
+        let ahead_m = trip.map_or(0.0, |t| {
+            let d = (t.target_mm as f64 - position_mm) / 1000.0;
+            if down {
+                -d
+            } else {
+                d
+            }
+        });
+        let travelling = self.last_status & (S1_TRAVEL | S6_BRAKE_OPEN) != 0;
+        let (a, j) = (self.accel_mps2 as f64, self.jerk_mps3 as f64);
+        let crawl = self.speed_mps(Speed::V0);
+        match self.phase {
+            Phase::Position(sent) => {
+                if sent == 0 {
+                    self.trip_start = k;
+                    self.channel.extend_from_slice(&position_message(position_mm.round() as i32));
+                }
+                // 12 bytes out in 6 messages, 3 more for the answer.
+                self.phase = if sent + 1 >= 9 { Phase::Select } else { Phase::Position(sent + 1) };
+                self.message(Kind::Stop, down, [0, 0])
+            }
+            Phase::Select => {
+                let Some(trip) = trip else {
+                    self.phase = Phase::Done;
+                    return self.message(Kind::Idle, false, [0, 0]);
+                };
+                self.phase = match self.mode {
+                    Mode::Dcp4 => Phase::Distance { started: false },
+                    Mode::Dcp3 => Phase::Travel { started: false },
+                };
+                self.message(Kind::SpeedMode, down, trip.speed.data())
+            }
+            Phase::Distance { started } => {
+                if started && !travelling {
+                    return self.arrive(k, position_mm, down);
+                }
+                self.phase = Phase::Distance { started: started || travelling };
+                // The remaining distance (0 once there or past it).
+                let remaining = (ahead_m * 1000.0).max(0.0).round().min(32_767.0) as u16;
+                self.message(Kind::Decelerate, down, remaining.to_be_bytes())
+            }
+            Phase::Travel { started } => {
+                let speed = trip.map_or(0.0, |t| self.speed_mps(t.speed));
+                let decelerate_at = ramp_distance_m(speed, crawl, a, j) + CRAWL_M;
+                if started && !travelling {
+                    // Stopped by itself (the shaft end): the trip is over.
+                    return self.arrive(k, position_mm, down);
+                }
+                if started && ahead_m <= decelerate_at {
+                    self.phase = Phase::Crawl;
+                    return self.message(Kind::Decelerate, down, [0, 0]);
+                }
+                self.phase = Phase::Travel { started: started || travelling };
+                self.message(Kind::Travel, down, [0, 0])
+            }
+            Phase::Crawl => {
+                if ahead_m <= ramp_distance_m(crawl, 0.0, a, j) {
+                    self.phase = Phase::Stopping;
+                    return self.message(Kind::Stop, down, [0, 0]);
+                }
+                self.message(Kind::Decelerate, down, [0, 0])
+            }
+            Phase::Stopping => {
+                if !travelling {
+                    return self.arrive(k, position_mm, down);
+                }
+                self.message(Kind::Stop, down, [0, 0])
+            }
+            Phase::Stop => {
+                self.phase = Phase::Idle;
+                self.message(Kind::Idle, false, [0, 0])
+            }
+            Phase::Idle => {
+                if !self.trips.is_empty() {
+                    self.trips.remove(0);
+                }
+                self.phase = if self.trips.is_empty() { Phase::Done } else { Phase::Position(0) };
+                self.message(Kind::Idle, false, [0, 0])
+            }
+            Phase::Done => self.message(Kind::Idle, false, [0, 0]),
+        }
+    }
+
+    fn arrive(&mut self, k: u64, position_mm: f64, down: bool) -> Vec<u8> {
+        if let Some(&trip) = self.trips.first() {
+            self.arrivals.push(Arrival { trip, step: k, position_mm, start_step: self.trip_start });
+        }
+        self.phase = Phase::Stop;
+        self.message(Kind::Stop, down, [0, 0])
+    }
+
+    /// Takes the drive's replies of a step (whole 6-byte messages).
+    pub fn receive(&mut self, replies: &[u8]) -> anyhow::Result<()> {
+        ensure!(replies.len() % 6 == 0, "a partial DCP reply: {replies:02x?}");
+        for chunk in replies.chunks(6) {
+            let bytes: [u8; 6] = chunk.try_into().expect("chunks of 6");
+            let frame =
+                SlaveFrame::decode(&bytes).map_err(|e| anyhow::anyhow!("a bad DCP reply ({e:?}): {bytes:02x?}"))?;
+            self.last_status = frame.status;
+            self.replies.push(frame);
+        }
+        Ok(())
+    }
+}
+
+/// The default PIL target ELF: `pil/target/thumbv7em-none-eabihf/release/pil`
+/// (`PIL_ELF` overrides it).
+pub fn default_elf() -> PathBuf {
+    std::env::var_os("PIL_ELF").map(PathBuf::from).unwrap_or_else(closed_loop::pil::default_elf_path)
+}
