@@ -104,6 +104,15 @@ impl OutputDir {
         self.staging.join(name)
     }
 
+    /// A buffered writer of the output `name` (see [`OutputDir::path`]);
+    /// the error names the file.
+    pub fn writer(&self, name: impl AsRef<Path>) -> io::Result<io::BufWriter<std::fs::File>> {
+        let path = self.path(name);
+        std::fs::File::create(&path)
+            .map(io::BufWriter::new)
+            .map_err(|e| io::Error::new(e.kind(), format!("cannot write {}: {e}", path.display())))
+    }
+
     /// Where the output `name` will be once published.
     pub fn final_path(&self, name: impl AsRef<Path>) -> PathBuf {
         self.dir.join(name)

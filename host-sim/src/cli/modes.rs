@@ -3,7 +3,6 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clap::Args;
 
 use super::{check_open_range, default_car_mass_kg, output_dir, sweep_points};
@@ -85,9 +84,7 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     let modes: Vec<_> = lengths.iter().map(|&lw| natural_modes(&chain, lw)).collect();
 
     let csv_path = out.path("modes.csv");
-    let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&csv_path).with_context(|| format!("cannot write {}", csv_path.display()))?,
-    );
+    let mut csv = out.writer("modes.csv")?;
     writeln!(csv, "lw_m,f1_hz,f2_hz,f3_hz,f4_hz,f5_hz")?;
     for (lw, m) in lengths.iter().zip(&modes) {
         let f = m.frequencies_hz;
@@ -96,9 +93,7 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     csv.flush()?;
 
     let shapes_path = out.path("mode_shapes.csv");
-    let mut shapes = std::io::BufWriter::new(
-        std::fs::File::create(&shapes_path).with_context(|| format!("cannot write {}", shapes_path.display()))?,
-    );
+    let mut shapes = out.writer("mode_shapes.csv")?;
     writeln!(shapes, "lw_m,mode,f_hz,{}", COORDINATE_NAMES.map(|n| format!("u_{n}")).join(","))?;
     for (lw, m) in lengths.iter().zip(&modes) {
         for mode in 0..DOF {

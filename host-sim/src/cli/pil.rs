@@ -206,10 +206,7 @@ fn run_in(
         outln!("{:<50} {:>7} {:>9.1} {:>9.1}", "all steps", s.steps, s.mean, s.max);
     }
 
-    let path = out.path("pil_steps.csv");
-    let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut csv = out.writer("pil_steps.csv")?;
     writeln!(csv, "step,state,pwm_enabled,speed_loop_tick,cost_ticks,instructions")?;
     for (i, r) in reports.iter().enumerate() {
         writeln!(
@@ -369,10 +366,7 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
             s.peak_speed_mps
         );
     }
-    let path = out.path("dcp_travels.csv");
-    let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut csv = out.writer("dcp_travels.csv")?;
     writeln!(csv, "travel,from_mm,target_mm,landed_mm,error_mm,steps,time_s,peak_speed_mps")?;
     for (i, s) in summaries.iter().enumerate() {
         writeln!(
