@@ -130,6 +130,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
     }
     // The acquisition's noise is drawn from the same seed in both datasets,
     // so it cancels in the change.
+    let mut at_zero_deg: Option<(ForeignRig, Vec<(String, Recording)>)> = None;
     for kind in sweep_order() {
         let values = draw(kind, &mut rng);
         if !selected(kind.name()) {
@@ -137,18 +138,22 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
         }
         let mut effects = Effects::none();
         effects.set(kind, &values).expect("drawn parameters are in range");
-        let mut rig_of_case = foreign;
-        let mut reference = None;
-        if matches!(kind, EffectKind::DeadTime | EffectKind::CurrentSensorError) {
-            if let Some(drive) = rig_of_case.drive.as_mut() {
-                drive.rotor_start_angle_deg = 0.0;
-            }
-            reference = Some(foreign_dataset(&model, &rig_of_case, Effects::none()));
-        }
+        let (rig_of_case, reference) = if matches!(kind, EffectKind::DeadTime | EffectKind::CurrentSensorError) {
+            let (rig, data) = at_zero_deg.get_or_insert_with(|| {
+                let mut turned = foreign;
+                if let Some(drive) = turned.drive.as_mut() {
+                    drive.rotor_start_angle_deg = 0.0;
+                }
+                (turned, foreign_dataset(&model, &turned, Effects::none()))
+            });
+            (*rig, &*data)
+        } else {
+            (foreign, &nominal)
+        };
         let data = foreign_dataset(&model, &rig_of_case, effects);
         let truth = format!("{} {:?}", kind.name(), values.iter().map(|v| (v * 1e4).round() / 1e4).collect::<Vec<_>>());
         let report = diagnosed(&model, &truth, &data);
-        let change_mps2 = car_change(&data, reference.as_deref().unwrap_or(&nominal));
+        let change_mps2 = car_change(&data, reference);
         cases.push(Case { draw: d, truth, change_mps2, report });
     }
 }
