@@ -72,6 +72,43 @@ pub struct DrivenSettings {
     /// too, where the measured torque alone would replay it open loop.
     /// `false`: the measured torque alone.
     pub speed_feedback: bool,
+    /// The chain's state at the first sample when the recording begins
+    /// with the rig already moving ([`begins_in_motion`]).
+    pub start_state: StartState,
+}
+
+/// The chain's state at the first sample of a recording that begins with
+/// the rig already moving: the rig's brake lifted before the recording
+/// started, and how hard that lift jolted the chain (the motor torque then
+/// against the out-of-balance torque) is not recorded. The rope-mass
+/// modes, lightly damped, ring from it through the whole travel, their
+/// acceleration growing as their frequency rises with the shortening rope.
+/// The model's state is the static equilibrium of the out-of-balance torque
+/// (all zero); the measured torque acts from the first sample on, through a
+/// constant offset where an alternative asks for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StartState {
+    /// No offset: the measured torque's departure from the out-of-balance
+    /// torque at the first sample jolts the chain.
+    AsRecorded,
+    /// No jolt: the brake lifted against a pre-torque that balanced the load
+    /// (offset: out-of-balance torque minus the first samples' torque).
+    Balanced,
+    /// The jolt of a brake lifted at the first sample with no motor torque,
+    /// the whole out-of-balance torque released (offset: minus the first
+    /// samples' torque).
+    Unheld,
+}
+
+/// Span at the start of a recording over which the torque the chain had at
+/// its first sample is averaged, s.
+pub const START_TORQUE_SPAN_S: f64 = 0.01;
+
+/// Whether the rig is already moving at the recording's first sample
+/// (the encoder turns within [`STANDSTILL_WINDOW_S`] of it).
+pub fn begins_in_motion(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> bool {
+    let motion = motion_from_angle(shaft_angle_rad, sample_rate_hz);
+    motion.start == 0 && !motion.is_empty()
 }
 
 impl Default for DrivenSettings {
@@ -81,6 +118,7 @@ impl Default for DrivenSettings {
             ripple_phases_from_torque: true,
             ripple_phase_shift_rad: 0.0,
             speed_feedback: false,
+            start_state: StartState::AsRecorded,
         }
     }
 }
@@ -101,6 +139,13 @@ impl DrivenSettings {
             turned(3.0),
             Self { speed_feedback: true, ..d },
         ]
+    }
+
+    /// The start states other than the default, for a recording that
+    /// begins in motion ([`StartState`]).
+    pub fn start_alternatives() -> [Self; 2] {
+        let d = Self::default();
+        [Self { start_state: StartState::Balanced, ..d }, Self { start_state: StartState::Unheld, ..d }]
     }
 }
 
@@ -357,6 +402,23 @@ fn torque_driven_accelerations_with(
     let theta0 = travel.shaft_angle_rad[0];
     let steps = steps_per_sample(&line, &chain, (travel.shaft_angle_rad[n - 1] - theta0) * r, h, max_rate_per_step);
     let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
+    let mut state = NodeState::default();
+    let mut offset_nm = 0.0;
+    // A recording that begins in motion: the chain starts moving with the
+    // rig in the quasi-static state of its speed, jolted as the start
+    // state says (what the rig's brake lift left before the recording is
+    // not recorded).
+    if travel.motion.start == 0 {
+        let span = ((START_TORQUE_SPAN_S * fs).round() as usize).clamp(1, n);
+        let first_nm = travel.torque_nm[..span].iter().sum::<f64>() / span as f64;
+        let needed_nm;
+        (state, needed_nm) = moving_start(&line, &chain, reference.1[0], first_nm);
+        offset_nm = match settings.start_state {
+            StartState::AsRecorded => 0.0,
+            StartState::Balanced => needed_nm - first_nm,
+            StartState::Unheld => -first_nm,
+        };
+    }
     // Accelerations at sample k + frac. While the rig moves, the tracking loop
     // acts on the rigid-body coordinate (the mass-weighted mean of the
     // line's displacements) as a force spread in proportion to mass: it
@@ -368,14 +430,15 @@ fn torque_driven_accelerations_with(
     // minus the rig's.
     let deriv = |s: &NodeState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64)| {
         let j = (k + 1).min(n - 1);
-        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k])
+        let moving = travel.motion.contains(&k);
+        let offset = if moving { offset_nm } else { 0.0 };
+        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset
             - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
             - feedback.ki_nm_per_rad * departure_integral;
         let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
         let theta = theta0 + s.position_m[layout.sheave] / r;
         let shaft = torque + ripple.torque_nm(theta);
         let lumped = line.lumped(&chain, s.position_m[layout.sheave]);
-        let moving = travel.motion.contains(&k);
         let brake = if moving { BrakeAction::Released } else { BrakeAction::Held };
         let mut a = [0.0; MAX_NODES];
         line.accelerations_of(&chain, &lumped, &s.position_m, &s.velocity_mps, shaft, brake, 0.0, &mut a);
@@ -389,7 +452,6 @@ fn torque_driven_accelerations_with(
         }
         NodeState { position_m: s.velocity_mps, velocity_mps: a }
     };
-    let mut state = NodeState::default();
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut estimate = ModelEstimate::new(&feedback, fs, travel.speed_estimate_radps[0]);
     for k in 0..n {
@@ -415,6 +477,49 @@ fn torque_driven_accelerations_with(
         }
     }
     Ok((car, cw))
+}
+
+/// The chain moving as one at `speed_mps` (m/s) in the quasi-static state
+/// of the shaft torque that keeps it at that speed: every rope stretched by
+/// the forces it carries (the nodes' damping and friction, the
+/// out-of-balance torque), nothing ringing; the mass-weighted mean
+/// displacement zero. Returns that state and that torque (N m), found from
+/// the line's node forces at `torque_nm`.
+fn moving_start(line: &Line, chain: &Chain, speed_mps: f64, torque_nm: f64) -> (NodeState, f64) {
+    let layout = line.layout;
+    let nodes = layout.nodes;
+    let lumped = line.lumped(chain, 0.0);
+    let mut state = NodeState::default();
+    state.velocity_mps[..nodes].iter_mut().for_each(|v| *v = speed_mps);
+    let mut a = [0.0; MAX_NODES];
+    line.accelerations_of(
+        chain,
+        &lumped,
+        &state.position_m,
+        &state.velocity_mps,
+        torque_nm,
+        BrakeAction::Released,
+        0.0,
+        &mut a,
+    );
+    // Node forces with no elastic deflection, N; the torque that keeps the
+    // speed takes their sum off the sheave.
+    let mut forces = [0.0; MAX_NODES];
+    (0..nodes).for_each(|i| forces[i] = lumped.masses_kg[i] * a[i]);
+    let total: f64 = forces[..nodes].iter().sum();
+    forces[layout.sheave] -= total;
+    let needed_nm = torque_nm - total * chain.params.sheave_radius_m;
+    // No acceleration: the rope between nodes i and i + 1 carries the
+    // forces on the nodes up to i.
+    let mut carried = 0.0;
+    for (i, (force, spring)) in forces.iter().zip(&lumped.springs_n_per_m).take(nodes - 1).enumerate() {
+        carried -= force;
+        state.position_m[i + 1] = state.position_m[i] + carried / spring;
+    }
+    let masses = &lumped.masses_kg[..nodes];
+    let mean = masses.iter().zip(&state.position_m).map(|(m, x)| m * x).sum::<f64>() / masses.iter().sum::<f64>();
+    state.position_m[..nodes].iter_mut().for_each(|x| *x -= mean);
+    (state, needed_nm)
 }
 
 /// The tracking loop's reference: the measured sheave-edge travel (m) from
@@ -478,6 +583,67 @@ mod tests {
         assert!(d_default < 1e-3, "default step: {d_default:.2e} of the RMS from the half step");
         // What the split into several steps per sample is for.
         assert!(d_one > 10.0 * d_default, "one step per sample: {d_one:.2e}, default {d_default:.2e}");
+    }
+
+    /// A recording that begins with the rig moving at constant speed under
+    /// a torque 20 N m below the out-of-balance torque: as recorded, the
+    /// chain rings from that jolt at the first sample; `Balanced` starts
+    /// it without a jolt (nothing rings: the torque is constant); `Unheld`
+    /// rings from the whole out-of-balance torque. Recordings that begin
+    /// at standstill are run as recorded whatever the start state.
+    #[test]
+    fn the_start_state_sets_the_jolt_of_a_recording_that_begins_in_motion() {
+        // No ripple: the torque is constant, only the jolt rings.
+        let mut rig = RigConfig::embedded_default().unwrap();
+        rig.ripple.clear();
+        let fs = 4096.0;
+        let n = 4096;
+        let r = rig.mechanics.sheave_radius_m;
+        let lw = 2.0;
+        let chain = Chain::new(ChainParams::from_rig(&rig, 70.5), lw);
+        let hold = chain.params.out_of_balance_torque_nm(lw);
+        let torque = vec![hold - 20.0; n];
+        let angle: Vec<f64> = (0..n).map(|k| 0.5 * k as f64 / fs / r).collect();
+        let speed = vec![0.5 / r; n];
+        assert!(begins_in_motion(&angle, fs));
+        let travel = DrivenTravel {
+            m_car_kg: 70.5,
+            m_cw_kg: chain.params.m_cw_kg,
+            lw_start_m: lw,
+            torque_nm: &torque,
+            shaft_angle_rad: &angle,
+            speed_estimate_radps: &speed,
+            controller: None,
+            motion: motion_from_angle(&angle, fs),
+            constant_speed: 0..n,
+            sample_rate_hz: fs,
+        };
+        // Elastic vibration of the car above the tracking loop (10 Hz and up)
+        // over the first half second, RMS m/s^2.
+        let ring = |start_state: StartState, travel: &DrivenTravel| {
+            let settings = DrivenSettings { start_state, ..DrivenSettings::default() };
+            let car = torque_driven_accelerations(&rig, travel, &settings, &Effects::none()).unwrap().0;
+            let high = highpass_zero_phase(&car, fs, 10.0).unwrap();
+            (high[..n / 8].iter().map(|x| x * x).sum::<f64>() / (n / 8) as f64).sqrt()
+        };
+        let (recorded, balanced, unheld) = (
+            ring(StartState::AsRecorded, &travel),
+            ring(StartState::Balanced, &travel),
+            ring(StartState::Unheld, &travel),
+        );
+        println!(
+            "ring over the first 0.5 s: as recorded {recorded:.2e}, balanced {balanced:.2e}, unheld {unheld:.2e} m/s^2"
+        );
+        assert!(balanced < 1e-3 * recorded, "balanced {balanced:.2e}, as recorded {recorded:.2e}");
+        // The ring is linear in the jolt: the torque's departure from the
+        // one that keeps the speed as recorded, that whole torque unheld.
+        let (_, needed) = moving_start(&Line::new(&Effects::none()), &chain, 0.5, torque[0]);
+        let ratio = unheld / recorded;
+        let expected = needed.abs() / (needed - torque[0]).abs();
+        assert!((ratio / expected - 1.0).abs() < 0.05, "ratio {ratio:.3}, expected {expected:.3}");
+        // At standstill at the first sample: no offset.
+        let still = DrivenTravel { motion: 100..n, ..travel };
+        assert_eq!(ring(StartState::Unheld, &still), ring(StartState::AsRecorded, &still));
     }
 
     #[test]

@@ -516,6 +516,11 @@ fn counterpart(
         for alternative in driven::DrivenSettings::alternatives() {
             perturbed.push(run_driven(models[0], &alternative)?);
         }
+        if driven::begins_in_motion(&measured.angle_rad, measured.sample_rate_hz) {
+            for alternative in driven::DrivenSettings::start_alternatives() {
+                perturbed.push(run_driven(models[0], &alternative)?);
+            }
+        }
         let inputs = DrivenInputs {
             measured: measured.clone(),
             torque_nm: torque.clone(),
