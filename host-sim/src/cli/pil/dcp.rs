@@ -87,6 +87,9 @@ pub struct ChipStep {
     pub dcp_replies: Vec<u8>,
     /// The service bytes it took this step.
     pub service_taken: Vec<u8>,
+    /// The chain observer's task after the step, if it ran: its cost in
+    /// SysTick ticks (25 MHz clock).
+    pub observer_ticks: Option<u32>,
 }
 
 /// QEMU running the PIL target with three sockets: PIL frames, DCP, service port.
@@ -194,7 +197,10 @@ impl Chip {
         let dcp_replies = read(n_out)?;
         let n_service = read(1)?[0] as usize;
         let service_taken = read(n_service)?;
-        Ok(ChipStep { report, dcp_taken, dcp_replies, service_taken })
+        let observer = read(5)?;
+        let observer_ticks =
+            (observer[0] != 0).then(|| u32::from_le_bytes([observer[1], observer[2], observer[3], observer[4]]));
+        Ok(ChipStep { report, dcp_taken, dcp_replies, service_taken, observer_ticks })
     }
 
     /// `n` bytes the chip sent on the service port.
@@ -220,6 +226,11 @@ pub struct LiftStep {
     /// 25 MHz clock under `-icount shift=5`: 1.25 instructions a tick);
     /// `None` for the host build alone.
     pub instructions: Option<f64>,
+    /// Whether the chain observer's task ran after the step (the shadow's).
+    pub observer_ran: bool,
+    /// The chip's observer task after the step, instructions, if it ran
+    /// (`None` also for the host build alone).
+    pub observer_instructions: Option<f64>,
 }
 
 /// The lift: the plant, the chip and its shadow, stepped together (or the
@@ -285,6 +296,11 @@ impl Lift {
         &self.shadow
     }
 
+    /// The plant (its car acceleration, rope lengths).
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
     /// One PWM period: `dcp_out` on the DCP line, `service_out` on the
     /// service port, the chip's step checked against the shadow's, the
     /// plant advanced.
@@ -309,8 +325,18 @@ impl Lift {
         }
         let dcp = self.shadow.dcp_step(&dcp_taken, sensors.time_us);
         let output = self.shadow.control_step(&sensors);
+        let observer_ran = self.shadow.observer_step();
         let dcp_replies = dcp.reply[..dcp.reply_len].to_vec();
         let instructions = chip.as_ref().map(|c| c.report.cost_ticks as f64 * INSTRUCTIONS_PER_TICK);
+        let observer_instructions =
+            chip.as_ref().and_then(|c| c.observer_ticks).map(|t| t as f64 * INSTRUCTIONS_PER_TICK);
+        if let Some(chip) = &chip {
+            ensure!(
+                chip.observer_ticks.is_some() == observer_ran,
+                "step {k}: the observer task ran on the {} only",
+                if observer_ran { "host" } else { "chip" }
+            );
+        }
         let service_answers = match (self.chip.as_mut(), chip) {
             (Some(c), Some(chip)) => {
                 let answers = c.read_service(expected_answers.len())?;
@@ -327,7 +353,7 @@ impl Lift {
         self.plant.advance(1.0 / self.drive.current_loop_hz as f64, self.max_step_s);
         ensure!(self.plant.in_valid_range(), "step {k}: the plant left its valid range");
         self.steps += 1;
-        Ok(LiftStep { output, dcp_replies, service_answers, saved, instructions })
+        Ok(LiftStep { output, dcp_replies, service_answers, saved, instructions, observer_ran, observer_instructions })
     }
 
     /// Sends the service request `line` (without its `\n`) and steps until
