@@ -1121,6 +1121,67 @@ mod tests {
     }
 
     #[test]
+    fn the_observer_estimate_of_a_tick_is_used_at_the_next_and_a_missed_deadline_is_counted() {
+        let config = rig();
+        let chain = crate::config::reference_chain();
+        let mut c = Controller::new(&config);
+        let table = HarmonicTable::default();
+        c.install_compensation(Strategy::CarObserver, &table, &chain);
+        assert!(c.uses_observer());
+        let mut task = crate::observer::ObserverTask::for_model(&chain).unwrap();
+        let mut car = IdealCar { k: 0, position_m: 0.0 };
+        car.run(&mut c, 0.01);
+        c.command_travel(travel()).unwrap();
+        // Through pre-torque: nothing published.
+        for _ in 0..(PRE_TORQUE_S * config.current_loop_hz) as u32 - 8 {
+            car.step(&mut c);
+            assert!(!c.observer_input_waiting());
+        }
+        // Served after every step (as a task that finishes within the
+        // period): at each tick the estimate in use is the one the task
+        // computed from the previous tick's input.
+        let mut published = 0;
+        let mut served: Option<ObserverEstimate> = None;
+        for _ in 0..1600 {
+            car.step(&mut c);
+            if c.observer_input_waiting() {
+                published += 1;
+                if let Some(previous) = served {
+                    assert_eq!(c.observer_estimate(), Some(previous));
+                }
+                assert!(task.serve(&mut c));
+                served = Some(task.observer().estimate()).filter(|_| published > 1);
+            }
+        }
+        assert_eq!(c.state(), DriveState::BrakeLift);
+        assert!(published >= 190, "{published} inputs in 0.1 s");
+        assert_eq!(c.observer_missed_deadlines(), 0);
+        assert!(c.observer_estimate().is_some());
+        // A task late by a whole speed-loop period (one input never taken
+        // before the next tick): counted at the next tick, whose own input
+        // the task then serves.
+        let divider = config.speed_loop_divider();
+        let mut late_until = None;
+        let mut after_skip = None;
+        for i in 0..64u32 {
+            car.step(&mut c);
+            if !c.observer_input_waiting() {
+                continue;
+            }
+            match late_until {
+                None => late_until = Some(i + divider),
+                Some(until) if i < until => {}
+                Some(_) => {
+                    after_skip.get_or_insert(c.observer_missed_deadlines());
+                    task.serve(&mut c);
+                }
+            }
+        }
+        assert_eq!(after_skip, Some(1));
+        assert_eq!(c.observer_missed_deadlines(), 1);
+    }
+
+    #[test]
     fn a_stop_before_the_brake_is_lifted_ends_the_travel_without_moving() {
         let mut c = Controller::new(&rig());
         let mut car = IdealCar { k: 0, position_m: 0.0 };

@@ -426,6 +426,112 @@ impl Lift {
     }
 }
 
+/// Core clock of the STM32G474 the load is given against, Hz.
+pub const CORE_CLOCK_HZ: f64 = 170.0e6;
+
+/// The load of the control interrupt and the chain observer's task on the
+/// emulated chip, from the instructions of each step (one cycle counted
+/// per instruction: a lower bound of the cycles on the real M4), over the
+/// steps with the inverter on.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CpuLoad {
+    /// Steps counted (inverter on).
+    pub steps: u64,
+    /// Control steps' instructions, summed.
+    pub control_instructions: f64,
+    /// Largest control step, instructions.
+    pub control_max: f64,
+    /// Observer runs counted.
+    pub observer_runs: u64,
+    /// Observer runs' instructions, summed.
+    pub observer_instructions: f64,
+    /// Largest observer run, instructions.
+    pub observer_max: f64,
+    /// Largest sum over one speed-loop period: the control steps of the
+    /// `divider` PWM periods up to an observer run, and that run, instructions.
+    pub worst_speed_period: f64,
+    recent: std::collections::VecDeque<f64>,
+    divider: usize,
+    pwm_hz: f64,
+}
+
+impl CpuLoad {
+    /// For `drive`'s PWM rate and speed-loop divider.
+    pub fn new(drive: &DriveConfig) -> Self {
+        Self {
+            divider: drive.speed_loop_divider().max(1) as usize,
+            pwm_hz: drive.current_loop_hz as f64,
+            ..Self::default()
+        }
+    }
+
+    /// CPU cycles of one PWM period at [`CORE_CLOCK_HZ`] (10 625 at 16 kHz).
+    pub fn cycles_per_period(&self) -> f64 {
+        CORE_CLOCK_HZ / self.pwm_hz
+    }
+
+    /// Adds a step of the chip (a step without the chip's figures or with
+    /// the inverter off is not counted).
+    pub fn add(&mut self, step: &LiftStep) {
+        let Some(control) = step.instructions else { return };
+        if !step.output.pwm_enabled {
+            self.recent.clear();
+            return;
+        }
+        self.steps += 1;
+        self.control_instructions += control;
+        self.control_max = self.control_max.max(control);
+        self.recent.push_back(control);
+        if self.recent.len() > self.divider {
+            self.recent.pop_front();
+        }
+        if let Some(observer) = step.observer_instructions {
+            self.observer_runs += 1;
+            self.observer_instructions += observer;
+            self.observer_max = self.observer_max.max(observer);
+            self.worst_speed_period = self.worst_speed_period.max(self.recent.iter().sum::<f64>() + observer);
+        }
+    }
+
+    /// Mean control step, instructions.
+    pub fn control_mean(&self) -> f64 {
+        self.control_instructions / self.steps.max(1) as f64
+    }
+
+    /// Mean observer run, instructions.
+    pub fn observer_mean(&self) -> f64 {
+        self.observer_instructions / self.observer_runs.max(1) as f64
+    }
+
+    /// Mean load, % of a 170 MHz core: the instructions of the control
+    /// steps and the observer runs over the cycles of the steps counted.
+    pub fn mean_percent(&self) -> f64 {
+        100.0 * (self.control_instructions + self.observer_instructions)
+            / (self.steps.max(1) as f64 * self.cycles_per_period())
+    }
+
+    /// Load of the busiest speed-loop period, % of a 170 MHz core.
+    pub fn worst_period_percent(&self) -> f64 {
+        100.0 * self.worst_speed_period / (self.divider as f64 * self.cycles_per_period())
+    }
+
+    /// One line: the load, and what it is made of.
+    pub fn summary(&self) -> String {
+        format!(
+            "CPU load of a 170 MHz core (one cycle an instruction) over {} steps with the inverter on: {:.1} % mean,              {:.1} % in the busiest speed-loop period; control interrupt {:.0} instructions a step (max {:.0}), chain              observer task {:.0} instructions a run (max {:.0}), {} runs ({:.0} Hz)",
+            self.steps,
+            self.mean_percent(),
+            self.worst_period_percent(),
+            self.control_mean(),
+            self.control_max,
+            self.observer_mean(),
+            self.observer_max,
+            self.observer_runs,
+            self.observer_runs as f64 / self.steps.max(1) as f64 * self.pwm_hz,
+        )
+    }
+}
+
 /// PWM periods between two messages of the lift controller: 15 ms.
 pub const CYCLE_STEPS: u64 = 240;
 
