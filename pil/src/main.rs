@@ -235,8 +235,7 @@ fn main() -> ! {
                 let start = SYST::get_current();
                 let observer_ran = drive.observer_step();
                 let end = SYST::get_current();
-                let observer_ticks =
-                    (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
+                let observer_ticks = (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
                 record[0] = n_in as u8;
                 record[1..1 + n_in].copy_from_slice(&taken[..n_in]);
                 record[1 + n_in] = dcp.reply_len as u8;

@@ -518,7 +518,9 @@ impl CpuLoad {
     /// One line: the load, and what it is made of.
     pub fn summary(&self) -> String {
         format!(
-            "CPU load of a 170 MHz core (one cycle an instruction) over {} steps with the inverter on: {:.1} % mean,              {:.1} % in the busiest speed-loop period; control interrupt {:.0} instructions a step (max {:.0}), chain              observer task {:.0} instructions a run (max {:.0}), {} runs ({:.0} Hz)",
+            "CPU load of a 170 MHz core (one cycle an instruction) over {} steps with the inverter on: {:.1} % mean, \
+             {:.1} % in the busiest speed-loop period; control interrupt {:.0} instructions a step (max {:.0}), chain \
+             observer task {:.0} instructions a run (max {:.0}), {} runs ({:.0} Hz)",
             self.steps,
             self.mean_percent(),
             self.worst_period_percent(),
