@@ -41,6 +41,7 @@ use drive_core::alignment::{Alignment, AlignmentError, AlignmentParams, Alignmen
 use drive_core::controller::Telemetry;
 use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
 use drive_core::lift_drive::{self, ApplyError, ControllerCommand};
+use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::{ControlOutput, Controller, DriveState, SensorFrame};
 use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::interrupt;
@@ -194,6 +195,17 @@ pub fn deliver_observer_output(output: drive_core::observer::ObserverOutput) {
             drive.controller.deliver_observer_output(output);
         }
     });
+}
+
+/// The harmonic table to keep in the parameter record
+/// (`drive_core::lift_drive::kept_table`: what the controller learned in
+/// its latest travel with a learning strategy, else the table installed;
+/// `installed` before the controller runs), N m. Copies the controller's
+/// table in a critical section: call it with the control interrupt paused.
+pub fn kept_table(installed: &HarmonicTable) -> HarmonicTable {
+    critical_section::with(|cs| {
+        DRIVE.borrow_ref(cs).as_ref().map_or(*installed, |d| lift_drive::kept_table(&d.controller, installed))
+    })
 }
 
 /// Speed-loop ticks whose observer estimate was not back in time, since start.

@@ -147,6 +147,26 @@ pub fn apply(command: ControllerCommand, controller: &mut Controller) -> Result<
     }
 }
 
+/// The harmonic table (N m) a drive keeps in its parameter record: after a
+/// travel with `Strategy::Adaptive` or `Strategy::CarObserver`, what the
+/// controller learned (the calibration of `Strategy::Table`); otherwise the
+/// table of the compensation installed, or `installed` (N m) without one.
+pub fn kept_table(controller: &Controller, installed: &HarmonicTable) -> HarmonicTable {
+    match controller.compensation() {
+        Some(c) => {
+            let learned = c.learned_table();
+            let learns = matches!(c.strategy(), Strategy::Adaptive | Strategy::CarObserver);
+            let n = learned.len.min(learned.torque_nm.len());
+            if learns && learned.torque_nm[..n].iter().any(|u| u.re != 0.0 || u.im != 0.0) {
+                learned
+            } else {
+                c.table()
+            }
+        }
+        None => *installed,
+    }
+}
+
 /// Distance to stop from car speed `speed_mps` with the profile's
 /// acceleration and jerk limits (the deceleration half of the S-curve),
 /// mm, rounded up, at most `u16::MAX`.
@@ -409,19 +429,7 @@ impl LiftDrive {
     /// learned: the calibration of `Strategy::Table`; otherwise the table
     /// installed), the car mass, the encoder offset, the DCP variant.
     pub fn parameters(&self) -> DriveParameters {
-        let table = match self.controller.compensation() {
-            Some(c) => {
-                let learned = c.learned_table();
-                let learns = matches!(c.strategy(), Strategy::Adaptive | Strategy::CarObserver);
-                let n = learned.len.min(learned.torque_nm.len());
-                if learns && learned.torque_nm[..n].iter().any(|u| u.re != 0.0 || u.im != 0.0) {
-                    learned
-                } else {
-                    c.table()
-                }
-            }
-            None => self.service.table,
-        };
+        let table = kept_table(&self.controller, &self.service.table);
         DriveParameters {
             strategy: self.service.strategy,
             table,
