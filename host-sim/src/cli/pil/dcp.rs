@@ -517,20 +517,29 @@ impl CpuLoad {
 
     /// One line: the load, and what it is made of.
     pub fn summary(&self) -> String {
-        format!(
-            "CPU load of a 170 MHz core (one cycle an instruction) over {} steps with the inverter on: {:.1} % mean, \
-             {:.1} % in the busiest speed-loop period; control interrupt {:.0} instructions a step (max {:.0}), chain \
-             observer task {:.0} instructions a run (max {:.0}), {} runs ({:.0} Hz)",
+        let mut line = format!(
+            "CPU load of a 170 MHz core (one cycle an instruction) over {} steps with the inverter on: {:.1} % mean",
             self.steps,
-            self.mean_percent(),
-            self.worst_period_percent(),
+            self.mean_percent()
+        );
+        if self.observer_runs > 0 {
+            line += &format!(", {:.1} % in the busiest speed-loop period", self.worst_period_percent());
+        }
+        line += &format!(
+            "; control interrupt {:.0} instructions a step (max {:.0})",
             self.control_mean(),
-            self.control_max,
-            self.observer_mean(),
-            self.observer_max,
-            self.observer_runs,
-            self.observer_runs as f64 / self.steps.max(1) as f64 * self.pwm_hz,
-        )
+            self.control_max
+        );
+        if self.observer_runs > 0 {
+            line += &format!(
+                ", chain observer task {:.0} instructions a run (max {:.0}), {} runs ({:.0} Hz)",
+                self.observer_mean(),
+                self.observer_max,
+                self.observer_runs,
+                self.observer_runs as f64 / self.steps.max(1) as f64 * self.pwm_hz,
+            );
+        }
+        line
     }
 }
 
