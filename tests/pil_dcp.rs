@@ -443,6 +443,43 @@ fn a_car_observer_travel_on_the_emulated_chip_rides_as_on_the_host_and_fits_the_
         println!("{name:<40} chip {c:9.3} host {h:9.3} {db:+.2} dB");
         assert!(h.is_finite() && *h > 0.0 && db.abs() <= 1.0, "{name}: chip {c}, host {h}");
     }
+    // The host-sim closed loop (`host-sim travel`'s: the plant sampled at
+    // the rig's 16 384 Hz, the PWM outputs acting from the next half
+    // period, the travel commanded directly) with the same strategy on the
+    // same travel: within 1 dB each too.
+    let travel_loop = {
+        let drive = rig.drive_config();
+        let mut controller = drive_core::Controller::new(&drive);
+        let table = default_parameters(&rig).table;
+        controller.install_compensation(drive_core::ripple::Strategy::CarObserver, &table, &rig.observer_model());
+        let task = drive_core::observer::ObserverTask::for_model(&rig.observer_model()).unwrap();
+        let mut observed = closed_loop::ObservedController { controller: &mut controller, task };
+        let spec = closed_loop::TravelSpec {
+            m_car_kg: host_sim::cli::pil::dcp::geometry(&rig).1 as f64,
+            direction: drive_core::config::Direction::Up,
+            lw_start_m: lw_start,
+            lw_end_m: lw_start + 2.0,
+        };
+        let options = closed_loop::SimOptions::for_rig(&rig);
+        let run = closed_loop::simulate_travel_with(&rig, &spec, &options, &mut observed, None, None).unwrap();
+        let stage = dsp::constant_speed_stage(&run.speed_radps, run.sample_rate_hz).unwrap();
+        let q = dsp::ride_quality(&run.acc_car_mps2, run.sample_rate_hz, Some(stage)).unwrap();
+        let c = q.constant_speed.unwrap();
+        [
+            q.whole_run.max_peak_to_peak_mg,
+            q.whole_run.a95_peak_to_peak_mg,
+            q.whole_run.max_acceleration_mg,
+            q.whole_run.max_deceleration_mg,
+            q.whole_run.max_jerk_mps3,
+            c.max_peak_to_peak_mg,
+            c.a95_peak_to_peak_mg,
+        ]
+    };
+    for ((name, c), t) in chip.iter().zip(travel_loop) {
+        let db = 20.0 * (c / t).log10();
+        println!("{name:<40} chip {c:9.3} host-sim travel loop {t:9.3} {db:+.2} dB");
+        assert!(t.is_finite() && t > 0.0 && db.abs() <= 1.0, "{name}: chip {c}, host-sim travel loop {t}");
+    }
     // The load of the control interrupt and the observer task, under 60 %
     // of a 170 MHz core (instructions counted under -icount, not time).
     println!("{}", on_chip.load.summary());
