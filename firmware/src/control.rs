@@ -19,7 +19,11 @@
 //! 6. every [`RECORD_DECIMATION`]th step queues a telemetry record.
 //!
 //! Sharing: the interrupt owns the controller, inside a
-//! `critical_section::Mutex`; the task never touches it. The task and the
+//! `critical_section::Mutex`; the telemetry task never touches it. The chain
+//! observer's task (`observer.rs`, a lower-priority interrupt executor)
+//! takes the observer's input from it and hands the output back, each in a
+//! critical section that copies a few words; the interrupt wakes that task
+//! when the controller has published an input. The task and the
 //! interrupt exchange commands, events and records through `heapless`
 //! queues behind critical sections, each held for one push or pop (a few
 //! hundred cycles at most, the longest the task can delay the interrupt).
@@ -37,6 +41,7 @@ use drive_core::alignment::{Alignment, AlignmentError, AlignmentParams, Alignmen
 use drive_core::controller::Telemetry;
 use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
 use drive_core::lift_drive::{self, ApplyError, ControllerCommand};
+use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::{ControlOutput, Controller, DriveState, SensorFrame};
 use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::interrupt;
@@ -175,6 +180,37 @@ pub struct Snapshot {
     pub pwm_on: bool,
     /// Brake released after the latest step (also during the alignment).
     pub brake_released: bool,
+}
+
+/// The observer's task takes the input the controller published (short
+/// critical section: a copy of a few words).
+pub fn take_observer_input() -> Option<drive_core::observer::ObserverInput> {
+    critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).as_mut().and_then(|d| d.controller.take_observer_input()))
+}
+
+/// The observer's task hands back the output of an input (short critical section).
+pub fn deliver_observer_output(output: drive_core::observer::ObserverOutput) {
+    critical_section::with(|cs| {
+        if let Some(drive) = DRIVE.borrow_ref_mut(cs).as_mut() {
+            drive.controller.deliver_observer_output(output);
+        }
+    });
+}
+
+/// The harmonic table to keep in the parameter record
+/// (`drive_core::lift_drive::kept_table`: what the controller learned in
+/// its latest travel with a learning strategy, else the table installed;
+/// `installed` before the controller runs), N m. Copies the controller's
+/// table in a critical section: call it with the control interrupt paused.
+pub fn kept_table(installed: &HarmonicTable) -> HarmonicTable {
+    critical_section::with(|cs| {
+        DRIVE.borrow_ref(cs).as_ref().map_or(*installed, |d| lift_drive::kept_table(&d.controller, installed))
+    })
+}
+
+/// Speed-loop ticks whose observer estimate was not back in time, since start.
+pub fn observer_missed_deadlines() -> u32 {
+    critical_section::with(|cs| DRIVE.borrow_ref(cs).as_ref().map_or(0, |d| d.controller.observer_missed_deadlines()))
 }
 
 /// The latest [`Snapshot`].
@@ -520,7 +556,11 @@ impl Drive {
                     dc_bus_code: samples.dc_bus_code,
                     time_us,
                 };
-                (Some(self.controller.step(&frame)), None, frame.phase_current_codes)
+                let output = self.controller.step(&frame);
+                if self.controller.observer_input_waiting() {
+                    crate::observer::input_published();
+                }
+                (Some(output), None, frame.phase_current_codes)
             }
             Phase::Failed => (None, None, samples.phase_codes),
         }

@@ -13,8 +13,11 @@
 //!
 //! The control interrupt (`control.rs`, highest priority) runs
 //! `drive_core::Controller::step` once per PWM period with the measured values;
-//! the speed loop, the profile and the speed observer run inside it. Three
-//! Embassy tasks: `telemetry.rs` logs what the interrupt queues and feeds
+//! the speed loop, the profile and the speed observer run inside it. With
+//! the strategy `car-observer`, the chain observer runs in a task of its own
+//! (`observer.rs`: an interrupt executor below the control interrupt), fed
+//! by the controller at each speed-loop tick and read back at the next.
+//! Three thread-mode Embassy tasks: `telemetry.rs` logs what the interrupt queues and feeds
 //! the watchdog while the interrupt is alive; `dcp.rs` answers the lift
 //! controller and submits its commands; `service.rs` answers the service
 //! port.
@@ -74,6 +77,7 @@ mod board;
 mod control;
 mod dcp;
 mod encoder;
+mod observer;
 mod params;
 mod pwm;
 mod service;
@@ -85,6 +89,7 @@ use defmt::{error, info, warn};
 use defmt_rtt as _;
 use drive_core::dcp::{Mode, SlaveConfig};
 use drive_core::lift_drive::{speed_table, DcpPort};
+use drive_core::observer::ObserverTask;
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::Controller;
@@ -160,22 +165,10 @@ async fn main(spawner: Spawner) {
 
     let mut store = params::ParamStore::new(p.FLASH);
     let (stored, params_status) = store.load().await;
-    let (mut strategy, mut table, m_car_kg, dcp_mode, encoder_offset) = match stored {
+    let (strategy, table, m_car_kg, dcp_mode, encoder_offset) = match stored {
         Some(p) => (p.strategy, p.table, p.m_car_kg, p.dcp_mode, p.encoder_offset_counts),
         None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG, DCP_MODE, 0),
     };
-    if strategy == Strategy::CarObserver {
-        // Its chain observer runs in the controller's speed-loop tick: on the
-        // emulated Cortex-M4F that tick takes up to 34 278 instructions,
-        // 3.2 PWM periods at 170 MHz, which would overrun the control
-        // interrupt. Refused until the observer runs in a task of its own.
-        warn!(
-            "parameters: strategy car-observer refused (its observer does not fit the control interrupt);              running {=str}",
-            DEFAULT_STRATEGY.name()
-        );
-        strategy = DEFAULT_STRATEGY;
-        table = offline_table();
-    }
     let mut controller = Controller::new(&DRIVE_CONFIG);
     controller.install_compensation(strategy, &table, &CHAIN_MODEL);
     info!(
@@ -202,7 +195,20 @@ async fn main(spawner: Spawner) {
             save_requested: false,
         });
     });
+    let uses_observer = controller.uses_observer();
     control::start(controller, brake);
+    if uses_observer {
+        match ObserverTask::for_model(&CHAIN_MODEL) {
+            Ok(task) => {
+                observer::start(task);
+                info!("chain observer task running (interrupt executor at priority {=u8})", observer::PRIORITY as u8);
+            }
+            Err(e) => error!(
+                "chain observer model refused ({=str} must be {=str}): every speed tick counts a missed deadline",
+                e.field, e.expected
+            ),
+        }
+    }
     info!(
         "control interrupt running: current loop {=f32} Hz, speed loop {=f32} Hz; calibrating current offsets",
         DRIVE_CONFIG.current_loop_hz, DRIVE_CONFIG.speed_loop_hz

@@ -12,8 +12,11 @@
 //! dcp-mode` restarts the DCP slave in the other variant (the DCP task
 //! takes it). `save` writes the parameter record (strategy, table, car
 //! mass, the stored encoder offset, DCP variant) to flash with the drive
-//! idle and the control interrupt paused (`params.rs`); during a travel or
-//! the start-up it is answered `error busy`.
+//! idle and the control interrupt paused (`params.rs`); the table is what
+//! the controller learned in its latest travel with `adaptive` or
+//! `car-observer` (`drive_core::lift_drive::kept_table`, read from the
+//! paused controller), else the table installed. During a travel or the
+//! start-up `save` is answered `error busy`.
 
 use core::cell::RefCell;
 
@@ -97,20 +100,26 @@ pub async fn run(mut uart: BufferedUart<'static>, mut store: ParamStore, encoder
             state.travelling = drive.pwm_enabled() || drive.brake_released();
         }
         state.speed_radps = snapshot.speed_radps;
+        // `get table` shows the table `save` would keep (the learned one
+        // after a learning travel), as the PIL target's application layer.
+        let installed = state.table;
+        state.table = control::kept_table(&installed);
         let reply = answer(&line[..len], &mut state);
         let mut text: &[u8] = reply.as_bytes();
         if state.save_requested {
             state.save_requested = false;
-            let parameters = DriveParameters {
-                strategy: state.strategy,
-                table: state.table,
-                m_car_kg: state.m_car_kg,
-                encoder_offset_counts,
-                dcp_mode: state.dcp_mode,
-            };
             if !control::pause_if_idle() {
                 text = b"error busy";
             } else {
+                // The controller is idle and its interrupt paused: what it
+                // learned in its latest travel is the table to keep.
+                let parameters = DriveParameters {
+                    strategy: state.strategy,
+                    table: control::kept_table(&installed),
+                    m_car_kg: state.m_car_kg,
+                    encoder_offset_counts,
+                    dcp_mode: state.dcp_mode,
+                };
                 let written = store.save(&parameters).await;
                 control::resume();
                 if !written {

@@ -89,7 +89,8 @@ fn log_record(r: &Record, summary: bool) {
     if summary {
         info!(
             "t {=u32} ms: {=str}, pwm {=bool}, brake released {=bool}, iq {=f32} A (ref {=f32}), speed {=f32} rad/s \
-             (ref {=f32}), bus code {=u16}, longest step {=u32} cycles of {=u32}, dropped {=u32}",
+             (ref {=f32}), bus code {=u16}, longest step {=u32} cycles of {=u32}, dropped {=u32}; chain observer: \
+             {=u32} runs, longest {=u32} cycles, {=u32} missed deadlines",
             r.time_us / 1000,
             state_name(r.state),
             r.pwm_on,
@@ -101,7 +102,10 @@ fn log_record(r: &Record, summary: bool) {
             r.dc_bus_code,
             control::max_cycles(),
             pwm::PERIOD_CYCLES,
-            control::dropped()
+            control::dropped(),
+            crate::observer::runs(),
+            crate::observer::max_cycles(),
+            control::observer_missed_deadlines()
         );
     }
 }

@@ -17,7 +17,9 @@
 //! the commands it gives the controller, then the controller step) with the
 //! frame's time stamp as the DCP clock, and writes one record per step on
 //! UART1: `n_in, the bytes taken, n_out, the reply bytes, n_service, the
-//! service bytes taken`. The host's lift controller reads its replies from
+//! service bytes taken, observer, its cost` (`observer` 1 when the chain
+//! observer's task ran after the step, then its cost in SysTick ticks as
+//! four little-endian bytes, 0 otherwise). The host's lift controller reads its replies from
 //! the records, and the host shadow replays the same bytes at the same
 //! steps, so the chip and the host run the same application layer bit for
 //! bit whatever the emulator's timing of the bytes.
@@ -37,6 +39,14 @@
 //! the service port's `get params` says why; the service port's `save`
 //! writes the record. Starting QEMU again in the same directory is a power
 //! cycle.
+//!
+//! The chain observer: with a strategy that uses it, the controller
+//! publishes the observer's input at each speed-loop tick and the
+//! observer's task (`drive_core::observer::ObserverTask`, through
+//! `LiftDrive::observer_step`) runs after the control step, before the
+//! next frame: a task below the control interrupt that finishes within the
+//! PWM period, on the schedule of `drive_core::observer::task` (the
+//! estimate of tick `k`'s input used at tick `k + 1`), the firmware's.
 //!
 //! Logging: defmt over semihosting (feature `semihosting`, the default) or
 //! RTT (feature `rtt`); the controller code is the same either way.
@@ -176,7 +186,7 @@ fn main() -> ! {
     }
     drive.install_parameters(&stored.unwrap_or_else(default_parameters), &CHAIN_MODEL, status);
     drive.set_savable(true);
-    let mut record = [0u8; 3 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP + MAX_SERVICE_BYTES_PER_STEP];
+    let mut record = [0u8; 3 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP + MAX_SERVICE_BYTES_PER_STEP + 5];
     let mut decoder = Decoder::new();
     let mut frame = [0u8; MAX_FRAME];
     defmt::info!("PIL target up: PWM {} Hz, waiting for frames on UART0", DRIVE_CONFIG.pwm_hz);
@@ -221,6 +231,11 @@ fn main() -> ! {
                 let end = SYST::get_current();
                 // SysTick counts down, modulo its 24-bit reload.
                 let cost_ticks = (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
+                // The chain observer's task, timed on its own.
+                let start = SYST::get_current();
+                let observer_ran = drive.observer_step();
+                let end = SYST::get_current();
+                let observer_ticks = (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
                 record[0] = n_in as u8;
                 record[1..1 + n_in].copy_from_slice(&taken[..n_in]);
                 record[1 + n_in] = dcp.reply_len as u8;
@@ -229,6 +244,10 @@ fn main() -> ! {
                 record[end] = n_service as u8;
                 record[end + 1..end + 1 + n_service].copy_from_slice(&service_taken[..n_service]);
                 end += 1 + n_service;
+                record[end] = observer_ran as u8;
+                let observer_cost = if observer_ran { observer_ticks } else { 0 };
+                record[end + 1..end + 5].copy_from_slice(&observer_cost.to_le_bytes());
+                end += 5;
                 dcp_uart.write_all(&record[..end]);
                 Message::Output(StepReport::new(&output, cost_ticks))
             }

@@ -24,7 +24,7 @@
 use crate::config::{Direction, DriveConfig};
 use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
 use crate::fixed::{mul_int, q16, Q16};
-use crate::observer::{ChainModel, ChainObserver, ObserverEstimate, ObserverTuning};
+use crate::observer::{ChainModel, ObserverEstimate, ObserverInput, ObserverLink, ObserverOutput, ObserverRequest};
 use crate::park_clarke::Abc;
 use crate::profile::{ProfileError, ProfilePoint, SCurve, SpeedRamp};
 use crate::ripple::harmonics::HarmonicTable;
@@ -281,8 +281,12 @@ pub struct Controller {
     binary_angle_per_count_q16: u64,
     /// Torque-ripple compensation (q-current feed-forward by shaft angle), if installed.
     compensation: Option<RippleCompensator>,
-    /// The reduced 5-DOF observer, if installed (run at the speed-loop rate with the brake released).
-    observer: Option<ChainObserver>,
+    /// The link to the chain observer's task, if the observer is in use
+    /// (inputs published at the speed-loop ticks with the brake released;
+    /// see [`crate::observer::task`] for the schedule).
+    observer: Option<ObserverLink>,
+    /// Speed-loop ticks since power-up (wraps): the observer's schedule.
+    speed_ticks: u32,
     /// The encoder counter of the latest step (what the observer reads), counts.
     last_encoder_count: u32,
     /// Fault checks: the latest current-loop sample, for the supervisor's
@@ -354,6 +358,7 @@ impl Controller {
             binary_angle_per_count_q16: (1u64 << 48) / config.encoder_counts_per_rev.max(1) as u64,
             compensation: None,
             observer: None,
+            speed_ticks: 0,
             last_encoder_count: 0,
             loop_sample: LoopSample::default(),
         }
@@ -371,9 +376,10 @@ impl Controller {
 
     /// Installs ripple compensation `strategy` for the orders of `table`
     /// (the `Strategy::Table` table, N m) on the drive's chain model `chain`, with the
-    /// chain observer when the strategy is [`Strategy::CarObserver`];
-    /// [`Strategy::Off`] removes both. The one setup the chip (PIL) and the
-    /// host share.
+    /// link to the chain observer's task when the strategy is
+    /// [`Strategy::CarObserver`] (the caller runs the task:
+    /// [`crate::observer::ObserverTask`]); [`Strategy::Off`] removes both.
+    /// The one setup the chip (PIL) and the host share.
     pub fn install_compensation(&mut self, strategy: Strategy, table: &HarmonicTable, chain: &ChainModel) {
         if strategy == Strategy::Off {
             self.compensation = None;
@@ -383,24 +389,53 @@ impl Controller {
         let mut compensator = RippleCompensator::new(&self.config, chain, &table.orders[..table.len], strategy);
         compensator.set_table(*table);
         self.compensation = Some(compensator);
-        self.observer = if strategy == Strategy::CarObserver {
-            ChainObserver::new(*chain, ObserverTuning::default()).ok()
-        } else {
-            None
-        };
+        self.observer = (strategy == Strategy::CarObserver).then(ObserverLink::default);
     }
 
-    /// Installs the chain observer, or removes it (between travels). With
-    /// an observer installed, `Strategy::CarObserver` learns from its
-    /// car acceleration.
-    pub fn set_observer(&mut self, observer: Option<ChainObserver>) {
-        self.observer = observer;
+    /// Uses the chain observer, or stops using it (between travels): with
+    /// `true`, the controller publishes the observer's inputs from the next
+    /// brake lift on and `Strategy::CarObserver` learns from the car
+    /// acceleration its task hands back. A new link (nothing pending, no
+    /// deadline counted) either way.
+    pub fn set_observer(&mut self, used: bool) {
+        self.observer = used.then(ObserverLink::default);
     }
 
-    /// The observer's latest estimate (car acceleration m/s^2, rope forces N,
-    /// shaft disturbance N m), if an observer is installed and started.
+    /// Whether the chain observer is in use (a task must serve its link).
+    pub fn uses_observer(&self) -> bool {
+        self.observer.is_some()
+    }
+
+    /// Whether an input waits for the observer's task (published at this
+    /// step's speed-loop tick and not taken yet).
+    pub fn observer_input_waiting(&self) -> bool {
+        self.observer.is_some_and(|link| link.is_waiting())
+    }
+
+    /// The observer's input waiting for its task, taken (the task's side of the link).
+    pub fn take_observer_input(&mut self) -> Option<ObserverInput> {
+        self.observer.as_mut().and_then(ObserverLink::take)
+    }
+
+    /// The observer task hands back the output of an input it took.
+    pub fn deliver_observer_output(&mut self, output: ObserverOutput) {
+        if let Some(link) = self.observer.as_mut() {
+            link.deliver(output);
+        }
+    }
+
+    /// Speed-loop ticks in which the observer's estimate of the previous
+    /// tick was not back from its task (missed deadlines), since the
+    /// observer was installed.
+    pub fn observer_missed_deadlines(&self) -> u32 {
+        self.observer.map_or(0, |link| link.missed_deadlines())
+    }
+
+    /// The observer's estimate in use (car acceleration m/s^2, rope forces N,
+    /// shaft disturbance N m): the latest one its task handed back in time,
+    /// if the observer is in use and has given one since the brake lifted.
     pub fn observer_estimate(&self) -> Option<ObserverEstimate> {
-        self.observer.filter(|o| o.is_started()).map(|o| o.estimate())
+        self.observer.and_then(|link| link.estimate())
     }
 
     /// Current state.
@@ -548,12 +583,19 @@ impl Controller {
     fn enter(&mut self, state: DriveState) {
         match (self.state, state) {
             (DriveState::PreTorque, DriveState::BrakeLift) => {
-                if let (Some(o), Some(t)) = (self.observer.as_mut(), self.travel) {
+                if let (Some(link), Some(t)) = (self.observer.as_mut(), self.travel) {
                     let moved_m = self.estimator.position_counts().saturating_sub(t.start_counts) as f32
                         * core::f32::consts::TAU
                         / self.config.encoder_counts_per_rev as f32
                         * self.config.sheave_radius_m;
-                    o.start(t.command.lw_start_m + moved_m, t.command.m_car_kg, self.last_encoder_count);
+                    link.publish(
+                        self.speed_ticks,
+                        ObserverRequest::Start {
+                            lw_m: t.command.lw_start_m + moved_m,
+                            m_car_kg: t.command.m_car_kg,
+                            encoder_count: self.last_encoder_count,
+                        },
+                    );
                 }
             }
             (DriveState::BrakeLift, DriveState::Travel) => {
@@ -723,6 +765,7 @@ impl Controller {
 
     /// Speed-loop period: estimator, over-speed check, sequence, q-current reference.
     fn speed_tick(&mut self) {
+        self.speed_ticks = self.speed_ticks.wrapping_add(1);
         self.estimator.update();
         let speed = self.estimator.speed_radps();
         self.supervisor.check_speed(speed);
@@ -784,9 +827,19 @@ impl Controller {
             DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet => {
                 let speed_ref_q16 = q16(speed_ref_radps);
                 let shaft_angle = self.shaft_angle();
+                // The observer's schedule: the estimate its task computed
+                // from the previous tick's input, then this tick's input.
                 let estimate = match self.observer.as_mut() {
-                    Some(o) if self.state != DriveState::BrakeSet && o.is_started() => {
-                        Some(o.update(self.last_encoder_count, kt * self.telemetry.iq_a))
+                    Some(link) if self.state != DriveState::BrakeSet && link.is_started() => {
+                        let estimate = link.consume(self.speed_ticks).and_then(|o| o.estimate);
+                        link.publish(
+                            self.speed_ticks,
+                            ObserverRequest::Update {
+                                encoder_count: self.last_encoder_count,
+                                motor_torque_nm: kt * self.telemetry.iq_a,
+                            },
+                        );
+                        estimate
                     }
                     _ => None,
                 };
@@ -1065,6 +1118,67 @@ mod tests {
             let peak = ticks.iter().map(|o| o.telemetry.ref_speed_mps.abs()).fold(0.0f32, f32::max);
             assert_eq!(peak, 0.4, "reached the speed before the limit");
         }
+    }
+
+    #[test]
+    fn the_observer_estimate_of_a_tick_is_used_at_the_next_and_a_missed_deadline_is_counted() {
+        let config = rig();
+        let chain = crate::config::reference_chain();
+        let mut c = Controller::new(&config);
+        let table = HarmonicTable::default();
+        c.install_compensation(Strategy::CarObserver, &table, &chain);
+        assert!(c.uses_observer());
+        let mut task = crate::observer::ObserverTask::for_model(&chain).unwrap();
+        let mut car = IdealCar { k: 0, position_m: 0.0 };
+        car.run(&mut c, 0.01);
+        c.command_travel(travel()).unwrap();
+        // Through pre-torque: nothing published.
+        for _ in 0..(PRE_TORQUE_S * config.current_loop_hz) as u32 - 8 {
+            car.step(&mut c);
+            assert!(!c.observer_input_waiting());
+        }
+        // Served after every step (as a task that finishes within the
+        // period): at each tick the estimate in use is the one the task
+        // computed from the previous tick's input.
+        let mut published = 0;
+        let mut served: Option<ObserverEstimate> = None;
+        for _ in 0..1600 {
+            car.step(&mut c);
+            if c.observer_input_waiting() {
+                published += 1;
+                if let Some(previous) = served {
+                    assert_eq!(c.observer_estimate(), Some(previous));
+                }
+                assert!(task.serve(&mut c));
+                served = Some(task.observer().estimate()).filter(|_| published > 1);
+            }
+        }
+        assert_eq!(c.state(), DriveState::BrakeLift);
+        assert!(published >= 190, "{published} inputs in 0.1 s");
+        assert_eq!(c.observer_missed_deadlines(), 0);
+        assert!(c.observer_estimate().is_some());
+        // A task late by a whole speed-loop period (one input never taken
+        // before the next tick): counted at the next tick, whose own input
+        // the task then serves.
+        let divider = config.speed_loop_divider();
+        let mut late_until = None;
+        let mut after_skip = None;
+        for i in 0..64u32 {
+            car.step(&mut c);
+            if !c.observer_input_waiting() {
+                continue;
+            }
+            match late_until {
+                None => late_until = Some(i + divider),
+                Some(until) if i < until => {}
+                Some(_) => {
+                    after_skip.get_or_insert(c.observer_missed_deadlines());
+                    task.serve(&mut c);
+                }
+            }
+        }
+        assert_eq!(after_skip, Some(1));
+        assert_eq!(c.observer_missed_deadlines(), 1);
     }
 
     #[test]

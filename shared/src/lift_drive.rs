@@ -28,7 +28,7 @@ use crate::controller::{
 use crate::dcp::command::{Mode, Speed};
 use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, FRAME_LEN};
 use crate::dcp::slave::{DriveStatus, Outcome, Refusal, Request, Slave, SlaveConfig, StopReason, Travel};
-use crate::observer::ChainModel;
+use crate::observer::{ChainModel, ObserverTask};
 use crate::param_store::DriveParameters;
 use crate::ripple::harmonics::HarmonicTable;
 use crate::ripple::Strategy;
@@ -144,6 +144,26 @@ pub fn apply(command: ControllerCommand, controller: &mut Controller) -> Result<
             }
             Ok(())
         }
+    }
+}
+
+/// The harmonic table (N m) a drive keeps in its parameter record: after a
+/// travel with `Strategy::Adaptive` or `Strategy::CarObserver`, what the
+/// controller learned (the calibration of `Strategy::Table`); otherwise the
+/// table of the compensation installed, or `installed` (N m) without one.
+pub fn kept_table(controller: &Controller, installed: &HarmonicTable) -> HarmonicTable {
+    match controller.compensation() {
+        Some(c) => {
+            let learned = c.learned_table();
+            let learns = matches!(c.strategy(), Strategy::Adaptive | Strategy::CarObserver);
+            let n = learned.len.min(learned.torque_nm.len());
+            if learns && learned.torque_nm[..n].iter().any(|u| u.re != 0.0 || u.im != 0.0) {
+                learned
+            } else {
+                c.table()
+            }
+        }
+        None => *installed,
     }
 }
 
@@ -308,6 +328,9 @@ pub struct LiftDrive {
     chain: Option<ChainModel>,
     /// The rotor alignment's encoder offset, counts (kept in the record).
     encoder_offset_counts: u32,
+    /// The chain observer's task (on the drive's chain model, once known):
+    /// it serves the controller's observer link when a strategy uses it.
+    observer_task: Option<ObserverTask>,
 }
 
 /// Most service-port bytes one step takes (it stops after a line's end).
@@ -374,6 +397,7 @@ impl LiftDrive {
             line_len: 0,
             chain: None,
             encoder_offset_counts: 0,
+            observer_task: None,
         }
     }
 
@@ -383,6 +407,7 @@ impl LiftDrive {
     /// the stored record (`get params`).
     pub fn install_parameters(&mut self, parameters: &DriveParameters, chain: &ChainModel, status: ParamsStatus) {
         self.chain = Some(*chain);
+        self.observer_task = ObserverTask::for_model(chain).ok();
         self.controller.install_compensation(parameters.strategy, &parameters.table, chain);
         self.port.set_car_mass(parameters.m_car_kg);
         self.port.set_mode(parameters.dcp_mode);
@@ -404,19 +429,7 @@ impl LiftDrive {
     /// learned: the calibration of `Strategy::Table`; otherwise the table
     /// installed), the car mass, the encoder offset, the DCP variant.
     pub fn parameters(&self) -> DriveParameters {
-        let table = match self.controller.compensation() {
-            Some(c) => {
-                let learned = c.learned_table();
-                let learns = matches!(c.strategy(), Strategy::Adaptive | Strategy::CarObserver);
-                let n = learned.len.min(learned.torque_nm.len());
-                if learns && learned.torque_nm[..n].iter().any(|u| u.re != 0.0 || u.im != 0.0) {
-                    learned
-                } else {
-                    c.table()
-                }
-            }
-            None => self.service.table,
-        };
+        let table = kept_table(&self.controller, &self.service.table);
         DriveParameters {
             strategy: self.service.strategy,
             table,
@@ -492,15 +505,37 @@ impl LiftDrive {
         &mut self.controller
     }
 
+    /// The chain observer's task, if the drive's chain model is known.
+    pub fn observer_task(&self) -> Option<&ObserverTask> {
+        self.observer_task.as_ref()
+    }
+
+    /// The chain observer's task, run once between two PWM periods: takes
+    /// the input the controller published at its latest speed-loop tick
+    /// (if any: only with a strategy that uses the observer), runs the
+    /// observer and hands the output back, in time for the next tick
+    /// (`drive_core::observer::task`). Whether it ran. The firmware runs
+    /// the same [`ObserverTask`] in an interrupt executor below the
+    /// control interrupt.
+    pub fn observer_step(&mut self) -> bool {
+        match self.observer_task.as_mut() {
+            Some(task) if self.controller.uses_observer() => task.serve(&mut self.controller),
+            _ => false,
+        }
+    }
+
     /// The DCP port.
     pub fn port(&self) -> &DcpPort {
         &self.port
     }
 
-    /// One PWM period: [`LiftDrive::dcp_step`], then [`LiftDrive::control_step`].
+    /// One PWM period: [`LiftDrive::dcp_step`], [`LiftDrive::control_step`],
+    /// then [`LiftDrive::observer_step`].
     pub fn step(&mut self, dcp_in: &[u8], sensors: &SensorFrame) -> (ControlOutput, StepDcp) {
         let dcp = self.dcp_step(dcp_in, sensors.time_us);
-        (self.control_step(sensors), dcp)
+        let output = self.control_step(sensors);
+        self.observer_step();
+        (output, dcp)
     }
 
     /// The DCP part of a period: the bytes `dcp_in` (at most

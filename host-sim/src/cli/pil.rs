@@ -67,9 +67,11 @@ pub struct PilArgs {
     /// speed, the remaining distance, stop and idle, one message every
     /// 15 ms), closed around the plant, every step checked bit for bit
     /// against the host build. Prints a summary per travel and writes
-    /// `dcp_travels.csv`. `--steps`, `--direction` and `--compensation` do
-    /// not apply; `--m-car` is the car's mass and is set as the drive's load
-    /// weighing on the service port.
+    /// `dcp_travels.csv` and the CPU load of the control interrupt and the
+    /// chain observer's task. `--steps` and `--direction` do not apply;
+    /// `--m-car` is the car's mass and is set as the drive's load weighing
+    /// on the service port, `--compensation` (if not off) the drive's
+    /// strategy (`set strategy`).
     #[arg(long)]
     pub dcp: bool,
     /// With `--dcp`: the landings to travel to in turn, mm above the lowest
@@ -266,10 +268,6 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
     use drive_core::dcp::command::{Mode, Speed};
     use drive_core::service::ParamsStatus;
 
-    anyhow::ensure!(
-        args.compensation.strategy() == drive_core::ripple::Strategy::Off,
-        "--compensation does not apply with --dcp (the chip starts with its stored or default parameters)"
-    );
     let (geometry, _) = dcp::geometry(rig);
     check_landings(&args.landings, args.start_mm, geometry.shaft_travel_mm)?;
     let out = output_dir(&args.out, args.force)?;
@@ -284,6 +282,11 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
     let mut lift = dcp::Lift::new(rig, Some(chip), &dcp::default_parameters(rig), ParamsStatus::None, m_car, lw_start)?;
     let (answer, _) = lift.ask(&format!("set mass {}", m_car as f32), 2_000)?;
     anyhow::ensure!(answer.starts_with("ok mass"), "the drive refused the car mass: {answer}");
+    let strategy = args.compensation.strategy();
+    if strategy != drive_core::ripple::Strategy::Off {
+        let (answer, _) = lift.ask(&format!("set strategy {}", strategy.name()), 2_000)?;
+        anyhow::ensure!(answer.starts_with("ok strategy"), "the drive refused the strategy: {answer}");
+    }
 
     let drive = rig.drive_config();
     let trips = args.landings.iter().map(|&target_mm| dcp::Trip { target_mm, speed: Speed::V4 }).collect();
@@ -302,12 +305,14 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut peak = 0.0f64;
     let mut peaks = Vec::new();
+    let mut load = dcp::CpuLoad::new(&drive);
     let mut k = 0;
     while master.phase() != dcp::Phase::Done {
         anyhow::ensure!(k < max_steps, "the travels did not finish within {max_steps} steps");
         let bytes = master.bytes(k, lift.position_mm());
         let step = lift.step(&bytes, &[])?;
         master.receive(&step.dcp_replies)?;
+        load.add(&step);
         peak = peak.max((step.output.telemetry.speed_radps * drive.sheave_radius_m).abs() as f64);
         if master.arrivals.len() > peaks.len() {
             peaks.push(peak);
@@ -338,10 +343,16 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
         })
         .collect();
     outln!(
-        "{k} control steps ({:.2} s) of DCP4 travels on the emulated Cortex-M4F in {wall:.1} s, m_car = {m_car} kg: \
-         every output, DCP reply and service answer bit-identical to the host build",
-        k as f64 / drive.current_loop_hz as f64
+        "{k} control steps ({:.2} s) of DCP4 travels on the emulated Cortex-M4F in {wall:.1} s, m_car = {m_car} kg, \
+         compensation {}: every output, DCP reply and service answer bit-identical to the host build",
+        k as f64 / drive.current_loop_hz as f64,
+        strategy.name()
     );
+    outln!("{}", load.summary());
+    let missed = lift.shadow().controller().observer_missed_deadlines();
+    if lift.shadow().controller().uses_observer() {
+        outln!("chain observer: {missed} missed deadlines");
+    }
     outln!(
         "{:>7} {:>9} {:>9} {:>10} {:>9} {:>8} {:>8} {:>10}",
         "travel",

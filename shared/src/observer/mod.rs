@@ -6,7 +6,10 @@
 //!   rope stiffnesses `EA / l` scheduled on the rope lengths (Eqn 1-3), the
 //!   out-of-balance torque of Eqn 4 and the series discretisation;
 //! * [`kalman`]: the extended Kalman filter that also identifies a scale on
-//!   `EA` and the angle-locked machine ripple it does not know.
+//!   `EA` and the angle-locked machine ripple it does not know;
+//! * [`task`]: the observer as a task of its own beside the control step,
+//!   on a fixed schedule (the estimate of a tick's input used at the next
+//!   tick), with missed deadlines counted.
 //!
 //! Typical use at the speed tick, with the brake lifted:
 //!
@@ -27,6 +30,8 @@
 
 pub mod kalman;
 pub mod model;
+pub mod task;
 
 pub use kalman::{ChainObserver, ObserverEstimate, ObserverTuning};
 pub use model::{ChainModel, ModelError};
+pub use task::{ObserverInput, ObserverLink, ObserverOutput, ObserverRequest, ObserverTask};

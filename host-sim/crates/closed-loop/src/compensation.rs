@@ -162,10 +162,10 @@ pub fn travel_with_compensator(
 ) -> Result<(TravelRun, RippleCompensator), SimError> {
     let plant_rig = mismatch.plant_rig(nominal);
     let mut controller = Controller::new(&nominal.drive_config());
-    if compensator.strategy() == Strategy::CarObserver {
-        controller.set_observer(Some(observer(nominal)?));
-    }
+    let uses_observer = compensator.strategy() == Strategy::CarObserver;
+    controller.set_observer(uses_observer);
     controller.set_compensation(Some(compensator));
+    let task = drive_core::observer::ObserverTask::new(observer(nominal)?);
     let mut shift = RippleOrderShift { fraction: 0.0, done: false };
     let hook: Option<&mut dyn FaultHook> = match mismatch {
         Mismatch::RipplePhaseDrift { fraction } => {
@@ -174,7 +174,13 @@ pub fn travel_with_compensator(
         }
         _ => None,
     };
-    let run = simulate_travel_faulted(&plant_rig, spec, options, &mut controller, hook, None, None)?;
+    let mut drive = crate::ObservedController { controller: &mut controller, task };
+    let run = simulate_travel_faulted(&plant_rig, spec, options, &mut drive, hook, None, None)?;
+    if uses_observer {
+        // A missed deadline cannot happen here (the task runs after every
+        // step); one would mean the schedule is broken.
+        debug_assert_eq!(controller.observer_missed_deadlines(), 0);
+    }
     let after = *controller.compensation().expect("installed above");
     Ok((run, after))
 }

@@ -239,6 +239,30 @@ impl DriveController for Controller {
     }
 }
 
+/// The drive core with the chain observer's task: after each control step
+/// the task serves the input the controller published (if any), as a task
+/// of lower priority that finishes before the next PWM period; the
+/// controller uses its estimate at the next speed-loop tick
+/// (`drive_core::observer::task`), as on the chip.
+pub struct ObservedController<'a> {
+    /// The drive core.
+    pub controller: &'a mut Controller,
+    /// The observer's task.
+    pub task: drive_core::observer::ObserverTask,
+}
+
+impl DriveController for ObservedController<'_> {
+    fn command_travel(&mut self, command: TravelCommand) -> Result<(), SimError> {
+        Controller::command_travel(self.controller, command).map_err(SimError::Refused)
+    }
+
+    fn step(&mut self, sensors: &SensorFrame) -> Result<ControlOutput, SimError> {
+        let output = Controller::step(self.controller, sensors);
+        self.task.serve(self.controller);
+        Ok(output)
+    }
+}
+
 /// What went into and came out of the controller, step by step.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct StepLog {

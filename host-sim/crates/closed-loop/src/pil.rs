@@ -12,7 +12,10 @@
 //! (the shadow) takes the same inputs, and the target's outputs and
 //! telemetry digest must equal the shadow's bit for bit, or the run stops at
 //! that step with both printed. The telemetry the closed loop records is the
-//! shadow's, which the digest has shown to be the target's.
+//! shadow's, which the digest has shown to be the target's. With a strategy
+//! that uses the chain observer, the target runs the observer's task after
+//! each control step (`drive_core::lift_drive::LiftDrive::observer_step`)
+//! and the shadow does the same, on the schedule of `drive_core::observer::task`.
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -112,6 +115,8 @@ pub struct PilTarget {
     icount_shift: u32,
     reports: Vec<StepReport>,
     shadow: Controller,
+    /// The chain observer's task of the shadow (a strategy that uses it installed).
+    shadow_observer: Option<drive_core::observer::ObserverTask>,
 }
 
 impl PilTarget {
@@ -178,6 +183,7 @@ impl PilTarget {
             icount_shift: options.icount_shift,
             reports: Vec::new(),
             shadow: Controller::new(drive),
+            shadow_observer: None,
         })
     }
 
@@ -311,12 +317,18 @@ impl PilTarget {
             other => return Err(PilError::Unexpected(other)),
         }
         self.shadow.install_compensation(strategy, &sent, chain);
+        // The target keeps one task on its chain model (invalid: none, and
+        // the controller counts every tick as a missed deadline).
+        self.shadow_observer = drive_core::observer::ObserverTask::for_model(chain).ok();
         Ok(())
     }
 
     /// Steps the shadow on `sensors` and checks the target's `report` against it.
     fn shadow_check(&mut self, sensors: &SensorFrame, report: StepReport) -> Result<ControlOutput, SimError> {
         let host = self.shadow.step(sensors);
+        if let Some(task) = self.shadow_observer.as_mut() {
+            task.serve(&mut self.shadow);
+        }
         if !report.matches(&host) {
             return Err(SimError::Link(format!(
                 "step {}: the target's output differs from the host build\n  inputs {sensors:?}\n  target {report:?}\n  host   {:?}",

@@ -87,6 +87,9 @@ pub struct ChipStep {
     pub dcp_replies: Vec<u8>,
     /// The service bytes it took this step.
     pub service_taken: Vec<u8>,
+    /// The chain observer's task after the step, if it ran: its cost in
+    /// SysTick ticks (25 MHz clock).
+    pub observer_ticks: Option<u32>,
 }
 
 /// QEMU running the PIL target with three sockets: PIL frames, DCP, service port.
@@ -194,7 +197,10 @@ impl Chip {
         let dcp_replies = read(n_out)?;
         let n_service = read(1)?[0] as usize;
         let service_taken = read(n_service)?;
-        Ok(ChipStep { report, dcp_taken, dcp_replies, service_taken })
+        let observer = read(5)?;
+        let observer_ticks =
+            (observer[0] != 0).then(|| u32::from_le_bytes([observer[1], observer[2], observer[3], observer[4]]));
+        Ok(ChipStep { report, dcp_taken, dcp_replies, service_taken, observer_ticks })
     }
 
     /// `n` bytes the chip sent on the service port.
@@ -220,6 +226,11 @@ pub struct LiftStep {
     /// 25 MHz clock under `-icount shift=5`: 1.25 instructions a tick);
     /// `None` for the host build alone.
     pub instructions: Option<f64>,
+    /// Whether the chain observer's task ran after the step (the shadow's).
+    pub observer_ran: bool,
+    /// The chip's observer task after the step, instructions, if it ran
+    /// (`None` also for the host build alone).
+    pub observer_instructions: Option<f64>,
 }
 
 /// The lift: the plant, the chip and its shadow, stepped together (or the
@@ -285,6 +296,11 @@ impl Lift {
         &self.shadow
     }
 
+    /// The plant (its car acceleration, rope lengths).
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
     /// One PWM period: `dcp_out` on the DCP line, `service_out` on the
     /// service port, the chip's step checked against the shadow's, the
     /// plant advanced.
@@ -309,8 +325,18 @@ impl Lift {
         }
         let dcp = self.shadow.dcp_step(&dcp_taken, sensors.time_us);
         let output = self.shadow.control_step(&sensors);
+        let observer_ran = self.shadow.observer_step();
         let dcp_replies = dcp.reply[..dcp.reply_len].to_vec();
         let instructions = chip.as_ref().map(|c| c.report.cost_ticks as f64 * INSTRUCTIONS_PER_TICK);
+        let observer_instructions =
+            chip.as_ref().and_then(|c| c.observer_ticks).map(|t| t as f64 * INSTRUCTIONS_PER_TICK);
+        if let Some(chip) = &chip {
+            ensure!(
+                chip.observer_ticks.is_some() == observer_ran,
+                "step {k}: the observer task ran on the {} only",
+                if observer_ran { "host" } else { "chip" }
+            );
+        }
         let service_answers = match (self.chip.as_mut(), chip) {
             (Some(c), Some(chip)) => {
                 let answers = c.read_service(expected_answers.len())?;
@@ -327,7 +353,7 @@ impl Lift {
         self.plant.advance(1.0 / self.drive.current_loop_hz as f64, self.max_step_s);
         ensure!(self.plant.in_valid_range(), "step {k}: the plant left its valid range");
         self.steps += 1;
-        Ok(LiftStep { output, dcp_replies, service_answers, saved, instructions })
+        Ok(LiftStep { output, dcp_replies, service_answers, saved, instructions, observer_ran, observer_instructions })
     }
 
     /// Sends the service request `line` (without its `\n`) and steps until
@@ -397,6 +423,123 @@ impl Lift {
             chip.report
         );
         Ok(())
+    }
+}
+
+/// Core clock of the STM32G474 the load is given against, Hz.
+pub const CORE_CLOCK_HZ: f64 = 170.0e6;
+
+/// The load of the control interrupt and the chain observer's task on the
+/// emulated chip, from the instructions of each step (one cycle counted
+/// per instruction: a lower bound of the cycles on the real M4), over the
+/// steps with the inverter on.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CpuLoad {
+    /// Steps counted (inverter on).
+    pub steps: u64,
+    /// Control steps' instructions, summed.
+    pub control_instructions: f64,
+    /// Largest control step, instructions.
+    pub control_max: f64,
+    /// Observer runs counted.
+    pub observer_runs: u64,
+    /// Observer runs' instructions, summed.
+    pub observer_instructions: f64,
+    /// Largest observer run, instructions.
+    pub observer_max: f64,
+    /// Largest sum over one speed-loop period: the control steps of the
+    /// `divider` PWM periods up to an observer run, and that run, instructions.
+    pub worst_speed_period: f64,
+    recent: std::collections::VecDeque<f64>,
+    divider: usize,
+    pwm_hz: f64,
+}
+
+impl CpuLoad {
+    /// For `drive`'s PWM rate and speed-loop divider.
+    pub fn new(drive: &DriveConfig) -> Self {
+        Self {
+            divider: drive.speed_loop_divider().max(1) as usize,
+            pwm_hz: drive.current_loop_hz as f64,
+            ..Self::default()
+        }
+    }
+
+    /// CPU cycles of one PWM period at [`CORE_CLOCK_HZ`] (10 625 at 16 kHz).
+    pub fn cycles_per_period(&self) -> f64 {
+        CORE_CLOCK_HZ / self.pwm_hz
+    }
+
+    /// Adds a step of the chip (a step without the chip's figures or with
+    /// the inverter off is not counted).
+    pub fn add(&mut self, step: &LiftStep) {
+        let Some(control) = step.instructions else { return };
+        if !step.output.pwm_enabled {
+            self.recent.clear();
+            return;
+        }
+        self.steps += 1;
+        self.control_instructions += control;
+        self.control_max = self.control_max.max(control);
+        self.recent.push_back(control);
+        if self.recent.len() > self.divider {
+            self.recent.pop_front();
+        }
+        if let Some(observer) = step.observer_instructions {
+            self.observer_runs += 1;
+            self.observer_instructions += observer;
+            self.observer_max = self.observer_max.max(observer);
+            self.worst_speed_period = self.worst_speed_period.max(self.recent.iter().sum::<f64>() + observer);
+        }
+    }
+
+    /// Mean control step, instructions.
+    pub fn control_mean(&self) -> f64 {
+        self.control_instructions / self.steps.max(1) as f64
+    }
+
+    /// Mean observer run, instructions.
+    pub fn observer_mean(&self) -> f64 {
+        self.observer_instructions / self.observer_runs.max(1) as f64
+    }
+
+    /// Mean load, % of a 170 MHz core: the instructions of the control
+    /// steps and the observer runs over the cycles of the steps counted.
+    pub fn mean_percent(&self) -> f64 {
+        100.0 * (self.control_instructions + self.observer_instructions)
+            / (self.steps.max(1) as f64 * self.cycles_per_period())
+    }
+
+    /// Load of the busiest speed-loop period, % of a 170 MHz core.
+    pub fn worst_period_percent(&self) -> f64 {
+        100.0 * self.worst_speed_period / (self.divider as f64 * self.cycles_per_period())
+    }
+
+    /// One line: the load, and what it is made of.
+    pub fn summary(&self) -> String {
+        let mut line = format!(
+            "CPU load of a 170 MHz core (one cycle an instruction) over {} steps with the inverter on: {:.1} % mean",
+            self.steps,
+            self.mean_percent()
+        );
+        if self.observer_runs > 0 {
+            line += &format!(", {:.1} % in the busiest speed-loop period", self.worst_period_percent());
+        }
+        line += &format!(
+            "; control interrupt {:.0} instructions a step (max {:.0})",
+            self.control_mean(),
+            self.control_max
+        );
+        if self.observer_runs > 0 {
+            line += &format!(
+                ", chain observer task {:.0} instructions a run (max {:.0}), {} runs ({:.0} Hz)",
+                self.observer_mean(),
+                self.observer_max,
+                self.observer_runs,
+                self.observer_runs as f64 / self.steps.max(1) as f64 * self.pwm_hz,
+            );
+        }
+        line
     }
 }
 
