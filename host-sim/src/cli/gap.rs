@@ -191,6 +191,9 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     for l in &report.left_out {
         outln!("left out: {}: {}", l.recording, l.reason);
     }
+    if let Some(note) = report.begins_in_motion_note() {
+        outln!("start: {note}");
+    }
     for c in report.ranking.iter().take(5) {
         outln!(
             "  {:<48} held-out {:.2} -> {:.2} dB ({:+.0} %)",

@@ -606,6 +606,8 @@ mod tests {
         let angle: Vec<f64> = (0..n).map(|k| 0.5 * k as f64 / fs / r).collect();
         let speed = vec![0.5 / r; n];
         assert!(begins_in_motion(&angle, fs));
+        let later: Vec<f64> = (0..n).map(|k| 0.5 * (k.saturating_sub(1024)) as f64 / fs / r).collect();
+        assert!(!begins_in_motion(&later, fs), "a recording standing still for 0.25 s begins at standstill");
         let travel = DrivenTravel {
             m_car_kg: 70.5,
             m_cw_kg: chain.params.m_cw_kg,

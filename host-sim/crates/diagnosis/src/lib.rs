@@ -194,6 +194,10 @@ pub struct RecordingGap {
     pub explained: Option<GapValue>,
     /// Excess gap with the explaining model, dB.
     pub explained_excess_db: Option<f64>,
+    /// A travel whose rig is already moving at the first sample (its brake
+    /// lifted before the recording started): the chain's state there is not
+    /// recorded ([`driven::StartState`]).
+    pub begins_in_motion: bool,
 }
 
 /// What `gap` found.
@@ -239,6 +243,29 @@ pub struct GapReport {
     pub runtime_s: f64,
     /// Simulations run.
     pub simulations: usize,
+}
+
+impl GapReport {
+    /// The travels that begin with the rig already moving and what the
+    /// diagnosis does about them, in words; `None` when there are none.
+    pub fn begins_in_motion_note(&self) -> Option<String> {
+        let travels: Vec<&str> =
+            self.recordings.iter().filter(|g| g.begins_in_motion).map(|g| g.recording.as_str()).collect();
+        (!travels.is_empty()).then(|| {
+            let handled = if self.drive.drive == DriveModel::Foreign {
+                "the model starts there in the quasi-static state of the measured speed, and the tolerance covers \
+                 the unknown jolt of the brake lift, from none (a pre-torque that balanced the load) to the whole \
+                 torque (no pre-torque)"
+            } else {
+                "the closed loop runs the travel from standstill, so the start of the comparison is not the rig's"
+            };
+            format!(
+                "{} begin{} with the rig already moving (its brake lifted before the recording started): {handled}",
+                travels.join(", "),
+                if travels.len() == 1 { "s" } else { "" }
+            )
+        })
+    }
 }
 
 /// Text of the gap measure for reports.
@@ -813,7 +840,8 @@ fn nominal_gaps(
         .iter()
         .zip(&nominal_cells)
         .zip(&replays)
-        .map(|((t, cells), replay)| {
+        .zip(&c.measured)
+        .map(|(((t, cells), replay), measured)| {
             let nominal = gap_of_cells(cells.iter());
             let travel = matches!(t.recording.meta.kind, RecordingKind::Travel { .. });
             RecordingGap {
@@ -828,6 +856,7 @@ fn nominal_gaps(
                     .map(|r| gap_of_cells(r.iter().filter(low_acc)).excess_db()),
                 explained: None,
                 explained_excess_db: None,
+                begins_in_motion: travel && driven::begins_in_motion(&measured.angle_rad, measured.sample_rate_hz),
             }
         })
         .collect();

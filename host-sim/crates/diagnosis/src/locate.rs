@@ -378,6 +378,7 @@ mod tests {
             replay_acceleration_excess_db: replay,
             explained: None,
             explained_excess_db: None,
+            begins_in_motion: false,
         }
     }
 

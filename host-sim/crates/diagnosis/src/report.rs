@@ -266,6 +266,9 @@ fn overview(s: &mut String, r: &GapReport) {
     for l in &r.left_out {
         let _ = writeln!(s, "Left out: `{}`: {}.\n", l.recording, l.reason);
     }
+    if let Some(note) = r.begins_in_motion_note() {
+        let _ = writeln!(s, "Start: {note}.\n");
+    }
     let _ = writeln!(
         s,
         "Nominal model: excess gap {:.2} dB (noise gap {:.2} dB), mean over {} recordings; {} simulations in {:.1} s.\n",
@@ -527,6 +530,7 @@ mod tests {
             replay_acceleration_excess_db: replay,
             explained: None,
             explained_excess_db: explained,
+            begins_in_motion: false,
         };
         let mut s = String::new();
         recordings_section(&mut s, &[g(Some(2.0), Some(0.5), Some(0.25)), g(Some(2.0), None, None)]);
