@@ -8,6 +8,15 @@
 //! estimate, pre-torque and start and stop sequence are all in the
 //! recording.
 //!
+//! Below a quarter of the chain's first elastic mode ([`RIGID_FRACTION`])
+//! the chain turns as one rigid body, and the car and counterweight
+//! accelerations there are the rope's at the sheave, taken from the
+//! measured angle (through the effect's kinematics: sheave eccentricity's
+//! rope displacement, encoder error's true angle) rather than from the
+//! model: what the drive did against the slow ripple orders, and their
+//! unknown phases, then no longer blur the once-per-revolution line, where
+//! the kinematic effects show.
+//!
 //! The ripple's phases are not in the rig file. Where the rig's speed loop
 //! rejects a ripple order, the currents carry its mirror image: the order's
 //! phase is then read from the measured torque's angle-locked line.
@@ -476,7 +485,56 @@ fn torque_driven_accelerations_with(
             bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
         }
     }
-    Ok((car, cw))
+    let split_hz = RIGID_FRACTION * first_mode_hz(&chain, travel, r);
+    let rope = rope_acceleration_mps2(travel, effects, r)?;
+    Ok((below_from_the_angle(&car, &rope, fs, split_hz)?, below_from_the_angle(&cw, &neg(&rope), fs, split_hz)?))
+}
+
+/// Below this fraction of the chain's first elastic mode the chain turns as
+/// one rigid body: the car and counterweight accelerations there are the
+/// rope's at the sheave, from the measured angle.
+pub const RIGID_FRACTION: f64 = 0.25;
+
+/// The chain's lowest first elastic mode over the travel (Eqn 10 at the
+/// counterweight-side rope lengths of its start and end), Hz.
+fn first_mode_hz(chain: &Chain, travel: &DrivenTravel, r: f64) -> f64 {
+    let angle = travel.shaft_angle_rad;
+    let moved_m = r * (angle[angle.len() - 1] - angle[0]);
+    [travel.lw_start_m, travel.lw_start_m + moved_m]
+        .iter()
+        .map(|&lw| plant::modes::natural_modes(&chain.params, lw).frequencies_hz[1])
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The rope's acceleration at the sheave (m/s^2, positive: car up) from the
+/// measured (true) shaft angle, low-passed as the tracking reference is:
+/// `r theta''`, or with sheave eccentricity the second derivative of its
+/// rope displacement.
+fn rope_acceleration_mps2(travel: &DrivenTravel, effects: &Effects, r: f64) -> Result<Vec<f64>> {
+    let angle = travel.shaft_angle_rad;
+    let theta0 = angle[0];
+    let displacement: Vec<f64> = match effects.sheave_eccentricity.as_ref() {
+        Some(e) => angle.iter().map(|a| e.rope_displacement_m(r, a - theta0)).collect(),
+        None => angle.iter().map(|a| r * (a - theta0)).collect(),
+    };
+    let fs = travel.sample_rate_hz;
+    let high = highpass_zero_phase(&displacement, fs, TRACKING_REFERENCE_LOWPASS_HZ)
+        .context("low-passing the rope displacement")?;
+    let smooth: Vec<f64> = displacement.iter().zip(&high).map(|(a, h)| a - h).collect();
+    Ok(central_difference(&central_difference(&smooth, fs), fs))
+}
+
+fn neg(x: &[f64]) -> Vec<f64> {
+    x.iter().map(|v| -v).collect()
+}
+
+/// The model's acceleration above `split_hz` and the rope's below it
+/// (complementary zero-phase split).
+fn below_from_the_angle(model: &[f64], rope: &[f64], fs: f64, split_hz: f64) -> Result<Vec<f64>> {
+    let n = model.len().min(rope.len());
+    let model_high = highpass_zero_phase(&model[..n], fs, split_hz).context("splitting the model's acceleration")?;
+    let rope_high = highpass_zero_phase(&rope[..n], fs, split_hz).context("splitting the rope's acceleration")?;
+    Ok((0..n).map(|k| model_high[k] + rope[k] - rope_high[k]).collect())
 }
 
 /// The chain moving as one at `speed_mps` (m/s) in the quasi-static state
@@ -646,6 +704,63 @@ mod tests {
         // At standstill at the first sample: no offset.
         let still = DrivenTravel { motion: 100..n, ..travel };
         assert_eq!(ring(StartState::Unheld, &still), ring(StartState::AsRecorded, &still));
+    }
+
+    /// Below a quarter of the chain's first mode the car moves with the
+    /// rope at the sheave: a measured angle that wobbles at 1 Hz (1 mm at
+    /// the sheave's edge) with a constant torque gives the car that wobble's
+    /// acceleration, `(2 pi)^2 * 1 mm`, to 2 %, and the counterweight the
+    /// opposite; the same wobble at 40 Hz, above the split, does not pass.
+    #[test]
+    fn below_the_first_mode_the_car_moves_with_the_measured_angle() {
+        let mut rig = RigConfig::embedded_default().unwrap();
+        rig.ripple.clear();
+        let fs = 1024.0;
+        let n = 8192;
+        let r = rig.mechanics.sheave_radius_m;
+        let lw = 2.0;
+        let chain = Chain::new(ChainParams::from_rig(&rig, 45.5), lw);
+        let torque = vec![chain.params.out_of_balance_torque_nm(lw); n];
+        let speed = vec![0.0; n];
+        let run = |f_hz: f64| {
+            let angle: Vec<f64> = (0..n).map(|k| 1e-3 * (TAU * f_hz * k as f64 / fs).sin() / r).collect();
+            let travel = DrivenTravel {
+                m_car_kg: 45.5,
+                m_cw_kg: chain.params.m_cw_kg,
+                lw_start_m: lw,
+                torque_nm: &torque,
+                shaft_angle_rad: &angle,
+                speed_estimate_radps: &speed,
+                controller: None,
+                motion: 0..n,
+                constant_speed: 0..n,
+                sample_rate_hz: fs,
+            };
+            let (car, cw) =
+                torque_driven_accelerations(&rig, &travel, &DrivenSettings::default(), &Effects::none()).unwrap();
+            // The line at f_hz over the middle half, m/s^2.
+            let line = |x: &[f64]| {
+                let (mut re, mut im) = (0.0, 0.0);
+                for (k, v) in x.iter().enumerate().take(3 * n / 4).skip(n / 4) {
+                    let (sn, cs) = (TAU * f_hz * k as f64 / fs).sin_cos();
+                    re += v * cs;
+                    im += v * sn;
+                }
+                (2.0 * re / (n / 2) as f64, 2.0 * im / (n / 2) as f64)
+            };
+            (line(&car), line(&cw))
+        };
+        let ((car_re, car_im), (cw_re, cw_im)) = run(1.0);
+        let expected = -(TAU * 1.0).powi(2) * 1e-3;
+        println!(
+            "1 Hz: car ({car_re:.5}, {car_im:.5}), counterweight ({cw_re:.5}, {cw_im:.5}), rope {expected:.5} m/s^2"
+        );
+        assert!((car_im / expected - 1.0).abs() < 0.02 && car_re.abs() < 0.02 * expected.abs());
+        assert!((cw_im / -expected - 1.0).abs() < 0.02);
+        let ((high_re, high_im), _) = run(40.0);
+        let rope_40 = (TAU * 40.0).powi(2) * 1e-3;
+        println!("40 Hz: car {:.5} of the rope's {rope_40:.3} m/s^2", high_re.hypot(high_im));
+        assert!(high_re.hypot(high_im) < 0.05 * rope_40);
     }
 
     #[test]
