@@ -597,6 +597,29 @@ fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> Result<(Vec
 mod tests {
     use super::*;
 
+    /// A travel of `chain`'s car from the chain's start, the whole of it the
+    /// constant-speed stage: measured torque (N m), angle (rad) and speed
+    /// estimate (rad/s), the samples in motion, the sample rate (Hz).
+    fn travel_of<'a>(
+        chain: &Chain,
+        (torque_nm, shaft_angle_rad, speed_estimate_radps): (&'a [f64], &'a [f64], &'a [f64]),
+        motion: Range<usize>,
+        sample_rate_hz: f64,
+    ) -> DrivenTravel<'a> {
+        DrivenTravel {
+            m_car_kg: chain.params.m_car_kg,
+            m_cw_kg: chain.params.m_cw_kg,
+            lw_start_m: chain.lw_start_m,
+            torque_nm,
+            shaft_angle_rad,
+            speed_estimate_radps,
+            controller: None,
+            motion,
+            constant_speed: 0..torque_nm.len(),
+            sample_rate_hz,
+        }
+    }
+
     /// The car acceleration of the torque-driven model does not change when
     /// its step is halved: a travel at constant speed driven by a torque
     /// with lines near the car-side rope-mass mode (300 and 450 Hz) and one
@@ -617,18 +640,7 @@ mod tests {
             .collect();
         let angle: Vec<f64> = (0..n).map(|k| 0.5 * t(k) / r).collect();
         let speed = vec![0.5 / r; n];
-        let travel = DrivenTravel {
-            m_car_kg: 70.5,
-            m_cw_kg: chain.params.m_cw_kg,
-            lw_start_m: 2.0,
-            torque_nm: &torque,
-            shaft_angle_rad: &angle,
-            speed_estimate_radps: &speed,
-            controller: None,
-            motion: 0..n,
-            constant_speed: 0..n,
-            sample_rate_hz: fs,
-        };
+        let travel = travel_of(&chain, (&torque, &angle, &speed), 0..n, fs);
         let settings = DrivenSettings::default();
         let run =
             |rate: f64| torque_driven_accelerations_with(&rig, &travel, &settings, &Effects::none(), rate).unwrap().0;
@@ -666,18 +678,7 @@ mod tests {
         assert!(begins_in_motion(&angle, fs));
         let later: Vec<f64> = (0..n).map(|k| 0.5 * (k.saturating_sub(1024)) as f64 / fs / r).collect();
         assert!(!begins_in_motion(&later, fs), "a recording standing still for 0.25 s begins at standstill");
-        let travel = DrivenTravel {
-            m_car_kg: 70.5,
-            m_cw_kg: chain.params.m_cw_kg,
-            lw_start_m: lw,
-            torque_nm: &torque,
-            shaft_angle_rad: &angle,
-            speed_estimate_radps: &speed,
-            controller: None,
-            motion: motion_from_angle(&angle, fs),
-            constant_speed: 0..n,
-            sample_rate_hz: fs,
-        };
+        let travel = travel_of(&chain, (&torque, &angle, &speed), motion_from_angle(&angle, fs), fs);
         // Elastic vibration of the car above the tracking loop (10 Hz and up)
         // over the first half second, RMS m/s^2.
         let ring = |start_state: StartState, travel: &DrivenTravel| {
@@ -724,18 +725,7 @@ mod tests {
         let speed = vec![0.0; n];
         let run = |f_hz: f64| {
             let angle: Vec<f64> = (0..n).map(|k| 1e-3 * (TAU * f_hz * k as f64 / fs).sin() / r).collect();
-            let travel = DrivenTravel {
-                m_car_kg: 45.5,
-                m_cw_kg: chain.params.m_cw_kg,
-                lw_start_m: lw,
-                torque_nm: &torque,
-                shaft_angle_rad: &angle,
-                speed_estimate_radps: &speed,
-                controller: None,
-                motion: 0..n,
-                constant_speed: 0..n,
-                sample_rate_hz: fs,
-            };
+            let travel = travel_of(&chain, (&torque, &angle, &speed), 0..n, fs);
             let (car, cw) =
                 torque_driven_accelerations(&rig, &travel, &DrivenSettings::default(), &Effects::none()).unwrap();
             // The line at f_hz over the middle half, m/s^2.
