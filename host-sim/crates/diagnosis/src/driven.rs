@@ -92,20 +92,21 @@ pub struct DrivenSettings {
 /// against the out-of-balance torque) is not recorded. The rope-mass
 /// modes, lightly damped, ring from it through the whole travel, their
 /// acceleration growing as their frequency rises with the shortening rope.
-/// The model's state is the static equilibrium of the out-of-balance torque
-/// (all zero); the measured torque acts from the first sample on, through a
-/// constant offset where an alternative asks for it.
+/// The model starts moving with the rig in the quasi-static state of the
+/// measured speed (the torque that keeps that speed, `moving_start`); the
+/// measured torque acts from the first sample on, through a constant offset
+/// where an alternative asks for it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StartState {
-    /// No offset: the measured torque's departure from the out-of-balance
-    /// torque at the first sample jolts the chain.
+    /// No offset: the measured torque's departure from the torque that keeps
+    /// the speed jolts the chain at the first sample.
     AsRecorded,
     /// No jolt: the brake lifted against a pre-torque that balanced the load
-    /// (offset: out-of-balance torque minus the first samples' torque).
+    /// (offset: the torque that keeps the speed minus the first samples').
     Balanced,
     /// The jolt of a brake lifted at the first sample with no motor torque,
-    /// the whole out-of-balance torque released (offset: minus the first
-    /// samples' torque).
+    /// the whole torque that keeps the speed released (offset: minus the
+    /// first samples' torque).
     Unheld,
 }
 
@@ -116,7 +117,11 @@ pub const START_TORQUE_SPAN_S: f64 = 0.01;
 /// Whether the rig is already moving at the recording's first sample
 /// (the encoder turns within [`STANDSTILL_WINDOW_S`] of it).
 pub fn begins_in_motion(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> bool {
-    let motion = motion_from_angle(shaft_angle_rad, sample_rate_hz);
+    moving_at_first_sample(&motion_from_angle(shaft_angle_rad, sample_rate_hz))
+}
+
+/// Whether `motion` ([`motion_from_angle`]) holds the first sample.
+fn moving_at_first_sample(motion: &Range<usize>) -> bool {
     motion.start == 0 && !motion.is_empty()
 }
 
@@ -417,7 +422,7 @@ fn torque_driven_accelerations_with(
     // rig in the quasi-static state of its speed, jolted as the start
     // state says (what the rig's brake lift left before the recording is
     // not recorded).
-    if travel.motion.start == 0 {
+    if moving_at_first_sample(&travel.motion) {
         let span = ((START_TORQUE_SPAN_S * fs).round() as usize).clamp(1, n);
         let first_nm = travel.torque_nm[..span].iter().sum::<f64>() / span as f64;
         let needed_nm;
@@ -486,8 +491,8 @@ fn torque_driven_accelerations_with(
         }
     }
     let split_hz = RIGID_FRACTION * first_mode_hz(&chain, travel, r);
-    let rope = rope_acceleration_mps2(travel, effects, r)?;
-    Ok((below_from_the_angle(&car, &rope, fs, split_hz)?, below_from_the_angle(&cw, &neg(&rope), fs, split_hz)?))
+    let rope = rope_acceleration_mps2(travel, effects, r, &reference.1)?;
+    below_from_the_angle((&car, &cw), &rope, fs, split_hz)
 }
 
 /// Below this fraction of the chain's first elastic mode the chain turns as
@@ -508,33 +513,36 @@ fn first_mode_hz(chain: &Chain, travel: &DrivenTravel, r: f64) -> f64 {
 
 /// The rope's acceleration at the sheave (m/s^2, positive: car up) from the
 /// measured (true) shaft angle, low-passed as the tracking reference is:
-/// `r theta''`, or with sheave eccentricity the second derivative of its
-/// rope displacement.
-fn rope_acceleration_mps2(travel: &DrivenTravel, effects: &Effects, r: f64) -> Result<Vec<f64>> {
-    let angle = travel.shaft_angle_rad;
-    let theta0 = angle[0];
-    let displacement: Vec<f64> = match effects.sheave_eccentricity.as_ref() {
-        Some(e) => angle.iter().map(|a| e.rope_displacement_m(r, a - theta0)).collect(),
-        None => angle.iter().map(|a| r * (a - theta0)).collect(),
-    };
+/// `r theta''`, the rate of the tracking reference's speed
+/// (`reference_mps`, [`tracking_reference_m`]), or with sheave eccentricity
+/// the second derivative of its rope displacement.
+fn rope_acceleration_mps2(travel: &DrivenTravel, effects: &Effects, r: f64, reference_mps: &[f64]) -> Result<Vec<f64>> {
     let fs = travel.sample_rate_hz;
-    let high = highpass_zero_phase(&displacement, fs, TRACKING_REFERENCE_LOWPASS_HZ)
-        .context("low-passing the rope displacement")?;
-    let smooth: Vec<f64> = displacement.iter().zip(&high).map(|(a, h)| a - h).collect();
+    let Some(e) = effects.sheave_eccentricity.as_ref() else {
+        return Ok(central_difference(reference_mps, fs));
+    };
+    let theta0 = travel.shaft_angle_rad[0];
+    let displacement: Vec<f64> = travel.shaft_angle_rad.iter().map(|a| e.rope_displacement_m(r, a - theta0)).collect();
+    let smooth = lowpassed_m(&displacement, fs).context("low-passing the rope displacement")?;
     Ok(central_difference(&central_difference(&smooth, fs), fs))
 }
 
-fn neg(x: &[f64]) -> Vec<f64> {
-    x.iter().map(|v| -v).collect()
-}
-
-/// The model's acceleration above `split_hz` and the rope's below it
-/// (complementary zero-phase split).
-fn below_from_the_angle(model: &[f64], rope: &[f64], fs: f64, split_hz: f64) -> Result<Vec<f64>> {
-    let n = model.len().min(rope.len());
-    let model_high = highpass_zero_phase(&model[..n], fs, split_hz).context("splitting the model's acceleration")?;
-    let rope_high = highpass_zero_phase(&rope[..n], fs, split_hz).context("splitting the rope's acceleration")?;
-    Ok((0..n).map(|k| model_high[k] + rope[k] - rope_high[k]).collect())
+/// The model's car and counterweight accelerations above `split_hz` and
+/// the rope's below it (complementary zero-phase split; the counterweight
+/// moves against the car).
+fn below_from_the_angle(
+    (car, cw): (&[f64], &[f64]),
+    rope: &[f64],
+    fs: f64,
+    split_hz: f64,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let rope_high = highpass_zero_phase(rope, fs, split_hz).context("splitting the rope's acceleration")?;
+    let rope_low: Vec<f64> = rope.iter().zip(&rope_high).map(|(a, h)| a - h).collect();
+    let split = |model: &[f64], sign: f64| -> Result<Vec<f64>> {
+        let high = highpass_zero_phase(model, fs, split_hz).context("splitting the model's acceleration")?;
+        Ok(high.iter().zip(&rope_low).map(|(h, low)| h + sign * low).collect())
+    };
+    Ok((split(car, 1.0)?, split(cw, -1.0)?))
 }
 
 /// The chain moving as one at `speed_mps` (m/s) in the quasi-static state
@@ -580,15 +588,20 @@ fn moving_start(line: &Line, chain: &Chain, speed_mps: f64, torque_nm: f64) -> (
     (state, needed_nm)
 }
 
+/// A displacement (m) low-passed at [`TRACKING_REFERENCE_LOWPASS_HZ`]
+/// (zero phase: the signal less its high-passed part).
+fn lowpassed_m(displacement_m: &[f64], fs: f64) -> Result<Vec<f64>> {
+    let high = highpass_zero_phase(displacement_m, fs, TRACKING_REFERENCE_LOWPASS_HZ)?;
+    Ok(displacement_m.iter().zip(&high).map(|(a, h)| a - h).collect())
+}
+
 /// The tracking loop's reference: the measured sheave-edge travel (m) from
 /// the start, low-passed at [`TRACKING_REFERENCE_LOWPASS_HZ`], and its rate
 /// (m/s, central differences).
 fn tracking_reference_m(shaft_angle_rad: &[f64], fs: f64, r: f64) -> Result<(Vec<f64>, Vec<f64>)> {
     let theta0 = shaft_angle_rad[0];
     let relative: Vec<f64> = shaft_angle_rad.iter().map(|a| (a - theta0) * r).collect();
-    let high = highpass_zero_phase(&relative, fs, TRACKING_REFERENCE_LOWPASS_HZ)
-        .context("low-passing the measured shaft angle")?;
-    let u: Vec<f64> = relative.iter().zip(&high).map(|(a, h)| a - h).collect();
+    let u = lowpassed_m(&relative, fs).context("low-passing the measured shaft angle")?;
     let v = central_difference(&u, fs);
     Ok((u, v))
 }
