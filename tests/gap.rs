@@ -221,7 +221,7 @@ fn off_nominal_ea_and_damping_are_calibrated_away() {
     let report = run(&rig, "off-nominal EA and damping", &data);
     println!(
         "calibrated EA {:.4e} N (truth {:.4e}), guide damping {:.1} kg/s (truth {:.1}), sheave {:.3} (truth {:.3}); \
-         nominal excess gap {:.2} dB, verdict {:?}",
+         nominal excess gap {:.2} dB, persistent cell {:?}, verdict {:?}",
         report.calibration.rope_ea_n,
         truth.mechanics.rope_ea_n,
         report.calibration.guide_damping_kg_per_s,
@@ -229,6 +229,7 @@ fn off_nominal_ea_and_damping_are_calibrated_away() {
         report.calibration.sheave_damping_nms_per_rad,
         truth.mechanics.c_sheave_nms_per_rad,
         report.nominal_excess_db,
+        report.persistent_cell.as_ref().map(diagnosis::report::persistent_text),
         report.verdict
     );
     assert!((report.calibration.rope_ea_n / truth.mechanics.rope_ea_n - 1.0).abs() < 0.03);

@@ -38,6 +38,11 @@ pub struct GapArgs {
     /// called `nominal`.
     #[arg(long, value_name = "DB", default_value_t = diagnosis::NOMINAL_EXCESS_DB, allow_negative_numbers = true)]
     pub nominal_excess_db: f64,
+    /// Largest RMS (dB) by which one cell (channel, phase, band or line)
+    /// may lie beyond noise and tolerance in most recordings and the
+    /// verdict still be `nominal`.
+    #[arg(long, value_name = "DB", default_value_t = diagnosis::PERSISTENT_CELL_DB, allow_negative_numbers = true)]
+    pub persistent_cell_db: f64,
     /// Smallest held-out shrink of the gap (0-1) for `explained`.
     #[arg(long, value_name = "FRACTION", default_value_t = diagnosis::EXPLAINED_SHRINK, allow_negative_numbers = true)]
     pub explained_shrink: f64,
@@ -67,6 +72,7 @@ impl From<DriveArg> for diagnosis::DriveAssumption {
 /// Runs `gap`.
 pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     super::check_open_range("--nominal-excess-db", args.nominal_excess_db, 0.0, 100.0)?;
+    super::check_open_range("--persistent-cell-db", args.persistent_cell_db, 0.0, 100.0)?;
     super::check_open_range("--explained-shrink", args.explained_shrink, 0.0, 1.0)?;
     let effects = if args.effects.is_empty() {
         EffectKind::ALL.to_vec()
@@ -100,6 +106,7 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         drive: args.drive.into(),
         effects,
         nominal_excess_db: args.nominal_excess_db,
+        persistent_cell_db: args.persistent_cell_db,
         explained_shrink: args.explained_shrink,
     };
     let name = args.dataset.display().to_string();
@@ -163,6 +170,9 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         report.location.phase.name(),
         report.location.band
     );
+    if let Some(p) = &report.persistent_cell {
+        outln!("persistent cell: {}", diagnosis::report::persistent_text(p));
+    }
     outln!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
     for l in &report.rig_speed_loops {
         match (&l.controller, &l.refused) {

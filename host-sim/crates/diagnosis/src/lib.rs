@@ -52,7 +52,7 @@ use crate::identify_dataset::LeftOut;
 use attribute::{attribute, Candidate, Lab, Target};
 use calibrate::{calibrate, Calibration};
 use locate::{locate, Location};
-use measure::{cell_gaps, gap_of_cells, CellGap, GapValue};
+use measure::{cell_gaps, gap_of_cells, persistent_cell, CellGap, GapValue, PersistentCell};
 use plant::effects::{EffectKind, Effects};
 use plant::free_decay::eqn9_first_frequency_hz;
 use recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
@@ -66,6 +66,10 @@ use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 /// Largest nominal excess gap (dB, mean over the recordings) that the
 /// verdict still calls `nominal`.
 pub const NOMINAL_EXCESS_DB: f64 = 0.15;
+/// Largest RMS (dB) by which a persistent cell
+/// ([`measure::persistent_cell`]: beyond noise and tolerance in most
+/// recordings) may lie beyond them for the verdict still to be `nominal`.
+pub const PERSISTENT_CELL_DB: f64 = 0.5;
 /// Smallest held-out shrink of the gap for `explained`.
 pub const EXPLAINED_SHRINK: f64 = 0.7;
 
@@ -160,6 +164,8 @@ pub struct GapOptions {
     pub effects: Vec<EffectKind>,
     /// See [`NOMINAL_EXCESS_DB`].
     pub nominal_excess_db: f64,
+    /// See [`PERSISTENT_CELL_DB`].
+    pub persistent_cell_db: f64,
     /// See [`EXPLAINED_SHRINK`].
     pub explained_shrink: f64,
 }
@@ -170,6 +176,7 @@ impl Default for GapOptions {
             drive: DriveAssumption::Auto,
             effects: EffectKind::ALL.to_vec(),
             nominal_excess_db: NOMINAL_EXCESS_DB,
+            persistent_cell_db: PERSISTENT_CELL_DB,
             explained_shrink: EXPLAINED_SHRINK,
         }
     }
@@ -225,6 +232,10 @@ pub struct GapReport {
     pub nominal_excess_db: f64,
     /// Mean noise gap of the recordings, dB.
     pub noise_gap_db: f64,
+    /// The nominal model's persistent cell with the largest RMS beyond
+    /// noise and tolerance, if any; beyond [`PERSISTENT_CELL_DB`] it alone
+    /// makes the verdict other than `nominal`.
+    pub persistent_cell: Option<PersistentCell>,
     /// Step 1.
     pub calibration: Calibration,
     /// Where the gap lies (nominal model).
@@ -952,7 +963,9 @@ pub fn diagnose(
         reference_tension_n: calibration.reference_tension_n,
         progress: &report_progress,
     };
-    let is_nominal = nominal_excess_db <= options.nominal_excess_db;
+    let persistent_cell = persistent_cell(&nominal_cells, &compared.bands);
+    let is_nominal = nominal_excess_db <= options.nominal_excess_db
+        && persistent_cell.as_ref().is_none_or(|p| p.rms_beyond_db <= options.persistent_cell_db);
     // Under another drive the counterpart is the torque-driven mechanics,
     // which holds only some of the library's effects.
     let (kinds, not_fitted): (Vec<EffectKind>, Vec<EffectKind>) =
@@ -991,6 +1004,7 @@ pub fn diagnose(
         gap_measure: GAP_MEASURE.to_string(),
         nominal_excess_db,
         noise_gap_db,
+        persistent_cell,
         calibration,
         location,
         ranking,

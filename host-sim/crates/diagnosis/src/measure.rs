@@ -13,7 +13,7 @@
 //! (dB) is what a model can still explain. Reports give all three.
 
 use super::signals::{Channel, Phase};
-use super::spectra::{CellKey, CellPowers};
+use super::spectra::{Bands, CellKey, CellPowers};
 
 /// Dynamic range of the comparison: a floor this far below the channel's
 /// strongest measured cell (-80 dB) is added to both sides of every cell,
@@ -40,6 +40,84 @@ pub struct CellGap {
     pub noise_db: f64,
     /// The model's reproducibility in this cell, dB.
     pub tolerance_db: f64,
+}
+
+impl CellGap {
+    /// How far `|d|` lies beyond twice its noise scatter and the model's
+    /// reproducibility, dB (0 inside them).
+    pub fn beyond_db(&self) -> f64 {
+        (self.d_db.abs() - 2.0 * self.noise_db - self.tolerance_db).max(0.0)
+    }
+}
+
+/// Fewest recordings in which a cell must lie beyond noise and tolerance to
+/// be persistent.
+pub const PERSISTENT_MIN_RECORDINGS: usize = 3;
+
+/// Largest chance (family-wise over the dataset's cells) that cells beyond
+/// noise and tolerance at the dataset's own rate would put one cell beyond
+/// in as many recordings, for that cell to be persistent.
+pub const PERSISTENT_CHANCE: f64 = 0.01;
+
+/// A cell (channel, phase, band or line) that lies beyond noise and
+/// tolerance in every recording that has it: a gap confined to one band or
+/// one line, which the mean over all cells dilutes (a once-per-revolution
+/// line moves one cell of the hundred and fifty of a travel).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PersistentCell {
+    /// Channel.
+    pub channel: Channel,
+    /// Travel phase (or `decay`).
+    pub phase: Phase,
+    /// Band (`lo-hi Hz`) or line (`order n`).
+    pub band: String,
+    /// Recordings that have the cell, every one beyond noise and tolerance.
+    pub recordings: usize,
+    /// RMS over those recordings of [`CellGap::beyond_db`], dB.
+    pub rms_beyond_db: f64,
+    /// Chance that cells beyond at the dataset's rate put one of its cells
+    /// beyond in every recording, family-wise over the cells (Bonferroni).
+    pub chance: f64,
+}
+
+/// The persistent cell with the largest RMS beyond noise and tolerance, if
+/// any: among `per_recording` (each recording's cells), a cell beyond in
+/// every one of at least [`PERSISTENT_MIN_RECORDINGS`] recordings, which
+/// cells beyond at the dataset's own rate `q` (the share of all its cells
+/// beyond) do with a chance `q^n` per cell, at most [`PERSISTENT_CHANCE`]
+/// over all cells.
+pub fn persistent_cell(per_recording: &[Vec<CellGap>], bands: &Bands) -> Option<PersistentCell> {
+    let mut by_key: Vec<(CellKey, Vec<f64>)> = Vec::new();
+    for c in per_recording.iter().flatten() {
+        let key = (c.channel, c.phase, c.band);
+        match by_key.binary_search_by(|(k, _)| k.cmp(&key)) {
+            Ok(i) => by_key[i].1.push(c.beyond_db()),
+            Err(i) => by_key.insert(i, (key, vec![c.beyond_db()])),
+        }
+    }
+    let cells = by_key.iter().map(|(_, b)| b.len()).sum::<usize>();
+    let beyond = by_key.iter().flat_map(|(_, b)| b).filter(|b| **b > 0.0).count();
+    let rate = beyond as f64 / cells.max(1) as f64;
+    let keys = by_key.len() as f64;
+    by_key
+        .into_iter()
+        .filter_map(|((channel, phase, band), beyond)| {
+            let recordings = beyond.len();
+            let chance = keys * rate.powi(recordings as i32);
+            let persistent = recordings >= PERSISTENT_MIN_RECORDINGS
+                && beyond.iter().all(|b| *b > 0.0)
+                && chance <= PERSISTENT_CHANCE;
+            let rms_beyond_db = (beyond.iter().map(|b| b * b).sum::<f64>() / recordings as f64).sqrt();
+            persistent.then(|| PersistentCell {
+                channel,
+                phase,
+                band: bands.label(band),
+                recordings,
+                rms_beyond_db,
+                chance,
+            })
+        })
+        .max_by(|a, b| a.rms_beyond_db.total_cmp(&b.rms_beyond_db))
 }
 
 /// How far (dB) a cell may stray beyond twice its noise scatter before it
@@ -159,7 +237,7 @@ pub fn cell_gaps(
 pub fn gap_of_cells<'a>(cells: impl Iterator<Item = &'a CellGap>) -> GapValue {
     let mut per: Vec<(Channel, [f64; 3], usize)> = Vec::new();
     for c in cells {
-        let beyond = (c.d_db.abs() - 2.0 * c.noise_db - c.tolerance_db).max(0.0);
+        let beyond = c.beyond_db();
         let add = [c.d_db * c.d_db, c.noise_db * c.noise_db, beyond * beyond];
         match per.iter_mut().find(|(ch, ..)| *ch == c.channel) {
             Some(e) => {
@@ -202,5 +280,46 @@ mod tests {
         // Signal far above the noise: no scatter, d is the level ratio.
         let (d, s) = cell(1000.0, 100.0, 100.0, 0.0, 1e-30);
         assert!((d - 10.0).abs() < 1e-9 && s == 0.0);
+    }
+
+    fn car_cell(band: usize, d_db: f64) -> CellGap {
+        CellGap {
+            channel: Channel::CarAcceleration,
+            phase: Phase::Constant,
+            band,
+            measured: 1.0,
+            simulated: 1.0,
+            d_db,
+            noise_db: 0.25,
+            tolerance_db: 0.5,
+        }
+    }
+
+    #[test]
+    fn a_cell_beyond_in_every_recording_is_persistent_unless_chance_explains_it() {
+        let bands = Bands::new(4096.0, 4096);
+        // Band 1 beyond (|d| - 2 sigma - tolerance = 2 dB) in all four
+        // recordings, with either sign; band 2 in three of four; forty
+        // cells inside.
+        let d1 = [3.0, -3.0, 3.0, 3.0];
+        let d2 = [3.0, 3.0, 3.0, 0.0];
+        let recording = |r: usize| {
+            let mut cells = vec![car_cell(1, d1[r]), car_cell(2, d2[r])];
+            cells.extend((3..43).map(|b| car_cell(b, 0.1)));
+            cells
+        };
+        let recordings: Vec<Vec<CellGap>> = (0..4).map(recording).collect();
+        let p = persistent_cell(&recordings, &bands).expect("band 1 is persistent");
+        assert_eq!((p.band.as_str(), p.recordings), (bands.label(1).as_str(), 4));
+        assert!((p.rms_beyond_db - 2.0).abs() < 1e-12, "{}", p.rms_beyond_db);
+        // 7 of 168 cells beyond: 42 (7/168)^4 = 1.3e-4.
+        assert!((p.chance - 42.0 * (7.0f64 / 168.0).powi(4)).abs() < 1e-12, "{}", p.chance);
+        // Two recordings: too few. Four, but a tenth of all cells beyond:
+        // chance explains it.
+        assert!(persistent_cell(&recordings[..2], &bands).is_none());
+        let crowded: Vec<Vec<CellGap>> = (0..4)
+            .map(|r| recording(r).into_iter().map(|c| car_cell(c.band, 3.0 * c.d_db.signum())).collect())
+            .collect();
+        assert!(persistent_cell(&crowded, &bands).is_none());
     }
 }

@@ -243,6 +243,19 @@ fn verdict_text(verdict: Verdict, explained_by: Option<&str>, refused: bool) -> 
     }
 }
 
+/// A persistent cell in words.
+pub fn persistent_text(p: &crate::measure::PersistentCell) -> String {
+    format!(
+        "{}, {}, {}: beyond noise and tolerance in all {} recordings, by {:.2} dB RMS (chance {:.1e})",
+        p.channel.name(),
+        p.phase.name(),
+        p.band,
+        p.recordings,
+        p.rms_beyond_db,
+        p.chance
+    )
+}
+
 /// The drive model in words.
 fn drive_text(drive: DriveModel) -> &'static str {
     match drive {
@@ -278,6 +291,9 @@ fn overview(s: &mut String, r: &GapReport) {
         r.simulations,
         r.runtime_s
     );
+    if let Some(p) = &r.persistent_cell {
+        let _ = writeln!(s, "Persistent cell of the nominal model: {}.\n", persistent_text(p));
+    }
 }
 
 /// Section (when `explained`): how much the best candidate shrinks the
