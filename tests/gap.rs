@@ -19,17 +19,16 @@
 //! blind_every_effect_is_named_and_removes_the_held_out_gap --nocapture`).
 
 use closed_loop::synthetic::{add_noise, make_dataset, DatasetSpec};
-use closed_loop::{simulate_travel_faulted, FaultHook, SimOptions, StepAction, TravelSpec};
-use diagnosis::signals::{Channel, Phase, Subsystem};
+use closed_loop::{simulate_travel_faulted, SimOptions, TravelSpec};
 use diagnosis::{diagnose, GapOptions, GapReport, Verdict};
 use drive_core::config::Direction;
-use drive_core::SensorFrame;
 use plant::effects::{EffectKind, Effects};
-use plant::Plant;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use recording::{Recording, ACC_CAR, ACC_CW, I_A, I_B, I_C, KNOWN_COLUMNS};
 use rig_config::RigConfig;
+
+use crate::support::{assert_unexplained_on_the_moving_car, RailJoints};
 
 const ACC_NOISE_MPS2: f64 = 0.01;
 const CURRENT_NOISE_A: f64 = 0.02;
@@ -237,29 +236,6 @@ fn off_nominal_ea_and_damping_are_calibrated_away() {
     assert!(report.explained_by.is_none());
 }
 
-/// Guide-rail joints every 0.8 m kick the car (a 4 ms force pulse of
-/// 150 N as the shoe passes the step): not an effect of the library.
-struct RailJoints {
-    spacing_m: f64,
-    force_n: f64,
-    width_m: f64,
-}
-
-impl FaultHook for RailJoints {
-    fn before_step(&mut self, _t_s: f64, plant: &mut Plant) {
-        let x = plant.observe().car_position_m + 100.0 * self.spacing_m;
-        let phase = x.rem_euclid(self.spacing_m);
-        plant.faults.car_extra_force_n = if phase < self.width_m { self.force_n } else { 0.0 };
-    }
-    fn sensors(&mut self, _t_s: f64, frame: SensorFrame, _plant: &Plant) -> StepAction {
-        StepAction::Run(frame)
-    }
-    fn after_step(&mut self, _t_s: f64, _plant: &Plant, _output: &drive_core::ControlOutput) {}
-    fn keep_running_after_trip_s(&self) -> Option<f64> {
-        None
-    }
-}
-
 #[test]
 fn an_effect_outside_the_library_is_unexplained_and_located() {
     let rig = rig();
@@ -274,7 +250,7 @@ fn an_effect_outside_the_library_is_unexplained_and_located() {
             let options =
                 SimOptions { max_step_s: s.max_step_s, sample_rate_hz: s.sample_rate_hz, ..SimOptions::for_rig(&rig) };
             // 0.4 m/s over a 4 mm step: the pulse lasts 10 ms.
-            let mut joints = RailJoints { spacing_m: 0.8, force_n: 150.0, width_m: 0.004 };
+            let mut joints = RailJoints::kicking_the_car();
             let mut controller = drive_core::Controller::new(&rig.drive_config());
             let run = simulate_travel_faulted(&rig, &travel, &options, &mut controller, Some(&mut joints), None, None)
                 .expect("the travel with rail joints runs");
@@ -286,20 +262,5 @@ fn an_effect_outside_the_library_is_unexplained_and_located() {
     }
     let data = with_noise(dataset, 11);
     let report = run(&rig, "rail joints", &data);
-    let l = &report.location;
-    println!(
-        "verdict {:?}; best {} shrink {:.0} %; located {:?} / {} / {} / {} ({})",
-        report.verdict,
-        report.ranking[0].name,
-        100.0 * report.ranking[0].held_out_shrink,
-        l.subsystem,
-        l.channel.name(),
-        l.phase.name(),
-        l.band,
-        l.reasoning
-    );
-    assert_eq!(report.verdict, Verdict::Unexplained);
-    assert_eq!(l.subsystem, Subsystem::Mechanical);
-    assert_eq!(l.channel, Channel::CarAcceleration);
-    assert!(matches!(l.phase, Phase::Acceleration | Phase::Constant | Phase::Deceleration), "{:?}", l.phase);
+    assert_unexplained_on_the_moving_car(&report);
 }

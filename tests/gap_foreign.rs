@@ -4,16 +4,17 @@
 //! parameter-only change (EA within +-20 %, damping within +-50 %) and the
 //! library's effects at random strengths.
 //!
-//! CI runs one case (tension stiffening on one draw); the sweep over draws,
-//! the nominal and parameter-only rigs and every effect of the library is
+//! CI runs two cases on one draw (tension stiffening, and guide-rail joints
+//! that are not in the library); the sweep over draws, the nominal and
+//! parameter-only rigs, every effect of the library and the rail joints is
 //! an ignored test that prints the whole table (`GAP_FOREIGN_CASES` picks
-//! cases):
+//! cases: effect names, `nominal` and `rail_joints`):
 //! `cargo test --release -p host-sim --test integration gap_foreign:: -- --ignored --nocapture`
 //! (`GAP_FOREIGN_DRAWS=N` draws, default 2, from `GAP_FOREIGN_FIRST`,
 //! default 100: the foreign rig of `--foreign-seed 100` and on).
 
 use closed_loop::foreign::ForeignRig;
-use closed_loop::synthetic::{make_foreign_dataset, DatasetSpec};
+use closed_loop::synthetic::{make_foreign_dataset_hooked, DatasetSpec, TravelHooks};
 use diagnosis::driven::holds_effect;
 use diagnosis::{diagnose, GapOptions, GapReport, Verdict};
 use plant::effects::{EffectKind, Effects};
@@ -23,7 +24,7 @@ use recording::Recording;
 use rig_config::RigConfig;
 
 use crate::gap::{car_change, draw};
-use crate::support::rig;
+use crate::support::{assert_unexplained_on_the_moving_car, rig, RailJoints};
 
 /// One case of the sweep: what was drawn, what the diagnosis said.
 struct Case {
@@ -38,7 +39,7 @@ struct Case {
 impl Case {
     /// An effect's case (not the nominal or parameter-only rig).
     fn is_effect(&self) -> bool {
-        self.truth != "nominal" && !self.truth.starts_with("EA ")
+        self.truth != "nominal" && !self.truth.starts_with("EA ") && self.truth != OUTSIDE
     }
 
     /// The effect's car-acceleration signature is at least twice the
@@ -63,13 +64,24 @@ impl Case {
 /// The two car masses up and down over the full travel and their two free
 /// decays, recorded by `foreign` from `truth` with `effects`.
 fn foreign_dataset(truth: &RigConfig, foreign: &ForeignRig, effects: Effects) -> Vec<(String, Recording)> {
+    foreign_dataset_hooked(truth, foreign, effects, None)
+}
+
+/// The same with every travel under a hook of `hooks` (something outside
+/// the library).
+fn foreign_dataset_hooked(
+    truth: &RigConfig,
+    foreign: &ForeignRig,
+    effects: Effects,
+    hooks: Option<TravelHooks>,
+) -> Vec<(String, Recording)> {
     let spec = DatasetSpec {
         m_car_kg: vec![45.5, 70.5],
         decay_masses_kg: vec![45.5, 70.5],
         effects,
         ..DatasetSpec::rig(truth)
     };
-    make_foreign_dataset(truth, &spec, foreign).expect("foreign dataset")
+    make_foreign_dataset_hooked(truth, &spec, foreign, hooks).expect("foreign dataset")
 }
 
 /// The foreign rig of draw `d`: drive and acquisition at random, as
@@ -126,8 +138,8 @@ fn sweep_order() -> Vec<EffectKind> {
 }
 
 /// What the sweep runs, from `GAP_FOREIGN_CASES` (a comma-separated list of
-/// effect names and `nominal`, which stands for the nominal and the
-/// parameter-only rig); all of them when unset.
+/// effect names, `nominal`, which stands for the nominal and the
+/// parameter-only rig, and `rail_joints`); all of them when unset.
 fn selected(name: &str) -> bool {
     std::env::var("GAP_FOREIGN_CASES").map_or(true, |list| list.split(',').any(|c| c.trim() == name))
 }
@@ -185,6 +197,31 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
         let change_mps2 = car_change(&data, reference);
         cases.push(Case { draw: d, truth, change_mps2, noise_mps2, report });
     }
+    if selected("rail_joints") {
+        let data = rail_joints_dataset(&model, &foreign);
+        let report = diagnosed(&model, OUTSIDE, &data);
+        let change_mps2 = car_change(&data, &nominal);
+        cases.push(Case { draw: d, truth: OUTSIDE.into(), change_mps2, noise_mps2, report });
+    }
+}
+
+/// The case of an effect outside the library: guide-rail joints kicking the
+/// car ([`RailJoints::kicking_the_car`]).
+const OUTSIDE: &str = "rail_joints (not in the library)";
+
+/// The dataset of `foreign` on `model` with rail joints kicking the car.
+fn rail_joints_dataset(model: &RigConfig, foreign: &ForeignRig) -> Vec<(String, Recording)> {
+    let hooks = || Box::new(RailJoints::kicking_the_car()) as Box<dyn closed_loop::FaultHook>;
+    foreign_dataset_hooked(model, foreign, Effects::none(), Some(&hooks))
+}
+
+/// Guide-rail joints on a foreign rig (not an effect of the library):
+/// `unexplained`, located in the mechanics, on the car, while it moves.
+#[test]
+fn foreign_rig_rail_joints_are_unexplained_and_located() {
+    let model = rig();
+    let report = diagnosed(&model, OUTSIDE, &rail_joints_dataset(&model, &foreign_rig(8)));
+    assert_unexplained_on_the_moving_car(&report);
 }
 
 /// Tension stiffening (alpha 0.437) on a foreign rig: the nominal model
@@ -228,7 +265,10 @@ fn foreign_rigs_blind_sweep() {
          effect {explained} of {n}; {below} effect cases below twice the noise not counted",
         n = counted.len()
     );
-    for c in cases.iter().filter(|c| !c.is_effect()) {
+    for c in cases.iter().filter(|c| c.truth == OUTSIDE) {
+        assert_eq!(c.report.verdict, Verdict::Unexplained, "draw {}: {}", c.draw, c.truth);
+    }
+    for c in cases.iter().filter(|c| !c.is_effect() && c.truth != OUTSIDE) {
         assert_eq!(c.report.verdict, Verdict::Nominal, "draw {}: {}", c.draw, c.truth);
     }
 }

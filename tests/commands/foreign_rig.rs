@@ -25,7 +25,7 @@ fn check_travel(rig: &RigConfig, drive: &ForeignDrive, m_car_kg: f64, direction:
     let options = SimOptions { sample_rate_hz: 500.0, ..SimOptions::for_rig(rig) };
     let what = format!("{m_car_kg} kg {direction:?} with {}", drive.summary());
     let run: TravelRun =
-        simulate_commercial_travel(rig, &spec, drive, &options).unwrap_or_else(|e| panic!("{what}: {e}"));
+        simulate_commercial_travel(rig, &spec, drive, &options, None).unwrap_or_else(|e| panic!("{what}: {e}"));
     assert_eq!(run.drive_state.last(), Some(&0.0), "{what}: not idle at the end");
     let landing_error_m = run.lw_m.last().unwrap() - spec.lw_end_m;
     assert!(landing_error_m.abs() < 0.1, "{what}: landed {landing_error_m} m off");

@@ -12,7 +12,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::foreign::{simulate_commercial_travel, AnalogSignal, Channel, ForeignError, ForeignRig};
-use crate::{simulate_travel, simulate_travel_with, SimError, SimOptions, TravelSpec};
+use crate::{simulate_travel, simulate_travel_faulted, FaultHook, SimError, SimOptions, TravelSpec};
 use plant::effects::Effects;
 use plant::free_decay::{simulate_free_decay_with, FreeDecayError, FreeDecaySpec};
 use recording::{
@@ -211,6 +211,25 @@ pub fn make_foreign_dataset(
     spec: &DatasetSpec,
     foreign: &ForeignRig,
 ) -> Result<Vec<(String, Recording)>, ForeignError> {
+    make_foreign_dataset_hooked(rig, spec, foreign, None)
+}
+
+/// Makes a fresh closed-loop hook for each travel of a dataset: something
+/// the rig does that no parameter or effect describes (rail joints, a
+/// fault).
+pub type TravelHooks<'a> = &'a (dyn Fn() -> Box<dyn FaultHook> + Sync);
+
+/// [`make_foreign_dataset`] with every travel run under a hook of `hooks`
+/// (none: the rig as it is); the free decays are the rope's alone.
+///
+/// # Errors
+/// As [`make_foreign_dataset`].
+pub fn make_foreign_dataset_hooked(
+    rig: &RigConfig,
+    spec: &DatasetSpec,
+    foreign: &ForeignRig,
+    hooks: Option<TravelHooks>,
+) -> Result<Vec<(String, Recording)>, ForeignError> {
     use rayon::prelude::*;
     foreign.validate()?;
     let travels: Vec<(f64, Direction)> =
@@ -226,7 +245,10 @@ pub fn make_foreign_dataset(
             let travel = TravelSpec { m_car_kg: m, direction, lw_start_m, lw_end_m };
             let mut rng = recording_rng(spec.seed, index);
             let name = travel_stem(m, direction);
-            Ok((name, foreign_travel(rig, spec, foreign, &travel, &mut rng)?))
+            let mut hook = hooks.map(|make| make());
+            let hook = hook.as_mut().map(|h| h.as_mut() as &mut dyn FaultHook);
+            let recording = foreign_travel(rig, spec, foreign, &travel, hook, &mut rng)?;
+            Ok((name, recording))
         })
         .collect();
     let mut out = Vec::new();
@@ -258,6 +280,7 @@ fn foreign_travel(
     spec: &DatasetSpec,
     foreign: &ForeignRig,
     travel: &TravelSpec,
+    hook: Option<&mut dyn FaultHook>,
     rng: &mut StdRng,
 ) -> Result<Recording, ForeignError> {
     let mut options =
@@ -268,8 +291,11 @@ fn foreign_travel(
         options.tail_s = if acq.duration_s > 0.0 { acq.duration_s + acq.pre_trigger_s } else { FOREIGN_TAIL_S };
     }
     let run = match &foreign.drive {
-        Some(drive) => simulate_commercial_travel(rig, travel, drive, &options)?,
-        None => simulate_travel_with(rig, travel, &options, &mut Controller::new(&rig.drive_config()), None, None)?,
+        Some(drive) => simulate_commercial_travel(rig, travel, drive, &options, hook)?,
+        None => {
+            let mut controller = Controller::new(&rig.drive_config());
+            simulate_travel_faulted(rig, travel, &options, &mut controller, hook, None, None)?
+        }
     };
     let description = foreign_description(foreign, "travel");
     let Some(acq) = &foreign.acquisition else {

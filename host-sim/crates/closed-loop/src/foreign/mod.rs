@@ -22,7 +22,7 @@ pub use params::{ParamError, ParamInfo, ParamKind};
 
 use drive_core::{ControlOutput, SensorFrame, TravelCommand};
 
-use crate::{simulate_travel_with, DriveController, SimError, SimOptions, TravelRun, TravelSpec};
+use crate::{simulate_travel_faulted, DriveController, FaultHook, SimError, SimOptions, TravelRun, TravelSpec};
 use plant::free_decay::FreeDecayError;
 use plant::sensors::Sensors;
 use rig_config::RigConfig;
@@ -204,7 +204,8 @@ impl DriveController for RotatedStator<'_> {
 }
 
 /// Simulates the travel `spec` on `rig` driven by the commercial drive with
-/// `drive`, the rotor starting at `drive.rotor_start_angle_deg`. The run's
+/// `drive`, the rotor starting at `drive.rotor_start_angle_deg`, with
+/// `hook` acting on the closed loop (none: the rig as it is). The run's
 /// phase currents are those of the machine's phases (the rotor at that
 /// angle), its speed, angle and reference the drive's.
 ///
@@ -218,11 +219,12 @@ pub fn simulate_commercial_travel(
     spec: &TravelSpec,
     drive: &ForeignDrive,
     options: &SimOptions,
+    hook: Option<&mut dyn FaultHook>,
 ) -> Result<TravelRun, ForeignError> {
     let mut commercial = CommercialDrive::new(rig, drive)?;
     let angle = drive.rotor_start_angle_deg.to_radians();
     if angle == 0.0 {
-        return Ok(simulate_travel_with(rig, spec, options, &mut commercial, None, None)?);
+        return Ok(simulate_travel_faulted(rig, spec, options, &mut commercial, hook, None, None)?);
     }
     if options.effects.dead_time.is_some() || options.effects.current_sensor_error.is_some() {
         return Err(ForeignError::Unsupported(format!(
@@ -237,7 +239,7 @@ pub fn simulate_commercial_travel(
         sensors: Sensors::from_rig(rig),
         period_counts: rig.pwm_period_counts(),
     };
-    let mut run = simulate_travel_with(rig, spec, options, &mut stator, None, None)?;
+    let mut run = simulate_travel_faulted(rig, spec, options, &mut stator, hook, None, None)?;
     let [a, b, c] = &mut run.phase_currents_a;
     for k in 0..a.len() {
         let r = rotate_abc([a[k], b[k], c[k]], angle);
