@@ -33,8 +33,16 @@ struct Case {
     change_mps2: f64,
     /// RMS white noise of the draw's accelerometers, m/s^2.
     noise_mps2: f64,
+    /// The rig's EA (N), guide damping (kg/s) and sheave damping
+    /// (N m s/rad) for the nominal and parameter-only rigs, whose
+    /// calibration the sweep checks.
+    calibration_truth: Option<(f64, f64, f64)>,
     report: GapReport,
 }
+
+/// Largest relative errors of the calibrated EA, guide damping and sheave
+/// damping (the bounds the sample's identification meets).
+const CALIBRATION_BOUNDS: (f64, f64, f64) = (0.02, 0.15, 0.10);
 
 impl Case {
     /// An effect's case (not the nominal or parameter-only rig).
@@ -52,6 +60,18 @@ impl Case {
     fn named_first(&self) -> bool {
         self.report.verdict != Verdict::Nominal
             && self.report.ranking.first().is_some_and(|b| self.truth.starts_with(&format!("{} ", b.name)))
+    }
+
+    /// Relative errors of the calibrated EA, guide and sheave damping.
+    fn calibration_errors(&self) -> Option<(f64, f64, f64)> {
+        let c = &self.report.calibration;
+        self.calibration_truth.map(|(ea, guide, sheave)| {
+            (
+                c.rope_ea_n / ea - 1.0,
+                c.guide_damping_kg_per_s / guide - 1.0,
+                c.sheave_damping_nms_per_rad / sheave - 1.0,
+            )
+        })
     }
 
     /// `explained` by the true effect.
@@ -108,14 +128,14 @@ fn parameter_only(nominal: &RigConfig, rng: &mut StdRng) -> RigConfig {
 
 fn print_table(cases: &[Case]) {
     println!(
-        "{:>4} {:<70} {:>10} {:>7} {:<12} {:<24} {:>7} {:>8}",
+        "{:>4} {:<70} {:>10} {:>7} {:<12} {:<24} {:>7} {:>8}  calibration error EA / guide / sheave",
         "draw", "truth", "car change", "/ noise", "verdict", "first", "shrink", "excess"
     );
     for c in cases {
         let (first, shrink) =
             c.report.ranking.first().map_or(("-".to_string(), 0.0), |b| (b.name.clone(), b.held_out_shrink));
         println!(
-            "{:>4} {:<70} {:>10.4} {:>7.1} {:<12} {:<24} {:>6.0}% {:>6.2}dB",
+            "{:>4} {:<70} {:>10.4} {:>7.1} {:<12} {:<24} {:>6.0}% {:>6.2}dB  {}",
             c.draw,
             c.truth,
             c.change_mps2,
@@ -123,7 +143,13 @@ fn print_table(cases: &[Case]) {
             format!("{:?}", c.report.verdict),
             first,
             100.0 * shrink,
-            c.report.nominal_excess_db
+            c.report.nominal_excess_db,
+            c.calibration_errors().map_or(String::new(), |(ea, guide, sheave)| format!(
+                "{:+.1} % / {:+.1} % / {:+.1} %",
+                100.0 * ea,
+                100.0 * guide,
+                100.0 * sheave
+            ))
         );
     }
 }
@@ -156,10 +182,21 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
     let mut rng = StdRng::seed_from_u64(1000 + d);
     let nominal = foreign_dataset(&model, &foreign, Effects::none());
     let noise_mps2 = foreign.acquisition.map_or(0.0, |a| a.acc_noise_mps2);
+    let truth_of = |r: &RigConfig| {
+        let m = &r.mechanics;
+        Some((m.rope_ea_n, m.c_car_kg_per_s, m.c_sheave_nms_per_rad))
+    };
     let truth = parameter_only(&model, &mut rng);
     if selected("nominal") {
         let report = diagnosed(&model, "nominal", &nominal);
-        cases.push(Case { draw: d, truth: "nominal".into(), change_mps2: 0.0, noise_mps2, report });
+        cases.push(Case {
+            draw: d,
+            truth: "nominal".into(),
+            change_mps2: 0.0,
+            noise_mps2,
+            calibration_truth: truth_of(&model),
+            report,
+        });
         let data = foreign_dataset(&truth, &foreign, Effects::none());
         let m = &truth.mechanics;
         let name = format!(
@@ -167,7 +204,8 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
             m.rope_ea_n, m.c_car_kg_per_s, m.c_sheave_nms_per_rad
         );
         let report = diagnosed(&model, &name, &data);
-        cases.push(Case { draw: d, truth: name, change_mps2: car_change(&data, &nominal), noise_mps2, report });
+        let change_mps2 = car_change(&data, &nominal);
+        cases.push(Case { draw: d, truth: name, change_mps2, noise_mps2, calibration_truth: truth_of(&truth), report });
     }
     // The acquisition's noise is drawn from the same seed in both datasets,
     // so it cancels in the change.
@@ -195,13 +233,13 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
         let truth = format!("{} {:?}", kind.name(), values.iter().map(|v| (v * 1e4).round() / 1e4).collect::<Vec<_>>());
         let report = diagnosed(&model, &truth, &data);
         let change_mps2 = car_change(&data, reference);
-        cases.push(Case { draw: d, truth, change_mps2, noise_mps2, report });
+        cases.push(Case { draw: d, truth, change_mps2, noise_mps2, calibration_truth: None, report });
     }
     if selected("rail_joints") {
         let data = rail_joints_dataset(&model, &foreign);
         let report = diagnosed(&model, OUTSIDE, &data);
         let change_mps2 = car_change(&data, &nominal);
-        cases.push(Case { draw: d, truth: OUTSIDE.into(), change_mps2, noise_mps2, report });
+        cases.push(Case { draw: d, truth: OUTSIDE.into(), change_mps2, noise_mps2, calibration_truth: None, report });
     }
 }
 
@@ -270,5 +308,13 @@ fn foreign_rigs_blind_sweep() {
     }
     for c in cases.iter().filter(|c| !c.is_effect() && c.truth != OUTSIDE) {
         assert_eq!(c.report.verdict, Verdict::Nominal, "draw {}: {}", c.draw, c.truth);
+        let (ea, guide, sheave) = c.calibration_errors().expect("the rig's values are known");
+        let (ea_bound, guide_bound, sheave_bound) = CALIBRATION_BOUNDS;
+        assert!(
+            ea.abs() <= ea_bound && guide.abs() <= guide_bound && sheave.abs() <= sheave_bound,
+            "draw {}: {}: calibration off by {ea:+.3} / {guide:+.3} / {sheave:+.3}",
+            c.draw,
+            c.truth
+        );
     }
 }
