@@ -6,13 +6,11 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::output_dir;
-use diagnosis::signals::decimation_factor;
-use diagnosis::simulate::{model_step_s, simulate_recording};
-use diagnosis::{diagnose, report::write_report, GapOptions, Verdict};
-use dsp::{decimate, stft_spectrogram};
-use plant::effects::{EffectKind, Effects};
+use diagnosis::{diagnose, report::write_report, GapOptions};
+use dsp::stft_spectrogram;
+use plant::effects::EffectKind;
 use plots::spectrogram_plot;
-use recording::{read_dataset, ACC_CAR};
+use recording::read_dataset;
 use rig_config::RigConfig;
 
 /// Arguments of `gap`.
@@ -113,45 +111,22 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     let report = diagnose(rig, &name, &dataset, &options, &progress)?;
     bar.finish_and_clear();
 
-    // Spectrograms of the car acceleration, data and model side by side, for
-    // the recording with the largest nominal gap.
+    // Spectrograms of the car acceleration, data and models side by side,
+    // for the recording with the largest nominal gap.
     let mut plots = Vec::new();
-    if let Some(worst) = report.recordings.iter().max_by(|a, b| a.nominal_excess_db.total_cmp(&b.nominal_excess_db)) {
-        if let Some((stem, recording)) = dataset.iter().find(|(s, _)| *s == worst.recording) {
-            let factor = decimation_factor(recording.meta.sample_rate_hz);
-            let rate = recording.meta.sample_rate_hz / factor as f64;
-            let mut model_rig = rig.clone();
-            model_rig.mechanics.rope_ea_n = report.calibration.rope_ea_n;
-            model_rig.mechanics.c_car_kg_per_s = report.calibration.guide_damping_kg_per_s;
-            model_rig.mechanics.c_cw_kg_per_s = report.calibration.guide_damping_kg_per_s;
-            model_rig.mechanics.c_sheave_nms_per_rad = report.calibration.sheave_damping_nms_per_rad;
-            let explaining = report.ranking.first().filter(|_| report.verdict == Verdict::Explained).map(|c| c.effects);
-            let mut series = vec![("data".to_string(), recording.column(ACC_CAR).map(|c| c.values.clone()), factor)];
-            for (label, effects) in
-                [("nominal model".to_string(), Some(Effects::none())), ("explaining model".to_string(), explaining)]
-            {
-                // The project's drive in closed loop; a recording it cannot
-                // run loses this picture, never the diagnosis.
-                let Some(effects) = effects else { continue };
-                match simulate_recording(&model_rig, &effects, recording, stem, rate, model_step_s(&model_rig)) {
-                    Ok(sim) => series.push((label, sim.column(ACC_CAR).map(|c| c.values.clone()), 1)),
-                    Err(e) => eprintln!("note: no {label} spectrogram of `{stem}`: {e:#}"),
-                }
-            }
-            for (label, values, f) in series {
-                let Some(values) = values else { continue };
-                let values = if f > 1 { decimate(&values, f)? } else { values };
-                let spectrogram = stft_spectrogram(&values, rate, 0.5, 0.75, 400.0)?;
-                let file = format!("spectrogram_{}.png", label.replace(' ', "_"));
-                spectrogram_plot(
-                    &out.path(&file),
-                    &format!("car acceleration, {stem}: {label} (dB re 1 (m/s^2)^2/Hz)"),
-                    &spectrogram,
-                    &[],
-                    None,
-                )?;
-                plots.push((format!("car acceleration spectrogram of `{stem}`, {label}"), file));
-            }
+    if let Some(views) = &report.car_acceleration_views {
+        let stem = &views.recording;
+        for (label, values) in &views.series {
+            let spectrogram = stft_spectrogram(values, views.sample_rate_hz, 0.5, 0.75, 400.0)?;
+            let file = format!("spectrogram_{}.png", label.replace(' ', "_"));
+            spectrogram_plot(
+                &out.path(&file),
+                &format!("car acceleration, {stem}: {label} (dB re 1 (m/s^2)^2/Hz)"),
+                &spectrogram,
+                &[],
+                None,
+            )?;
+            plots.push((format!("car acceleration spectrogram of `{stem}`, {label}"), file));
         }
     }
     write_report(out.staging(), &report, &plots)?;

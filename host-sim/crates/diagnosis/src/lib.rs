@@ -236,6 +236,11 @@ pub struct GapReport {
     /// noise and tolerance, if any; beyond [`PERSISTENT_CELL_DB`] it alone
     /// makes the verdict other than `nominal`.
     pub persistent_cell: Option<PersistentCell>,
+    /// The car acceleration of the recording with the largest nominal gap,
+    /// measured and from the models the diagnosis compared it with (for
+    /// spectrograms; not in `gap.json`).
+    #[serde(skip)]
+    pub car_acceleration_views: Option<CarAccelerationViews>,
     /// Step 1.
     pub calibration: Calibration,
     /// Where the gap lies (nominal model).
@@ -277,6 +282,48 @@ impl GapReport {
             )
         })
     }
+}
+
+/// The car acceleration (m/s^2, positive up) of one recording as measured
+/// and as the diagnosis's models give it: the project's drive in closed
+/// loop or the mechanics driven by the measured torque, whichever the
+/// diagnosis used.
+#[derive(Clone, Debug)]
+pub struct CarAccelerationViews {
+    /// Recording.
+    pub recording: String,
+    /// Sample rate of every series, Hz (the analysis rate).
+    pub sample_rate_hz: f64,
+    /// (label, series): `data`, `nominal model` and, when `explained`,
+    /// `explaining model`.
+    pub series: Vec<(String, Vec<f64>)>,
+}
+
+/// The views of the recording with the largest nominal excess gap: its
+/// measured car acceleration, the nominal model's and, with `explaining`,
+/// the explaining model's (a model that cannot run loses its view, never
+/// the diagnosis).
+fn car_acceleration_views(
+    model: &RigConfig,
+    c: &Compared,
+    recordings: &[RecordingGap],
+    explaining: Option<&Effects>,
+) -> Option<CarAccelerationViews> {
+    let worst = (0..recordings.len())
+        .max_by(|&a, &b| recordings[a].nominal_excess_db.total_cmp(&recordings[b].nominal_excess_db))?;
+    let (target, measured) = (c.targets.get(worst)?, c.measured.get(worst)?);
+    let car = |s: &ChainSignals| s.channel(signals::Channel::CarAcceleration).map(<[f64]>::to_vec);
+    let mut series = vec![("data".to_string(), car(measured)?)];
+    let nominal = Effects::none();
+    for (label, effects) in [("nominal model", Some(&nominal)), ("explaining model", explaining)] {
+        let Some(effects) = effects else { continue };
+        if let Some(values) =
+            target.counterpart.simulate(model, effects, &target.recording, &target.stem).ok().as_ref().and_then(car)
+        {
+            series.push((label.to_string(), values));
+        }
+    }
+    Some(CarAccelerationViews { recording: target.stem.clone(), sample_rate_hz: measured.sample_rate_hz, series })
 }
 
 /// Text of the gap measure for reports.
@@ -992,6 +1039,8 @@ pub fn diagnose(
         map_after = gap_after(&model, &best.effects, &compared, &mut recordings);
         simulations += compared.targets.len();
     }
+    let explaining = (verdict == Verdict::Explained).then(|| best.map(|b| &b.effects)).flatten();
+    let car_acceleration_views = car_acceleration_views(&model, &compared, &recordings, explaining);
     let map_before = nominal_cells.into_iter().flatten().collect();
     Ok(GapReport {
         dataset: name.to_string(),
@@ -1005,6 +1054,7 @@ pub fn diagnose(
         nominal_excess_db,
         noise_gap_db,
         persistent_cell,
+        car_acceleration_views,
         calibration,
         location,
         ranking,
