@@ -179,6 +179,9 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     if let Some(note) = report.begins_in_motion_note() {
         outln!("start: {note}");
     }
+    if let Some(note) = report.once_per_revolution_note() {
+        outln!("once per revolution: {note}");
+    }
     for c in report.ranking.iter().take(5) {
         outln!(
             "  {:<48} held-out {:.2} -> {:.2} dB ({:+.0} %)",

@@ -262,6 +262,21 @@ pub struct GapReport {
 }
 
 impl GapReport {
+    /// When the two best candidates are the sheave's eccentricity and the
+    /// encoder's error, in either order: they move the rope alike for the
+    /// measured angle, and what tells them apart, in words.
+    pub fn once_per_revolution_note(&self) -> Option<String> {
+        let [first, second] = [self.ranking.first()?, self.ranking.get(1)?].map(|c| c.name.as_str());
+        (self.verdict != Verdict::Nominal && move_the_rope_alike(first, second)).then(|| {
+            format!(
+                "{first} and {second} both move the rope by r0 (theta + e sin(theta + phi)) for the measured \
+                     angle theta, one through the sheave's geometry, the other through the encoder's reading: the \
+                     recordings tell them apart only through the torque, under the rig's once-per-revolution \
+                     ripple; a second shaft sensor or a runout measurement of the sheave settles which"
+            )
+        })
+    }
+
     /// The travels that begin with the rig already moving and what the
     /// diagnosis does about them, in words; `None` when there are none.
     pub fn begins_in_motion_note(&self) -> Option<String> {
@@ -324,6 +339,13 @@ fn car_acceleration_views(
         }
     }
     Some(CarAccelerationViews { recording: target.stem.clone(), sample_rate_hz: measured.sample_rate_hz, series })
+}
+
+/// Whether candidates `a` and `b` are the sheave's eccentricity and the
+/// encoder's error, in either order.
+fn move_the_rope_alike(a: &str, b: &str) -> bool {
+    let pair = [EffectKind::SheaveEccentricity.name(), EffectKind::EncoderError.name()];
+    a != b && pair.contains(&a) && pair.contains(&b)
 }
 
 /// Text of the gap measure for reports.
@@ -1092,6 +1114,15 @@ mod tests {
             noise_density: Vec::new(),
             angle_rad: Vec::new(),
         }
+    }
+
+    #[test]
+    fn only_the_eccentricity_and_the_encoder_error_move_the_rope_alike() {
+        assert!(move_the_rope_alike("sheave_eccentricity", "encoder_error"));
+        assert!(move_the_rope_alike("encoder_error", "sheave_eccentricity"));
+        assert!(!move_the_rope_alike("encoder_error", "encoder_error"));
+        assert!(!move_the_rope_alike("sheave_eccentricity", "sheave_eccentricity + encoder_error"));
+        assert!(!move_the_rope_alike("sheave_eccentricity", "coulomb_guide_friction"));
     }
 
     #[test]

@@ -218,6 +218,9 @@ pub fn markdown(r: &GapReport, plots: &[(String, String)]) -> String {
     location_section(&mut s, &r.location);
     calibration_section(&mut s, &r.calibration);
     ranking_section(&mut s, &r.ranking);
+    if let Some(note) = r.once_per_revolution_note() {
+        let _ = writeln!(s, "Once per revolution: {note}.\n");
+    }
     recordings_section(&mut s, &r.recordings);
     let _ = writeln!(s, "\n## Gap measure\n\n{}\n", r.gap_measure);
     plots_section(&mut s, plots);
