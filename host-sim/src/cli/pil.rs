@@ -240,6 +240,27 @@ pub struct TravelSummary {
     pub peak_speed_mps: f64,
 }
 
+impl TravelSummary {
+    /// The columns of [`TravelSummary::row`] (`dcp_travels.csv`'s header).
+    pub const COLUMNS: [&'static str; 8] =
+        ["travel", "from_mm", "target_mm", "landed_mm", "error_mm", "steps", "time_s", "peak_speed_mps"];
+
+    /// Travel number `travel` as a row of [`TravelSummary::COLUMNS`]; the
+    /// time from the steps at `loop_hz` (Hz).
+    pub fn row(&self, travel: usize, loop_hz: f64) -> [f64; 8] {
+        [
+            travel as f64,
+            self.from_mm,
+            f64::from(self.target_mm),
+            self.landed_mm,
+            self.landed_mm - f64::from(self.target_mm),
+            self.steps as f64,
+            self.steps as f64 / loop_hz,
+            self.peak_speed_mps,
+        ]
+    }
+}
+
 /// Checks the `--dcp` landings: inside the shaft of `shaft_mm` mm, each
 /// at least 10 mm from the one before (the first from `start_mm`).
 pub fn check_landings(landings: &[i32], start_mm: f64, shaft_mm: u32) -> anyhow::Result<()> {
@@ -364,34 +385,15 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
         "time s",
         "peak m/s"
     );
+    let loop_hz = drive.current_loop_hz as f64;
     for (i, s) in summaries.iter().enumerate() {
-        outln!(
-            "{:>7} {:>9.1} {:>9} {:>10.2} {:>+9.2} {:>8} {:>8.2} {:>10.3}",
-            i + 1,
-            s.from_mm,
-            s.target_mm,
-            s.landed_mm,
-            s.landed_mm - s.target_mm as f64,
-            s.steps,
-            s.steps as f64 / drive.current_loop_hz as f64,
-            s.peak_speed_mps
-        );
+        let [travel, from, to, landed, error, steps, time, peak] = s.row(i + 1, loop_hz);
+        outln!("{travel:>7} {from:>9.1} {to:>9} {landed:>10.2} {error:>+9.2} {steps:>8} {time:>8.2} {peak:>10.3}");
     }
     let mut csv = out.writer("dcp_travels.csv")?;
-    writeln!(csv, "travel,from_mm,target_mm,landed_mm,error_mm,steps,time_s,peak_speed_mps")?;
+    writeln!(csv, "{}", TravelSummary::COLUMNS.join(","))?;
     for (i, s) in summaries.iter().enumerate() {
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{}",
-            i + 1,
-            s.from_mm,
-            s.target_mm,
-            s.landed_mm,
-            s.landed_mm - s.target_mm as f64,
-            s.steps,
-            s.steps as f64 / drive.current_loop_hz as f64,
-            s.peak_speed_mps
-        )?;
+        writeln!(csv, "{}", s.row(i + 1, loop_hz).map(|v| v.to_string()).join(","))?;
     }
     csv.flush()?;
     drop(csv);
