@@ -159,14 +159,14 @@ fn parameter_only(nominal: &RigConfig, rng: &mut StdRng) -> RigConfig {
 
 fn print_table(cases: &[Case]) {
     println!(
-        "{:>4} {:<70} {:>10} {:>9} {:<12} {:<24} {:>7} {:>8}  calibration error EA / guide / sheave",
-        "draw", "truth", "car change", "sig/noise", "verdict", "first", "shrink", "excess"
+        "{:>4} {:<70} {:>10} {:>9} {:<12} {:<24} {:>7} {:>8} {:>10}  calibration error EA / guide / sheave",
+        "draw", "truth", "car change", "sig/noise", "verdict", "first", "shrink", "excess", "persistent"
     );
     for c in cases {
         let (first, shrink) =
             c.report.ranking.first().map_or(("-".to_string(), 0.0), |b| (b.name.clone(), b.held_out_shrink));
         println!(
-            "{:>4} {:<70} {:>10.4} {:>9.1} {:<12} {:<24} {:>6.0}% {:>6.2}dB  {}",
+            "{:>4} {:<70} {:>10.4} {:>9.1} {:<12} {:<24} {:>6.0}% {:>6.2}dB {:>8.2}dB  {}",
             c.draw,
             c.truth,
             c.change.rms_mps2,
@@ -175,6 +175,7 @@ fn print_table(cases: &[Case]) {
             first,
             100.0 * shrink,
             c.report.nominal_excess_db,
+            c.report.persistent_cell.as_ref().map_or(0.0, |p| p.rms_beyond_db),
             c.calibration_errors().map_or(String::new(), |(ea, guide, sheave)| format!(
                 "{:+.1} % / {:+.1} % / {:+.1} %",
                 100.0 * ea,

@@ -69,7 +69,7 @@ pub const NOMINAL_EXCESS_DB: f64 = 0.15;
 /// Largest RMS (dB) by which a persistent cell
 /// ([`measure::persistent_cell`]: beyond noise and tolerance in most
 /// recordings) may lie beyond them for the verdict still to be `nominal`.
-pub const PERSISTENT_CELL_DB: f64 = 0.5;
+pub const PERSISTENT_CELL_DB: f64 = 1.0;
 /// Smallest held-out shrink of the gap for `explained`.
 pub const EXPLAINED_SHRINK: f64 = 0.7;
 
