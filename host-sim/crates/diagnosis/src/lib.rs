@@ -67,8 +67,9 @@ use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 /// verdict still calls `nominal`.
 pub const NOMINAL_EXCESS_DB: f64 = 0.15;
 /// Largest RMS (dB) by which a persistent cell
-/// ([`measure::persistent_cell`]: beyond noise and tolerance in most
-/// recordings) may lie beyond them for the verdict still to be `nominal`.
+/// ([`measure::persistent_cell`]: beyond noise and tolerance in every
+/// recording that has it, more often than chance allows) may lie beyond
+/// them for the verdict still to be `nominal`.
 pub const PERSISTENT_CELL_DB: f64 = 1.0;
 /// Smallest held-out shrink of the gap for `explained`.
 pub const EXPLAINED_SHRINK: f64 = 0.7;
@@ -1063,6 +1064,7 @@ pub fn diagnose(
     }
     let explaining = (verdict == Verdict::Explained).then(|| best.map(|b| &b.effects)).flatten();
     let car_acceleration_views = car_acceleration_views(&model, &compared, &recordings, explaining);
+    simulations += car_acceleration_views.as_ref().map_or(0, |v| v.series.len().saturating_sub(1));
     let map_before = nominal_cells.into_iter().flatten().collect();
     Ok(GapReport {
         dataset: name.to_string(),
