@@ -319,6 +319,54 @@ fn foreign_rig_tension_stiffening_is_named_first() {
     assert!(report.attribution_note.as_deref().is_some_and(|n| n.contains("dead_time")));
 }
 
+/// The direct-axis lines of a foreign rig's travels (its drive turned to a
+/// rotor start at 0 degrees, as the library's electrical effects need)
+/// with `effects`.
+fn direct_axis_lines(effects: Effects) -> diagnosis::electrical_lines::ElectricalLines {
+    let model = rig();
+    let mut foreign = foreign_rig(8);
+    if let Some(drive) = foreign.drive.as_mut() {
+        drive.rotor_start_angle_deg = 0.0;
+    }
+    let data = foreign_dataset(&model, &foreign, effects);
+    let travels: Vec<(&str, &Recording)> = data.iter().map(|(s, r)| (s.as_str(), r)).collect();
+    diagnosis::electrical_lines::electrical_lines(&model, &travels)
+}
+
+/// Under another drive the transducers' and the inverter's errors are in
+/// the recorded currents and so in the torque that drives the model: the
+/// direct-axis current's lines show them. The nominal rig has none; the
+/// plant's current-sensor error, regulated in by the commercial drive, is
+/// fitted back to its offsets and gains; the plant's dead time puts a
+/// line at order 6 that `dead_time` explains.
+#[test]
+fn foreign_rig_electrical_effects_show_in_the_direct_axis_lines() {
+    let nominal = direct_axis_lines(Effects::none());
+    assert!(!nominal.present(), "{:?}", nominal.present_orders);
+
+    let truth = [0.15, -0.05, 0.008, -0.005];
+    let mut effects = Effects::none();
+    effects.set(EffectKind::CurrentSensorError, &truth).unwrap();
+    let found = direct_axis_lines(effects);
+    let best = &found.ranking[0];
+    println!("{}: {:.0} %", best.name, 100.0 * best.held_out_shrink);
+    assert_eq!(best.name, "current_sensor_error");
+    assert!(best.held_out_shrink >= 0.7, "{}", best.held_out_shrink);
+    for (p, t) in best.parameters.iter().zip(truth) {
+        println!("{} = {:.4} (truth {t})", p.name, p.value);
+        assert!((p.value - t).abs() <= 0.1 * t.abs() + 1e-3, "{} = {} against {t}", p.name, p.value);
+    }
+
+    let mut effects = Effects::none();
+    effects.set(EffectKind::DeadTime, &[3e-7, EffectKind::DeadTime.defaults()[1]]).unwrap();
+    let found = direct_axis_lines(effects);
+    assert_eq!(found.present_orders, vec![6.0]);
+    let best = &found.ranking[0];
+    println!("{}: {:.0} %", best.name, 100.0 * best.held_out_shrink);
+    assert_eq!(best.name, "dead_time");
+    assert!(best.held_out_shrink >= 0.7, "{}", best.held_out_shrink);
+}
+
 /// The sweep over foreign draws (about 25 minutes a draw on two cores).
 #[test]
 #[ignore = "full sweep: run with --ignored"]

@@ -148,6 +148,9 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     if let Some(p) = &report.persistent_cell {
         outln!("persistent cell: {}", diagnosis::report::persistent_text(p));
     }
+    if let Some(e) = &report.electrical_lines {
+        outln!("direct-axis lines: {}", diagnosis::report::electrical_lines_text(e));
+    }
     outln!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
     for l in &report.rig_speed_loops {
         match (&l.controller, &l.refused) {

@@ -598,7 +598,7 @@ fn folds(targets: &[Target]) -> Vec<(Vec<usize>, Vec<usize>)> {
 
 /// Jackknife standard error of one parameter from its values fitted per
 /// fold (same unit); NaN with fewer than two folds.
-fn jackknife_error(per_fold: &[f64]) -> f64 {
+pub(crate) fn jackknife_error(per_fold: &[f64]) -> f64 {
     let mean = per_fold.iter().sum::<f64>() / per_fold.len().max(1) as f64;
     if per_fold.len() >= 2 {
         let n = per_fold.len() as f64;

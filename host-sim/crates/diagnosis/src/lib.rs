@@ -29,6 +29,7 @@ pub mod attribute;
 pub mod calibrate;
 pub mod drive_law;
 pub mod driven;
+pub mod electrical_lines;
 pub mod error;
 pub mod identify;
 pub mod identify_dataset;
@@ -237,6 +238,11 @@ pub struct GapReport {
     /// noise and tolerance, if any; beyond [`PERSISTENT_CELL_DB`] it alone
     /// makes the verdict other than `nominal`.
     pub persistent_cell: Option<PersistentCell>,
+    /// Under another drive: the direct-axis current's lines at electrical
+    /// orders 1, 2 and 6 and the electrical effects fitted to them
+    /// ([`electrical_lines`]); a line present makes the verdict other than
+    /// `nominal`.
+    pub electrical_lines: Option<electrical_lines::ElectricalLines>,
     /// The car acceleration of the recording with the largest nominal gap,
     /// measured and from the models the diagnosis compared it with (for
     /// spectrograms; not in `gap.json`).
@@ -967,11 +973,20 @@ fn gap_after(model: &RigConfig, effects: &Effects, c: &Compared, recordings: &mu
     after.into_iter().flatten().flatten().collect()
 }
 
-/// The verdict from the nominal model's excess gap and the best candidate.
-fn verdict_of(is_nominal: bool, best: Option<&Candidate>, options: &GapOptions) -> Verdict {
-    if is_nominal {
+/// The verdict from the nominal model's gap (`is_nominal`) with the best
+/// candidate of the attribution, and the direct-axis lines when present
+/// with theirs: `nominal` when neither shows a gap, `explained` when every
+/// gap shown is explained (held-out shrink at least the option's).
+fn verdict_of(
+    is_nominal: bool,
+    best: Option<&Candidate>,
+    electrical: Option<&electrical_lines::ElectricalLines>,
+    options: &GapOptions,
+) -> Verdict {
+    let explains = |c: Option<&Candidate>| c.is_some_and(|b| b.held_out_shrink >= options.explained_shrink);
+    if is_nominal && electrical.is_none() {
         Verdict::Nominal
-    } else if best.is_some_and(|b| b.held_out_shrink >= options.explained_shrink) {
+    } else if (is_nominal || explains(best)) && electrical.is_none_or(|e| explains(e.ranking.first())) {
         Verdict::Explained
     } else {
         Verdict::Unexplained
@@ -1044,18 +1059,30 @@ pub fn diagnose(
         let names: Vec<&str> = not_fitted.iter().map(|k| k.name()).collect();
         format!(
             "the rig's drive is another, so the effects are fitted with the mechanics driven by its measured torque; \
-             not fitted: {} (the dead time and current-sensor errors act through the currents, which the measured \
-             torque already carries; the brake clamp acts at standstill, where another drive's start and stop are \
-             not compared)",
+             not fitted to the mechanics: {} (the dead time and current-sensor errors act through the currents, \
+             which the measured torque already carries: they are fitted to the direct-axis current's lines instead; \
+             the brake clamp acts at standstill, where another drive's start and stop are not compared)",
             names.join(", ")
         )
     });
-    let ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
-    let best = ranking.first();
-    let verdict = verdict_of(is_nominal, best, options);
+    let mechanical_ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
+    // Under another drive, its transducer and inverter errors show in the
+    // direct-axis current, not in the torque-driven mechanics.
+    let electrical_lines = (drive.drive == DriveModel::Foreign).then(|| {
+        let travels: Vec<(&str, &Recording)> =
+            compared.used.iter().map(|&i| (dataset[i].0.as_str(), &dataset[i].1)).collect();
+        electrical_lines::electrical_lines(&model, &travels)
+    });
+    let electrical = electrical_lines.as_ref().filter(|e| e.present());
+    let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
+    let best = if is_nominal { None } else { mechanical_ranking.first() };
     let mut simulations =
         compared.simulations + planned.load(std::sync::atomic::Ordering::Relaxed) * compared.targets.len();
-    let explained_by = (verdict == Verdict::Explained).then(|| best.map(|b| b.name.clone())).flatten();
+    let explained_by = (verdict == Verdict::Explained).then(|| {
+        let names: Vec<&str> =
+            electrical.and_then(|e| e.ranking.first()).into_iter().chain(best).map(|c| c.name.as_str()).collect();
+        names.join(" + ")
+    });
     let mut map_after = Vec::new();
     if let (Verdict::Explained, Some(best)) = (verdict, best) {
         progress(&format!("checking {}", best.effects.summary()), 0, compared.targets.len());
@@ -1066,6 +1093,8 @@ pub fn diagnose(
     let car_acceleration_views = car_acceleration_views(&model, &compared, &recordings, explaining);
     simulations += car_acceleration_views.as_ref().map_or(0, |v| v.series.len().saturating_sub(1));
     let map_before = nominal_cells.into_iter().flatten().collect();
+    let ranking =
+        electrical.map(|e| e.ranking.clone()).unwrap_or_default().into_iter().chain(mechanical_ranking).collect();
     Ok(GapReport {
         dataset: name.to_string(),
         verdict,
@@ -1078,6 +1107,7 @@ pub fn diagnose(
         nominal_excess_db,
         noise_gap_db,
         persistent_cell,
+        electrical_lines,
         car_acceleration_views,
         calibration,
         location,

@@ -259,6 +259,34 @@ pub fn persistent_text(p: &crate::measure::PersistentCell) -> String {
     )
 }
 
+/// The direct-axis lines in one line of words: the orders present and
+/// their largest amplitude against what nominal allows, or that none is.
+pub fn electrical_lines_text(e: &crate::electrical_lines::ElectricalLines) -> String {
+    let measured = e.travels.len();
+    if !e.present() {
+        return format!(
+            "none at electrical orders 1, 2, 6 beyond noise and cross coupling in {measured} travels ({:.2} dB)",
+            e.excess_db
+        );
+    }
+    let orders: Vec<String> = e
+        .present_orders
+        .iter()
+        .map(|&o| {
+            let lines = e.travels.iter().flat_map(|t| t.lines.iter().filter(move |l| l.order == o));
+            let (amplitude, allowance) =
+                lines.fold((0.0f64, 0.0f64), |(a, b), l| (a.max(l.amplitude_a), b.max(l.allowance_a)));
+            let travels = e.travels.iter().filter(|t| t.lines.iter().any(|l| l.order == o && l.present)).count();
+            format!(
+                "order {o}: in {travels} of {measured} travels, up to {:.1} mA (nominal allows {:.1} mA)",
+                1e3 * amplitude,
+                1e3 * allowance
+            )
+        })
+        .collect();
+    format!("{} ({:.2} dB beyond)", orders.join("; "), e.excess_db)
+}
+
 /// The drive model in words.
 fn drive_text(drive: DriveModel) -> &'static str {
     match drive {
@@ -296,6 +324,12 @@ fn overview(s: &mut String, r: &GapReport) {
     );
     if let Some(p) = &r.persistent_cell {
         let _ = writeln!(s, "Persistent cell of the nominal model: {}.\n", persistent_text(p));
+    }
+    if let Some(e) = &r.electrical_lines {
+        let _ = writeln!(s, "Direct-axis current's lines: {}.\n", electrical_lines_text(e));
+        for (stem, reason) in &e.not_measured {
+            let _ = writeln!(s, "Lines not measured: `{stem}`: {reason}.\n");
+        }
     }
 }
 
