@@ -448,13 +448,18 @@ pub fn explain(measured: Vec<TravelLines>, not_measured: Vec<(String, String)>) 
     } else {
         measured.iter().map(|t| excess_db(t, None, threshold_a)).sum::<f64>() / measured.len() as f64
     };
-    let mut ranking: Vec<Candidate> = if present_orders.is_empty() || measured.len() < 2 {
+    // The pair only where lines of both kinds are present.
+    let transducer_lines = present_orders.iter().any(|&o| o < 6.0);
+    let dead_time_line = present_orders.contains(&6.0);
+    let models: &[Model] = match (transducer_lines, dead_time_line) {
+        (true, true) => &[Model::Transducers, Model::DeadTime, Model::Both],
+        (false, false) => &[],
+        _ => &[Model::Transducers, Model::DeadTime],
+    };
+    let mut ranking: Vec<Candidate> = if measured.len() < 2 {
         Vec::new()
     } else {
-        [Model::Transducers, Model::DeadTime, Model::Both]
-            .into_iter()
-            .filter_map(|m| candidate(m, &measured, threshold_a))
-            .collect()
+        models.iter().filter_map(|&m| candidate(m, &measured, threshold_a)).collect()
     };
     ranking.sort_by(|a, b| a.score_db.total_cmp(&b.score_db));
     ElectricalLines { travels: measured, not_measured, present_orders, excess_db, ranking }
@@ -515,6 +520,8 @@ mod tests {
             [8.0, -4.0, 11.0, -2.0].iter().enumerate().map(|(k, &iq)| lines(iq, truth, 0.2, 0.0, k as u64)).collect();
         let found = explain(travels, Vec::new());
         assert_eq!(found.present_orders, vec![1.0, 2.0]);
+        // No line at order 6: the pair with the dead time is not tried.
+        assert!(found.ranking.iter().all(|c| !c.name.contains('+')));
         let best = &found.ranking[0];
         assert_eq!(best.name, "current_sensor_error");
         assert!(best.held_out_shrink > 0.9, "{}", best.held_out_shrink);

@@ -1125,6 +1125,45 @@ pub fn diagnose(
 mod tests {
     use super::*;
 
+    fn candidate(shrink: f64) -> Candidate {
+        Candidate {
+            name: "effect".into(),
+            parameters: Vec::new(),
+            fitted_parameters: 1,
+            training_gap_before_db: 1.0,
+            training_gap_after_db: 1.0 - shrink,
+            held_out_gap_before_db: 1.0,
+            held_out_gap_after_db: 1.0 - shrink,
+            held_out_shrink: shrink,
+            score_db: 1.0 - shrink,
+            effects: Effects::none(),
+        }
+    }
+
+    fn lines_explained_by(shrink: f64) -> electrical_lines::ElectricalLines {
+        electrical_lines::ElectricalLines {
+            travels: Vec::new(),
+            not_measured: Vec::new(),
+            present_orders: vec![1.0],
+            excess_db: 10.0,
+            ranking: vec![candidate(shrink)],
+        }
+    }
+
+    #[test]
+    fn every_gap_shown_must_be_explained() {
+        let o = GapOptions::default();
+        let (good, poor) = (candidate(0.9), candidate(0.2));
+        let (lines_good, lines_poor) = (lines_explained_by(0.9), lines_explained_by(0.2));
+        assert_eq!(verdict_of(true, Some(&poor), None, &o), Verdict::Nominal);
+        assert_eq!(verdict_of(true, Some(&poor), Some(&lines_good), &o), Verdict::Explained);
+        assert_eq!(verdict_of(true, Some(&good), Some(&lines_poor), &o), Verdict::Unexplained);
+        assert_eq!(verdict_of(false, Some(&good), Some(&lines_good), &o), Verdict::Explained);
+        assert_eq!(verdict_of(false, Some(&poor), Some(&lines_good), &o), Verdict::Unexplained);
+        assert_eq!(verdict_of(false, Some(&good), None, &o), Verdict::Explained);
+        assert_eq!(verdict_of(false, None, None, &o), Verdict::Unexplained);
+    }
+
     /// A travel's speed channel: a ramp to `top` rad/s, held, a ramp down.
     fn travel(top: f64) -> ChainSignals {
         let n = 3000;
