@@ -367,6 +367,19 @@ fn foreign_rig_electrical_effects_show_in_the_direct_axis_lines() {
     assert!(best.held_out_shrink >= 0.7, "{}", best.held_out_shrink);
 }
 
+/// No mechanical effect of the library (nor the encoder's error) puts a
+/// line on the direct axis: the drive answers the motion on the
+/// quadrature axis. Each at its default strength on a foreign rig.
+#[test]
+fn foreign_rig_mechanical_effects_leave_the_direct_axis_clean() {
+    for kind in EffectKind::ALL.into_iter().filter(|k| holds_effect(*k)) {
+        let mut effects = Effects::none();
+        effects.set(kind, &kind.defaults()).unwrap();
+        let found = direct_axis_lines(effects);
+        assert!(!found.present(), "{}: lines at orders {:?}", kind.name(), found.present_orders);
+    }
+}
+
 /// The sweep over foreign draws (about 25 minutes a draw on two cores).
 #[test]
 #[ignore = "full sweep: run with --ignored"]
