@@ -478,8 +478,14 @@ mod tests {
     /// phase c exact), formed into the current vector by the three-phase
     /// Clarke transform, on `i_q` A of quadrature current with `i_d = 0`,
     /// plus `q_ripple` A on the quadrature axis at orders 1, 2, 6 and
-    /// `leak` of it on the direct axis; 0.02 A of white noise per phase.
-    fn travel(i_q: f64, errors: [f64; 4], q_ripple: f64, leak: f64, seed: u64) -> (Vec<[f64; 3]>, Vec<f64>) {
+    /// `leak` of it on the direct axis; `noise` A RMS of white noise per phase.
+    fn travel(
+        i_q: f64,
+        errors: [f64; 4],
+        (q_ripple, leak): (f64, f64),
+        noise: f64,
+        seed: u64,
+    ) -> (Vec<[f64; 3]>, Vec<f64>) {
         let [oa, ob, ga, gb] = errors;
         let (fs, speed, seconds) = (4000.0, 6.15, 8.0);
         let mut rng = StdRng::seed_from_u64(seed);
@@ -499,15 +505,15 @@ mod tests {
             let det = m11 * m22 - m12 * m21;
             let i_a = (r1 * m22 - m12 * r2) / det;
             let i_b = (m11 * r2 - m21 * r1) / det;
-            let mut noise = || 0.02 * (rng.gen::<f64>() - 0.5) * 12f64.sqrt();
-            currents.push([i_a + noise(), i_b + noise(), -i_a - i_b + noise()]);
+            let mut white = || noise * (rng.gen::<f64>() - 0.5) * 12f64.sqrt();
+            currents.push([i_a + white(), i_b + white(), -i_a - i_b + white()]);
             angle.push(theta);
         }
         (currents, angle)
     }
 
     fn lines(i_q: f64, errors: [f64; 4], q_ripple: f64, leak: f64, seed: u64) -> TravelLines {
-        let (currents, angle) = travel(i_q, errors, q_ripple, leak, seed);
+        let (currents, angle) = travel(i_q, errors, (q_ripple, leak), 0.02, seed);
         let column = |k: usize| currents.iter().map(|c| c[k]).collect::<Vec<f64>>();
         let (a, b, c) = (column(0), column(1), column(2));
         lines_of_currents("travel", [&a, &b, &c], &angle, P, OFFSET).unwrap()
@@ -532,6 +538,16 @@ mod tests {
         }
         let dead_time = found.ranking.iter().find(|c| c.name == "dead_time").unwrap();
         assert!(dead_time.held_out_shrink < 0.1, "{}", dead_time.held_out_shrink);
+    }
+
+    #[test]
+    fn currents_without_noise_have_no_lines() {
+        // Rounding is at the level of the neighbouring orders too.
+        let (currents, angle) = travel(8.0, [0.0; 4], (0.0, 0.0), 0.0, 0);
+        let column = |k: usize| currents.iter().map(|c| c[k]).collect::<Vec<f64>>();
+        let (a, b, c) = (column(0), column(1), column(2));
+        let t = lines_of_currents("travel", [&a, &b, &c], &angle, P, OFFSET).unwrap();
+        assert!(t.lines.iter().all(|l| !l.present), "{:?}", t.lines);
     }
 
     #[test]
