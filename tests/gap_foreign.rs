@@ -5,7 +5,9 @@
 //! library's effects at random strengths.
 //!
 //! CI runs two cases on one draw (tension stiffening, and guide-rail joints
-//! that are not in the library); the sweep over draws, the nominal and
+//! that are not in the library) and the direct-axis lines of the nominal
+//! rig, the electrical effects and every mechanical one on that draw; the
+//! sweep over draws, the nominal and
 //! parameter-only rigs, every effect of the library and the rail joints is
 //! an ignored test that prints the whole table (`GAP_FOREIGN_CASES` picks
 //! cases: effect names, `nominal` and `rail_joints`):
