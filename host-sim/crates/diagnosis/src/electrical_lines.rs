@@ -348,12 +348,12 @@ fn transducer_parameters(x: &[f64]) -> [f64; 4] {
 }
 
 /// The candidate of `model`: fitted on every travel, and held out travel by
-/// travel.
-fn candidate(model: Model, travels: &[TravelLines], threshold_a: f64) -> Option<Candidate> {
+/// travel; `before` is the travels' mean excess with no model, dB
+/// ([`ElectricalLines::excess_db`]).
+fn candidate(model: Model, travels: &[TravelLines], threshold_a: f64, before: f64) -> Option<Candidate> {
     let all: Vec<&TravelLines> = travels.iter().collect();
     let x = fit(model, &all, threshold_a)?;
     let n = travels.len() as f64;
-    let before = travels.iter().map(|t| excess_db(t, None, threshold_a)).sum::<f64>() / n;
     let training_after = travels.iter().map(|t| excess_db(t, Some((model, &x)), threshold_a)).sum::<f64>() / n;
     let mut held_out = Vec::new();
     let mut fold_values: Vec<Vec<f64>> = Vec::new();
@@ -459,7 +459,7 @@ pub fn explain(measured: Vec<TravelLines>, not_measured: Vec<(String, String)>) 
     let mut ranking: Vec<Candidate> = if measured.len() < 2 {
         Vec::new()
     } else {
-        models.iter().filter_map(|&m| candidate(m, &measured, threshold_a)).collect()
+        models.iter().filter_map(|&m| candidate(m, &measured, threshold_a, excess_db)).collect()
     };
     ranking.sort_by(|a, b| a.score_db.total_cmp(&b.score_db));
     ElectricalLines { travels: measured, not_measured, present_orders, excess_db, ranking }
