@@ -19,7 +19,9 @@
 //!
 //! The ripple's phases are not in the rig file. Where the rig's speed loop
 //! rejects a ripple order, the currents carry its mirror image: the order's
-//! phase is then read from the measured torque's angle-locked line.
+//! phase is then read from the measured torque's angle-locked line, less
+//! the line the drive's own current transducers put there
+//! ([`TransducerTorqueLine`]).
 
 use std::f64::consts::TAU;
 use std::ops::Range;
@@ -223,13 +225,65 @@ pub struct DrivenTravel<'a> {
     pub constant_speed: Range<usize>,
     /// Sample rate, Hz.
     pub sample_rate_hz: f64,
+    /// The torque lines of the rig drive's current transducers over the
+    /// constant-speed stage (none where the direct-axis current shows none).
+    pub transducer_lines: &'a [TransducerTorqueLine],
+}
+
+/// An angle-locked line of the torque that the rig drive's current
+/// transducers put on the shaft. The drive holds the currents its
+/// transducers report; where they report an offset (a vector fixed in the
+/// stator) or unequal gains (its reflected part), the machine's currents
+/// carry the error's negative in the drive's frame, a vector `e` turning at
+/// electrical order 1 or 2 whose quadrature component is its direct one a
+/// quarter turn on: as lines in the shaft angle, `Q = j D`. The direct-axis
+/// line `D` is measured ([`crate::electrical_lines`]), so the torque line
+/// is `K_t j D` (`K_t = 1.5 p psi`), before the drive's speed loop answers
+/// it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransducerTorqueLine {
+    /// Mechanical order (the electrical order times the pole pairs).
+    pub mechanical_order: f64,
+    /// The line as `Re(X e^{j n theta_m})`: `[Re X, Im X]`, N m.
+    pub phasor_nm: [f64; 2],
+}
+
+/// The rigid chain's inertia at the sheave, kg m^2: the sheave's and every
+/// mass the ropes carry (car, counterweight, the ropes) at the sheave's
+/// radius.
+pub fn rigid_inertia_kg_m2(params: &ChainParams) -> f64 {
+    let r = params.sheave_radius_m;
+    let masses_kg =
+        params.m_car_kg + params.m_cw_kg + params.rope_mass_per_length_kg_per_m * params.rope_total_length_m;
+    params.sheave_inertia_kg_m2 + masses_kg * r * r
+}
+
+/// The sensitivity `S = 1 / (1 + L)` of the rig drive's speed loop at the
+/// angular frequency `omega_radps` (rad/s, signed: negative for a line
+/// that turns back with the shaft, where `S` is the conjugate), on the
+/// rigid chain of inertia `inertia_kg_m2` (kg m^2): `L = (K_p + K_i / s)
+/// e^{-s tau_d} / (1 + s tau_l) / (J s)`. A torque that the drive adds to
+/// its own output (its transducers' error) reaches the shaft as `S` times
+/// it; a torque from outside (the ripple) leaves `-(1 - S)` times it in
+/// the currents.
+pub fn speed_loop_sensitivity(controller: &SpeedController, inertia_kg_m2: f64, omega_radps: f64) -> [f64; 2] {
+    use nalgebra::Complex;
+    let s = Complex::new(0.0, omega_radps);
+    let controller_gain = Complex::new(controller.kp_nms_per_rad, 0.0) + controller.ki_nm_per_rad / s;
+    let estimate = (-s * controller.estimate_delay_s).exp() / (1.0 + s * controller.estimate_lag_s);
+    let open_loop = controller_gain * estimate / (s * inertia_kg_m2);
+    let sensitivity = 1.0 / (1.0 + open_loop);
+    [sensitivity.re, sensitivity.im]
 }
 
 /// The ripple of `rig` with each order's phase read from the measured
 /// torque's angle-locked line over the constant-speed stage where that
-/// line is at least [`REJECTED_FRACTION`] of the order's amplitude (the
-/// rig's speed loop rejects it: the currents carry `-A cos(n theta + phi)`);
-/// the rig file's phase elsewhere.
+/// line, less the drive's transducer line at that order as its speed loop
+/// lets it through ([`TransducerTorqueLine`], [`speed_loop_sensitivity`];
+/// the whole line where the loop is not identified), is at least
+/// [`REJECTED_FRACTION`] of the order's amplitude (the rig's speed loop
+/// rejects it: the currents carry `-A cos(n theta + phi)`); the rig file's
+/// phase elsewhere.
 pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> RippleTorque {
     let mut ripple = RippleTorque::from_rig(&rig.ripple);
     let stage = travel.constant_speed.clone();
@@ -237,6 +291,11 @@ pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> Ri
     if n < 2.0 {
         return ripple;
     }
+    let angle = &travel.shaft_angle_rad[stage.clone()];
+    let shaft_speed_radps = (angle[angle.len() - 1] - angle[0]) * travel.sample_rate_hz / (n - 1.0);
+    let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
+    params.m_cw_kg = travel.m_cw_kg;
+    let inertia = rigid_inertia_kg_m2(&params);
     for h in &mut ripple.harmonics {
         let (mut re, mut im) = (0.0, 0.0);
         for k in stage.clone() {
@@ -244,7 +303,15 @@ pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> Ri
             re += travel.torque_nm[k] * c;
             im -= travel.torque_nm[k] * s;
         }
-        let (re, im) = (2.0 * re / n, 2.0 * im / n);
+        let (mut re, mut im) = (2.0 * re / n, 2.0 * im / n);
+        if let Some(line) = travel.transducer_lines.iter().find(|l| l.mechanical_order == h.mechanical_order) {
+            let [sr, si] = travel
+                .controller
+                .map_or([1.0, 0.0], |c| speed_loop_sensitivity(&c, inertia, h.mechanical_order * shaft_speed_radps));
+            let [ur, ui] = line.phasor_nm;
+            re -= sr * ur - si * ui;
+            im -= sr * ui + si * ur;
+        }
         if re.hypot(im) >= REJECTED_FRACTION * h.amplitude_nm {
             h.phase_rad = (-im).atan2(-re);
         }
@@ -630,6 +697,49 @@ mod tests {
             motion,
             constant_speed: 0..torque_nm.len(),
             sample_rate_hz,
+            transducer_lines: &[],
+        }
+    }
+
+    /// The speed loop's sensitivity against the loop run in time: a rigid
+    /// inertia under a PI on a delayed, lagged speed estimate, a torque line
+    /// added to the drive's output; the line of the torque it then puts out
+    /// is `S` times the added one (both directions of turning).
+    #[test]
+    fn the_sensitivity_is_what_the_loop_does_in_time() {
+        let controller = SpeedController {
+            kp_nms_per_rad: 26.0,
+            ki_nm_per_rad: 80.0,
+            estimate_lag_s: 0.0005,
+            estimate_delay_s: 0.003,
+            dynamic_fit: 1.0,
+        };
+        let (inertia, fs) = (1.1, 20_000.0);
+        let delay = (controller.estimate_delay_s * fs).round() as usize;
+        for omega in [TAU * 5.4, -TAU * 5.4, TAU * 11.0] {
+            let (mut speed, mut estimate, mut integral) = (0.0, 0.0, 0.0);
+            let mut past = std::collections::VecDeque::from(vec![0.0; delay + 1]);
+            let seconds = 30.0;
+            let (mut re, mut im, mut count) = (0.0, 0.0, 0.0);
+            for k in 0..(seconds * fs) as usize {
+                let t = k as f64 / fs;
+                past.push_back(speed);
+                let seen = past.pop_front().unwrap();
+                estimate += (seen - estimate) / (1.0 + controller.estimate_lag_s * fs);
+                integral += -estimate / fs;
+                let added = (omega * t).cos();
+                let torque = controller.kp_nms_per_rad * -estimate + controller.ki_nm_per_rad * integral + added;
+                speed += torque / inertia / fs;
+                if t > seconds / 2.0 {
+                    re += torque * (omega * t).cos();
+                    im -= torque * (omega * t).sin();
+                    count += 1.0;
+                }
+            }
+            let measured = [2.0 * re / count, 2.0 * im / count];
+            let [sr, si] = speed_loop_sensitivity(&controller, inertia, omega);
+            let miss = (sr - measured[0]).hypot(si - measured[1]);
+            assert!(miss < 0.02 * sr.hypot(si), "omega {omega}: S = {sr} + {si} j against {measured:?}");
         }
     }
 

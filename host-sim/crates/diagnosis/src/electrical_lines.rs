@@ -45,6 +45,7 @@ use recording::{Recording, RecordingKind};
 use rig_config::RigConfig;
 
 use crate::attribute::{jackknife_error, Candidate, FittedParameter, PARAMETER_PENALTY};
+use crate::driven::TransducerTorqueLine;
 use crate::error::{DiagnosisError, Result};
 use crate::travel_signals::travel_torque;
 
@@ -100,6 +101,9 @@ pub struct TravelLines {
     pub mean_iq_a: f64,
     /// The sign of the electrical angle's motion over the stage: +1 or -1.
     pub direction: f64,
+    /// The offset of the frame the drive holds: `theta_e = p theta_m +
+    /// offset`, rad.
+    pub electrical_offset_rad: f64,
     /// One per [`ORDERS`].
     pub lines: Vec<DirectAxisLine>,
 }
@@ -218,7 +222,40 @@ pub fn lines_of_currents(stem: &str, abc: [&[f64]; 3], angle: &[f64], p: u32, of
         })
         .collect();
     let direction = if theta_e[theta_e.len() - 1] >= theta_e[0] { 1.0 } else { -1.0 };
-    Ok(TravelLines { recording: stem.to_string(), mean_id_a, mean_iq_a, direction, lines })
+    Ok(TravelLines {
+        recording: stem.to_string(),
+        mean_id_a,
+        mean_iq_a,
+        direction,
+        electrical_offset_rad: offset_rad,
+        lines,
+    })
+}
+
+/// Electrical orders at which the drive's current transducers put lines
+/// (offset: 1, unequal gains: 2).
+pub const TRANSDUCER_ORDERS: [f64; 2] = [1.0, 2.0];
+
+/// The torque lines the drive's transducers put on the shaft, from the
+/// present direct-axis lines of `lines` at [`TRANSDUCER_ORDERS`] on the
+/// machine `motor` ([`crate::driven::TransducerTorqueLine`]: `K_t j D`, the
+/// line turned from the electrical angle to the shaft angle).
+pub fn transducer_torque_lines(motor: &rig_config::Motor, lines: &TravelLines) -> Vec<TransducerTorqueLine> {
+    let p = f64::from(motor.pole_pairs);
+    let kt = 1.5 * p * motor.flux_linkage_wb;
+    lines
+        .lines
+        .iter()
+        .filter(|l| l.present && TRANSDUCER_ORDERS.contains(&l.order))
+        .map(|l| {
+            // i_d = a cos(k theta_e) + b sin(k theta_e) = Re(D e^{j k theta_e}), D = a - j b,
+            // and e^{j k theta_e} = e^{j k offset} e^{j k p theta_m}.
+            let (s, c) = (l.order * lines.electrical_offset_rad).sin_cos();
+            let (dr, di) = (l.phasor_a[0], -l.phasor_a[1]);
+            let (mr, mi) = (dr * c - di * s, dr * s + di * c);
+            TransducerTorqueLine { mechanical_order: l.order * p, phasor_nm: [-kt * mi, kt * mr] }
+        })
+        .collect()
 }
 
 /// Fewest electrical revolutions of a constant-speed stage whose lines are
@@ -538,6 +575,39 @@ mod tests {
         }
         let dead_time = found.ranking.iter().find(|c| c.name == "dead_time").unwrap();
         assert!(dead_time.held_out_shrink < 0.1, "{}", dead_time.held_out_shrink);
+    }
+
+    /// The torque line predicted from the direct-axis line (`K_t j D`)
+    /// is the machine's own: the torque of its quadrature current, from
+    /// currents solved from transducer readings the drive holds, read
+    /// against the shaft angle. Both directions, offsets and gains.
+    #[test]
+    fn the_transducers_torque_lines_are_the_quadrature_currents() {
+        let motor = rig_config::RigConfig::embedded_default().unwrap().motor;
+        let kt = 1.5 * f64::from(P) * motor.flux_linkage_wb;
+        for (i_q, errors) in [(8.0, [0.3, -0.08, 0.0, 0.0]), (-6.0, [-0.1, 0.2, 0.02, -0.015])] {
+            let (currents, angle) = travel(i_q, errors, (0.0, 0.0), 0.005, 3);
+            let column = |k: usize| currents.iter().map(|c| c[k]).collect::<Vec<f64>>();
+            let (a, b, c) = (column(0), column(1), column(2));
+            let t = lines_of_currents("travel", [&a, &b, &c], &angle, P, OFFSET).unwrap();
+            let predicted = transducer_torque_lines(&motor, &t);
+            let (_, q) = dsp::dq_currents(&a, &b, &c, &angle, P, OFFSET).unwrap();
+            let torque: Vec<f64> = detrended(&q).iter().map(|v| kt * v).collect();
+            let expected_orders = if errors[2] == 0.0 { vec![6.0] } else { vec![6.0, 12.0] };
+            assert_eq!(predicted.iter().map(|l| l.mechanical_order).collect::<Vec<_>>(), expected_orders);
+            for line in predicted {
+                let [cos, sin] = phasor(&torque, &angle, line.mechanical_order);
+                let measured = [cos, -sin];
+                let size = measured[0].hypot(measured[1]);
+                let miss = (line.phasor_nm[0] - measured[0]).hypot(line.phasor_nm[1] - measured[1]);
+                assert!(
+                    size > 0.05 && miss < 0.03 * size,
+                    "order {}: {:?} against {measured:?}",
+                    line.mechanical_order,
+                    line.phasor_nm
+                );
+            }
+        }
     }
 
     #[test]

@@ -60,7 +60,8 @@ use recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
 use rig_config::RigConfig;
 use signals::{chain_signals, decimation_factor, ChainSignals};
 use simulate::{
-    driven_counterpart, highpass_accelerations, model_step_s, simulate_counterpart, Counterpart, DrivenInputs,
+    driven_counterpart, highpass_accelerations, model_step_s, simulate_counterpart, Counterpart, DriveRecord,
+    DrivenInputs,
 };
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 
@@ -619,9 +620,16 @@ fn counterpart(
     }
     let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
     let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
+    let transducer_lines = if driven { transducer_torque_lines(models[0], recording, stem) } else { Vec::new() };
+    let drive_record = DriveRecord {
+        torque_nm: &torque,
+        speed_estimate_radps: &speed,
+        controller,
+        transducer_lines: &transducer_lines,
+    };
     let none = Effects::none();
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
-        driven_counterpart(model, recording, &measured, (&torque, &speed, controller), settings, &none)
+        driven_counterpart(model, recording, &measured, drive_record, settings, &none)
     };
     let run_closed = |model: &RigConfig| simulate_counterpart(model, &none, recording, stem, model_step_s(model));
     let (nominal, perturbed, how) = if driven {
@@ -640,6 +648,7 @@ fn counterpart(
             torque_nm: torque.clone(),
             speed_estimate_radps: speed.clone(),
             controller,
+            transducer_lines: transducer_lines.clone(),
         };
         // The nominal run made as the attribution makes every effect's.
         let how = Counterpart::Driven(std::sync::Arc::new(inputs));
@@ -663,7 +672,7 @@ fn counterpart(
             models[0],
             recording,
             &measured,
-            (&noisy, &speed, controller),
+            DriveRecord { torque_nm: &noisy, ..drive_record },
             &driven::DrivenSettings::default(),
             &none,
         )?;
@@ -673,6 +682,16 @@ fn counterpart(
     };
     let simulations = 1 + perturbed.len() + usize::from(noise_response.is_some());
     Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop, simulations, how })
+}
+
+/// The torque lines of the rig drive's current transducers in the travel
+/// `recording` ([`driven::TransducerTorqueLine`]): from its direct-axis
+/// lines at electrical orders 1 and 2 where present; none where the lines
+/// cannot be measured.
+fn transducer_torque_lines(model: &RigConfig, recording: &Recording, stem: &str) -> Vec<driven::TransducerTorqueLine> {
+    electrical_lines::travel_lines(model, recording, stem)
+        .map(|lines| electrical_lines::transducer_torque_lines(&model.motor, &lines))
+        .unwrap_or_default()
 }
 
 /// The first-order high-pass (corner, Hz) that brings the model's car

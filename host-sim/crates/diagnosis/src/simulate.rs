@@ -140,6 +140,33 @@ pub struct DrivenInputs {
     pub speed_estimate_radps: Vec<f64>,
     /// The rig drive's speed loop, where identified.
     pub controller: Option<drive_law::SpeedController>,
+    /// The torque lines of the rig drive's current transducers.
+    pub transducer_lines: Vec<driven::TransducerTorqueLine>,
+}
+
+impl DrivenInputs {
+    /// What the drive did, as the torque-driven model takes it.
+    pub fn drive_record(&self) -> DriveRecord<'_> {
+        DriveRecord {
+            torque_nm: &self.torque_nm,
+            speed_estimate_radps: &self.speed_estimate_radps,
+            controller: self.controller,
+            transducer_lines: &self.transducer_lines,
+        }
+    }
+}
+
+/// What another drive did in a travel, as the torque-driven model takes it.
+#[derive(Clone, Copy, Debug)]
+pub struct DriveRecord<'a> {
+    /// Machine torque from the measured currents, N m.
+    pub torque_nm: &'a [f64],
+    /// The rig drive's speed estimate, rad/s.
+    pub speed_estimate_radps: &'a [f64],
+    /// The rig drive's speed loop, where identified.
+    pub controller: Option<drive_law::SpeedController>,
+    /// The torque lines of the rig drive's current transducers.
+    pub transducer_lines: &'a [driven::TransducerTorqueLine],
 }
 
 impl Counterpart {
@@ -163,7 +190,7 @@ impl Counterpart {
                 rig,
                 measured,
                 &inputs.measured,
-                (&inputs.torque_nm, &inputs.speed_estimate_radps, inputs.controller),
+                inputs.drive_record(),
                 &driven::DrivenSettings::default(),
                 effects,
             ),
@@ -178,7 +205,7 @@ pub fn driven_counterpart(
     model: &RigConfig,
     recording: &Recording,
     measured: &ChainSignals,
-    (torque, speed, controller): (&[f64], &[f64], Option<drive_law::SpeedController>),
+    drive: DriveRecord,
     settings: &driven::DrivenSettings,
     effects: &Effects,
 ) -> Result<ChainSignals> {
@@ -193,13 +220,14 @@ pub fn driven_counterpart(
         m_car_kg,
         m_cw_kg,
         lw_start_m,
-        torque_nm: torque,
+        torque_nm: drive.torque_nm,
         shaft_angle_rad: &measured.angle_rad,
-        speed_estimate_radps: speed,
-        controller,
+        speed_estimate_radps: drive.speed_estimate_radps,
+        controller: drive.controller,
         motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
         constant_speed: constant,
         sample_rate_hz: measured.sample_rate_hz,
+        transducer_lines: drive.transducer_lines,
     };
     let (car, cw) = driven::torque_driven_accelerations(model, &travel, settings, effects)?;
     // The rig's accelerometers high-pass what they record; the model's
