@@ -281,9 +281,11 @@ pub fn speed_loop_sensitivity(controller: &SpeedController, inertia_kg_m2: f64, 
 /// line, less the drive's transducer line at that order as its speed loop
 /// lets it through ([`TransducerTorqueLine`], [`speed_loop_sensitivity`];
 /// the whole line where the loop is not identified), is at least
-/// [`REJECTED_FRACTION`] of the order's amplitude (the rig's speed loop
-/// rejects it: the currents carry `-A cos(n theta + phi)`); the rig file's
-/// phase elsewhere.
+/// [`REJECTED_FRACTION`] of the order's amplitude: the rig's speed loop
+/// rejects it, the currents carry `-T A cos(n theta + phi)` with `T = 1 -
+/// S` its complementary sensitivity, whose phase (up to a radian near the
+/// speed loop's crossover) is taken off where the loop is identified. The
+/// rig file's phase elsewhere.
 pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> RippleTorque {
     let mut ripple = RippleTorque::from_rig(&rig.ripple);
     let stage = travel.constant_speed.clone();
@@ -304,16 +306,18 @@ pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> Ri
             im -= travel.torque_nm[k] * s;
         }
         let (mut re, mut im) = (2.0 * re / n, 2.0 * im / n);
+        let sensitivity =
+            travel.controller.map(|c| speed_loop_sensitivity(&c, inertia, h.mechanical_order * shaft_speed_radps));
         if let Some(line) = travel.transducer_lines.iter().find(|l| l.mechanical_order == h.mechanical_order) {
-            let [sr, si] = travel
-                .controller
-                .map_or([1.0, 0.0], |c| speed_loop_sensitivity(&c, inertia, h.mechanical_order * shaft_speed_radps));
+            let [sr, si] = sensitivity.unwrap_or([1.0, 0.0]);
             let [ur, ui] = line.phasor_nm;
             re -= sr * ur - si * ui;
             im -= sr * ui + si * ur;
         }
         if re.hypot(im) >= REJECTED_FRACTION * h.amplitude_nm {
-            h.phase_rad = (-im).atan2(-re);
+            // The currents carry `-T A`, `T = 1 - S` the loop's rejection.
+            let rejection_phase_rad = sensitivity.map_or(0.0, |[sr, si]| (-si).atan2(1.0 - sr));
+            h.phase_rad = (-im).atan2(-re) - rejection_phase_rad;
         }
     }
     ripple
