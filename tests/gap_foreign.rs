@@ -332,7 +332,7 @@ fn direct_axis_lines(effects: Effects) -> diagnosis::electrical_lines::Electrica
     }
     let data = foreign_dataset(&model, &foreign, effects);
     let travels: Vec<(&str, &Recording)> = data.iter().map(|(s, r)| (s.as_str(), r)).collect();
-    diagnosis::electrical_lines::electrical_lines(&model, &travels)
+    diagnosis::electrical_lines::electrical_lines(&model, &travels, &EffectKind::ALL)
 }
 
 /// Under another drive the transducers' and the inverter's errors are in

@@ -454,7 +454,9 @@ fn model_parameters(model: Model, x: &[f64]) -> (Vec<FittedParameter>, Effects) 
 
 /// The direct-axis lines of the travels `travels` (`(stem, recording)`) on
 /// `rig`, and the library's electrical effects fitted to them when present.
-pub fn electrical_lines(rig: &RigConfig, travels: &[(&str, &Recording)]) -> ElectricalLines {
+/// Only the effects of `kinds` are fitted (the lines are measured whatever
+/// they are).
+pub fn electrical_lines(rig: &RigConfig, travels: &[(&str, &Recording)], kinds: &[EffectKind]) -> ElectricalLines {
     let mut measured = Vec::new();
     let mut not_measured = Vec::new();
     for (stem, recording) in travels {
@@ -466,12 +468,16 @@ pub fn electrical_lines(rig: &RigConfig, travels: &[(&str, &Recording)]) -> Elec
             Err(e) => not_measured.push((stem.to_string(), format!("{e:#}"))),
         }
     }
-    explain(measured, not_measured)
+    explain(measured, not_measured, kinds)
 }
 
 /// The orders present in the travels' lines `measured` and the library's
-/// electrical effects fitted to them; `not_measured` as given.
-pub fn explain(measured: Vec<TravelLines>, not_measured: Vec<(String, String)>) -> ElectricalLines {
+/// electrical effects among `kinds` fitted to them; `not_measured` as given.
+pub fn explain(
+    measured: Vec<TravelLines>,
+    not_measured: Vec<(String, String)>,
+    kinds: &[EffectKind],
+) -> ElectricalLines {
     let needed = measured.len().div_ceil(2).max(1);
     let present_orders: Vec<f64> = ORDERS
         .iter()
@@ -493,10 +499,15 @@ pub fn explain(measured: Vec<TravelLines>, not_measured: Vec<(String, String)>) 
         (false, false) => &[],
         _ => &[Model::Transducers, Model::DeadTime],
     };
+    let tried = |m: &Model| match m {
+        Model::Transducers => kinds.contains(&EffectKind::CurrentSensorError),
+        Model::DeadTime => kinds.contains(&EffectKind::DeadTime),
+        Model::Both => kinds.contains(&EffectKind::CurrentSensorError) && kinds.contains(&EffectKind::DeadTime),
+    };
     let mut ranking: Vec<Candidate> = if measured.len() < 2 {
         Vec::new()
     } else {
-        models.iter().filter_map(|&m| candidate(m, &measured, threshold_a, excess_db)).collect()
+        models.iter().filter(|m| tried(m)).filter_map(|&m| candidate(m, &measured, threshold_a, excess_db)).collect()
     };
     ranking.sort_by(|a, b| a.score_db.total_cmp(&b.score_db));
     ElectricalLines { travels: measured, not_measured, present_orders, excess_db, ranking }
@@ -561,7 +572,7 @@ mod tests {
         let truth = [0.3, -0.08, 0.012, -0.009];
         let travels: Vec<TravelLines> =
             [8.0, -4.0, 11.0, -2.0].iter().enumerate().map(|(k, &iq)| lines(iq, truth, 0.2, 0.0, k as u64)).collect();
-        let found = explain(travels, Vec::new());
+        let found = explain(travels, Vec::new(), &EffectKind::ALL);
         assert_eq!(found.present_orders, vec![1.0, 2.0]);
         // No line at order 6: the pair with the dead time is not tried.
         assert!(found.ranking.iter().all(|c| !c.name.contains('+')));
@@ -610,6 +621,21 @@ mod tests {
         }
     }
 
+    /// The lines are measured whatever the effects tried; only those
+    /// asked for are fitted.
+    #[test]
+    fn only_the_effects_asked_for_are_fitted_to_the_lines() {
+        let truth = [0.3, -0.08, 0.012, -0.009];
+        let travels = || -> Vec<TravelLines> {
+            [8.0, -4.0, 11.0].iter().enumerate().map(|(k, &iq)| lines(iq, truth, 0.2, 0.0, k as u64)).collect()
+        };
+        let found = explain(travels(), Vec::new(), &[EffectKind::DeadTime, EffectKind::CoulombGuideFriction]);
+        assert_eq!(found.present_orders, vec![1.0, 2.0]);
+        assert_eq!(found.ranking.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(), ["dead_time"]);
+        let found = explain(travels(), Vec::new(), &[EffectKind::CoulombGuideFriction]);
+        assert!(found.present() && found.ranking.is_empty());
+    }
+
     #[test]
     fn currents_without_noise_have_no_lines() {
         // Rounding is at the level of the neighbouring orders too.
@@ -627,7 +653,7 @@ mod tests {
             .enumerate()
             .map(|(k, &iq)| lines(iq, [0.0; 4], 0.3, 0.02, k as u64))
             .collect();
-        let found = explain(travels, Vec::new());
+        let found = explain(travels, Vec::new(), &EffectKind::ALL);
         assert!(found.present_orders.is_empty(), "{:?}", found.present_orders);
         assert!(found.ranking.is_empty());
         // The same leak, five times larger, is a line.
@@ -636,6 +662,6 @@ mod tests {
             .enumerate()
             .map(|(k, &iq)| lines(iq, [0.0; 4], 0.3, 0.1, k as u64))
             .collect();
-        assert_eq!(explain(travels, Vec::new()).present_orders, ORDERS.to_vec());
+        assert_eq!(explain(travels, Vec::new(), &EffectKind::ALL).present_orders, ORDERS.to_vec());
     }
 }

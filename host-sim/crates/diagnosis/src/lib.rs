@@ -1090,7 +1090,7 @@ pub fn diagnose(
     let electrical_lines = (drive.drive == DriveModel::Foreign).then(|| {
         let travels: Vec<(&str, &Recording)> =
             compared.used.iter().map(|&i| (dataset[i].0.as_str(), &dataset[i].1)).collect();
-        electrical_lines::electrical_lines(&model, &travels)
+        electrical_lines::electrical_lines(&model, &travels, &options.effects)
     });
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
