@@ -406,23 +406,12 @@ fn encoder_error_shows_in_the_recorded_angle() {
     let range = constant_speed_range(&run, rig.travel.rated_speed_mps, 0.5);
     let r = rig.mechanics.sheave_radius_m;
     let lw0 = run.lw_m[0];
-    let (mut s, mut c, mut ss, mut cc, mut sc) = (0.0, 0.0, 0.0, 0.0, 0.0);
     let diffs: Vec<f64> = range.clone().map(|i| run.angle_rad[i] - (run.lw_m[i] - lw0) / r).collect();
     let offset = mean(&diffs);
-    for (k, i) in range.clone().enumerate() {
-        let theta = (run.lw_m[i] - lw0) / r;
-        let d = diffs[k] - offset;
-        let (sin, cos) = (theta + error.phase_rad).sin_cos();
-        s += d * sin;
-        c += d * cos;
-        ss += sin * sin;
-        cc += cos * cos;
-        sc += sin * cos;
-    }
+    let d: Vec<f64> = diffs.iter().map(|x| x - offset).collect();
+    let shifted: Vec<f64> = range.clone().map(|i| (run.lw_m[i] - lw0) / r + error.phase_rad).collect();
     // Least squares of d = A sin(theta + phase) + B cos(theta + phase).
-    let det = ss * cc - sc * sc;
-    let a = (s * cc - c * sc) / det;
-    let b = (c * ss - s * sc) / det;
+    let [b, a] = dsp::sine_fit(&d, &shifted, 1.0);
     println!("angle error: {a:.5} rad in phase, {b:.5} rad in quadrature (a = {})", error.eccentricity_rad);
     assert!((a - error.eccentricity_rad).abs() < 0.05 * error.eccentricity_rad);
     assert!(b.abs() < 0.1 * error.eccentricity_rad);

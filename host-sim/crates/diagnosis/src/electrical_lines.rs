@@ -134,22 +134,9 @@ impl ElectricalLines {
 }
 
 /// Cosine and sine coefficients of `x` (its mean and trend removed) at
-/// `order` times `theta_e` (least squares on the pair).
+/// `order` times `theta_e` ([`dsp::sine_fit`]).
 fn phasor(x: &[f64], theta_e: &[f64], order: f64) -> [f64; 2] {
-    let (mut cc, mut ss, mut cs, mut xc, mut xs) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (&v, &t) in x.iter().zip(theta_e) {
-        let (s, c) = (order * t).sin_cos();
-        cc += c * c;
-        ss += s * s;
-        cs += c * s;
-        xc += v * c;
-        xs += v * s;
-    }
-    let det = cc * ss - cs * cs;
-    if det.abs() < f64::EPSILON * (cc * ss).max(1.0) {
-        return [0.0, 0.0];
-    }
-    [(ss * xc - cs * xs) / det, (cc * xs - cs * xc) / det]
+    dsp::sine_fit(x, theta_e, order)
 }
 
 /// `x` less its least-squares straight line.

@@ -26,6 +26,7 @@ pub mod iso18738;
 pub mod iso2631;
 pub mod ride_quality;
 pub mod ride_regions;
+pub mod sine_fit;
 pub mod spectrogram;
 pub mod spectrum;
 pub mod stages;
@@ -63,6 +64,7 @@ pub use ride_quality::{ride_quality, RideQuality, RideQualityReport, TravelDirec
 pub use ride_regions::{
     regions_from_acceleration, regions_from_speed, velocity_from_acceleration, RegionSource, RideRegions,
 };
+pub use sine_fit::sine_fit;
 pub use spectrogram::{stft_spectrogram, Spectrogram};
 pub use spectrum::{amplitude_spectrum, AmplitudeSpectrum, SpectralPeak};
 pub use stages::{constant_speed_stage, travel_phases, TravelPhases};
