@@ -68,19 +68,6 @@ fn drive_config(workspace_root: &std::path::Path) -> String {
         "{}: [travel].lw_high_m - lw_low_m = {shaft_travel_mm} mm is not a DCP distance (1..=65535 mm)",
         rig_toml.display()
     );
-    let ripple: Vec<String> = rig
-        .ripple
-        .iter()
-        .map(|r| {
-            format!(
-                "({}, {:?}, {:?}, {:?})",
-                r.mechanical_order.min(u16::MAX as u32),
-                r.amplitude_nm as f32,
-                r.phase_rad.cos() as f32,
-                r.phase_rad.sin() as f32
-            )
-        })
-        .collect();
     // The same generators the PIL target uses, so both run identical values.
     format!(
         "{}{}/// Inverter dead time between the switches of one leg, s (`[inverter].dead_time_s`).\n\
@@ -89,15 +76,12 @@ fn drive_config(workspace_root: &std::path::Path) -> String {
          pub const LIFT_GEOMETRY: drive_core::lift_drive::LiftGeometry = drive_core::lift_drive::LiftGeometry {{ \
          lw_lowest_landing_m: {:?}, shaft_travel_mm: {} }};\n\
          /// Car mass of the load weighing until one is stored: the heaviest car of `[mechanics].m_car_kg`, kg.\n\
-         pub const DEFAULT_CAR_MASS_KG: f32 = {:?};\n\
-         /// The rig's torque ripple (`[[ripple]]`): mechanical order, amplitude N m, cos and sin of the phase.\n\
-         pub const RIPPLE: [(u16, f32, f32, f32); {}] = [{}];\n",
+         pub const DEFAULT_CAR_MASS_KG: f32 = {:?};\n{}",
         rig.drive_config_source("configs/rig.toml"),
         rig.chain_model_source("configs/rig.toml"),
         lw_low as f32,
         shaft_travel_mm as u32,
         rig.mechanics.m_car_kg.iter().cloned().fold(f64::MIN, f64::max) as f32,
-        ripple.len(),
-        ripple.join(", ")
+        rig.ripple_source()
     )
 }

@@ -36,30 +36,8 @@ fn main() {
     let heaviest = rig.mechanics.m_car_kg.iter().cloned().fold(f64::MIN, f64::max) as f32;
     // The rig's ripple, as the firmware's build script writes it: the
     // offline compensation table is made from it.
-    let ripple: Vec<String> = rig
-        .ripple
-        .iter()
-        .map(|r| {
-            format!(
-                "({}, {:?}, {:?}, {:?})",
-                r.mechanical_order.min(u16::MAX as u32),
-                r.amplitude_nm as f32,
-                r.phase_rad.cos() as f32,
-                r.phase_rad.sin() as f32
-            )
-        })
-        .collect();
     let path = out_dir.join("ripple.rs");
-    fs::write(
-        &path,
-        format!(
-            "/// The rig's torque ripple (`[[ripple]]`): mechanical order, amplitude N m, cos and sin of the phase.\n\
-             pub const RIPPLE: [(u16, f32, f32, f32); {}] = [{}];\n",
-            ripple.len(),
-            ripple.join(", ")
-        ),
-    )
-    .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+    fs::write(&path, rig.ripple_source()).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
     let path = out_dir.join("lift.rs");
     fs::write(
         &path,

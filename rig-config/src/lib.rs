@@ -508,6 +508,33 @@ impl RigConfig {
         .replacen("ChainModel {", "ChainModel = drive_core::observer::ChainModel {", 1)
     }
 
+    /// Rust source of `pub const RIPPLE: [(u16, f32, f32, f32); N] = [...];`
+    /// for build scripts, like [`RigConfig::drive_config_source`]: each
+    /// `[[ripple]]` component as (mechanical order, amplitude N m, cos and
+    /// sin of its phase), from which the drive's offline compensation table
+    /// is made.
+    pub fn ripple_source(&self) -> String {
+        let ripple: Vec<String> = self
+            .ripple
+            .iter()
+            .map(|r| {
+                format!(
+                    "({}, {:?}, {:?}, {:?})",
+                    r.mechanical_order.min(u16::MAX as u32),
+                    r.amplitude_nm as f32,
+                    r.phase_rad.cos() as f32,
+                    r.phase_rad.sin() as f32
+                )
+            })
+            .collect();
+        format!(
+            "/// The rig's torque ripple (`[[ripple]]`): mechanical order, amplitude N m, cos and sin of the phase.\n\
+             pub const RIPPLE: [(u16, f32, f32, f32); {}] = [{}];\n",
+            ripple.len(),
+            ripple.join(", ")
+        )
+    }
+
     /// The drive-core parameters of this rig.
     pub fn drive_config(&self) -> DriveConfig {
         let m = &self.mechanics;
@@ -581,6 +608,21 @@ impl RigConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every `[[ripple]]` component in the generated table, its phase as
+    /// cos and sin; a phase of a quarter turn gives (0, 1).
+    #[test]
+    fn ripple_source_lists_every_component_with_its_phase() {
+        let mut rig = RigConfig::embedded_default().unwrap();
+        let source = rig.ripple_source();
+        assert!(source.contains(&format!("; {}] = [", rig.ripple.len())), "{source}");
+        assert!(source.contains("(12, 3.5, 1.0, 0.0)"), "{source}");
+        rig.ripple[0].phase_rad = std::f64::consts::FRAC_PI_2;
+        let turned = rig.ripple_source();
+        let first = &turned[turned.find("= [").unwrap() + 3..];
+        let fields: Vec<f32> = first[1..first.find(')').unwrap()].split(", ").map(|v| v.parse().unwrap()).collect();
+        assert!(fields[2].abs() < 1e-6 && (fields[3] - 1.0).abs() < 1e-6, "{turned}");
+    }
 
     #[test]
     fn embedded_default_loads_and_matches_the_shared_spec() {
