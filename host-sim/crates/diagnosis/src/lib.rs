@@ -434,6 +434,9 @@ struct Prepared {
     /// The rig drive's speed loop as identified, or why not, where the
     /// model is driven.
     speed_loop: Option<Result<drive_law::SpeedController, String>>,
+    /// The direct-axis current's lines of the travel, or why not, where the
+    /// model is driven ([`electrical_lines::travel_lines`]).
+    direct_axis: Option<Result<electrical_lines::TravelLines, String>>,
     /// Simulations run: the nominal model, its perturbations, the
     /// counterpart's alternatives and the noise response.
     simulations: usize,
@@ -620,7 +623,12 @@ fn counterpart(
     }
     let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
     let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
-    let transducer_lines = if driven { transducer_torque_lines(models[0], recording, stem) } else { Vec::new() };
+    let direct_axis =
+        driven.then(|| electrical_lines::travel_lines(models[0], recording, stem).map_err(|e| format!("{e:#}")));
+    let transducer_lines = match &direct_axis {
+        Some(Ok(lines)) => electrical_lines::transducer_torque_lines(&models[0].motor, lines),
+        _ => Vec::new(),
+    };
     let drive_record = DriveRecord {
         torque_nm: &torque,
         speed_estimate_radps: &speed,
@@ -681,17 +689,17 @@ fn counterpart(
         None
     };
     let simulations = 1 + perturbed.len() + usize::from(noise_response.is_some());
-    Ok(Prepared { stem: stem.to_string(), measured, nominal, perturbed, noise_response, speed_loop, simulations, how })
-}
-
-/// The torque lines of the rig drive's current transducers in the travel
-/// `recording` ([`driven::TransducerTorqueLine`]): from its direct-axis
-/// lines at electrical orders 1 and 2 where present; none where the lines
-/// cannot be measured.
-fn transducer_torque_lines(model: &RigConfig, recording: &Recording, stem: &str) -> Vec<driven::TransducerTorqueLine> {
-    electrical_lines::travel_lines(model, recording, stem)
-        .map(|lines| electrical_lines::transducer_torque_lines(&model.motor, &lines))
-        .unwrap_or_default()
+    Ok(Prepared {
+        stem: stem.to_string(),
+        measured,
+        nominal,
+        perturbed,
+        noise_response,
+        speed_loop,
+        direct_axis,
+        simulations,
+        how,
+    })
 }
 
 /// The first-order high-pass (corner, Hz) that brings the model's car
@@ -804,6 +812,9 @@ struct Compared {
     bands: Bands,
     /// The rig drive's speed loop per travel under another drive.
     rig_speed_loops: Vec<RigSpeedLoop>,
+    /// The direct-axis lines per travel kept under another drive: measured,
+    /// or (recording, why not).
+    direct_axis: (Vec<electrical_lines::TravelLines>, Vec<(String, String)>),
     /// Simulations run for the nominal model, its perturbations and the
     /// counterpart's alternatives.
     simulations: usize,
@@ -878,11 +889,12 @@ fn compared(
 ) -> Option<Compared> {
     let (mut targets, mut measured_all, mut used, mut rig_speed_loops) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut direct_axis = (Vec::new(), Vec::new());
     let mut bands_all: Option<Bands> = None;
     let mut simulations = 0;
     for (i, prepared) in prepared {
         let (stem, recording) = &dataset[i];
-        let prepared = match prepared {
+        let mut prepared = match prepared {
             Ok(p) => p,
             Err(e) => {
                 left_out.push(LeftOut { recording: stem.clone(), reason: format!("{e:#}") });
@@ -897,8 +909,14 @@ fn compared(
             };
             rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused });
         }
+        let lines = prepared.direct_axis.take();
         match target_of(prepared, recording, bands_all.as_ref(), drive, model) {
             Ok((target, measured, bands)) => {
+                match lines {
+                    Some(Ok(l)) => direct_axis.0.push(l),
+                    Some(Err(reason)) => direct_axis.1.push((stem.clone(), reason)),
+                    None => {}
+                }
                 targets.push(target);
                 measured_all.push(measured);
                 used.push(i);
@@ -908,7 +926,7 @@ fn compared(
         }
     }
     let bands = bands_all?;
-    Some(Compared { targets, measured: measured_all, used, bands, rig_speed_loops, simulations })
+    Some(Compared { targets, measured: measured_all, used, bands, rig_speed_loops, direct_axis, simulations })
 }
 
 /// The nominal model's cells of every target and each recording's gap
@@ -1088,9 +1106,8 @@ pub fn diagnose(
     // Under another drive, its transducer and inverter errors show in the
     // direct-axis current, not in the torque-driven mechanics.
     let electrical_lines = (drive.drive == DriveModel::Foreign).then(|| {
-        let travels: Vec<(&str, &Recording)> =
-            compared.used.iter().map(|&i| (dataset[i].0.as_str(), &dataset[i].1)).collect();
-        electrical_lines::electrical_lines(&model, &travels, &options.effects)
+        let (measured, not_measured) = std::mem::take(&mut compared.direct_axis);
+        electrical_lines::explain(measured, not_measured, &options.effects)
     });
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
