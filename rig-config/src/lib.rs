@@ -169,6 +169,14 @@ pub struct Motor {
     pub overcurrent_trip_a: f64,
 }
 
+impl Motor {
+    /// Torque per quadrature ampere at `i_d = 0`, `K_t = 1.5 p psi`, N m/A
+    /// (the machine's torque, Eqn 7's frame).
+    pub fn torque_constant_nm_per_a(&self) -> f64 {
+        1.5 * f64::from(self.pole_pairs) * self.flux_linkage_wb
+    }
+}
+
 /// `[inverter]`: power stage and sensors.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]

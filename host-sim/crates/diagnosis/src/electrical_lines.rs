@@ -229,7 +229,7 @@ pub const TRANSDUCER_ORDERS: [f64; 2] = [1.0, 2.0];
 /// line turned from the electrical angle to the shaft angle).
 pub fn transducer_torque_lines(motor: &rig_config::Motor, lines: &TravelLines) -> Vec<TransducerTorqueLine> {
     let p = f64::from(motor.pole_pairs);
-    let kt = 1.5 * p * motor.flux_linkage_wb;
+    let kt = motor.torque_constant_nm_per_a();
     lines
         .lines
         .iter()

@@ -338,7 +338,7 @@ impl CommercialDrive {
             ld_h: mo.ld_h,
             lq_h: mo.lq_h,
             flux_linkage_wb: mo.flux_linkage_wb,
-            torque_constant_nm_per_a: 1.5 * mo.pole_pairs as f64 * mo.flux_linkage_wb,
+            torque_constant_nm_per_a: mo.torque_constant_nm_per_a(),
             max_current_a: mo.rated_current_a,
             overcurrent_a: mo.overcurrent_trip_a,
             counts_per_rev: inv.encoder_counts_per_rev,
