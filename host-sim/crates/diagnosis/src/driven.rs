@@ -30,6 +30,7 @@ use crate::error::{bail, Context, Result};
 
 use super::drive_law::{central_difference, SpeedController};
 use dsp::highpass_zero_phase;
+use plant::angle::AngleSeries;
 use plant::effects::{EffectKind, Effects};
 use plant::line::{BrakeAction, Line, MAX_NODES};
 use plant::mechanics::Chain;
@@ -513,39 +514,45 @@ fn torque_driven_accelerations_with(
     // The rig drive's answer to the model's speed where it departs from
     // the rig's: `-Kp de - Ki integral(de)`, `de` the model's estimate
     // minus the rig's.
-    let deriv = |s: &NodeState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64)| {
-        let j = (k + 1).min(n - 1);
-        let moving = travel.motion.contains(&k);
-        let offset = if moving { offset_nm } else { 0.0 };
-        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset
-            - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
-            - feedback.ki_nm_per_rad * departure_integral;
-        let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
-        let theta = theta0 + s.position_m[layout.sheave] / r;
-        let shaft = torque + ripple.torque_nm(theta);
-        let lumped = line.lumped(&chain, s.position_m[layout.sheave]);
-        let brake = if moving { BrakeAction::Released } else { BrakeAction::Held };
-        let mut a = [0.0; MAX_NODES];
-        line.accelerations_of(&chain, &lumped, &s.position_m, &s.velocity_mps, shaft, brake, 0.0, &mut a);
-        if moving {
-            let masses = &lumped.masses_kg[..nodes];
-            let total: f64 = masses.iter().sum();
-            let mean = |x: &[f64; MAX_NODES]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
-            let (kp, kd) = tracking;
-            let body = kp * (u - mean(&s.position_m)) + kd * (v - mean(&s.velocity_mps));
-            a[..nodes].iter_mut().for_each(|a| *a += body);
-        }
-        NodeState { position_m: s.velocity_mps, velocity_mps: a }
-    };
+    let deriv =
+        |s: &NodeState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64), series: &AngleSeries| {
+            let j = (k + 1).min(n - 1);
+            let moving = travel.motion.contains(&k);
+            let offset = if moving { offset_nm } else { 0.0 };
+            let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset
+                - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
+                - feedback.ki_nm_per_rad * departure_integral;
+            let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
+            let theta = theta0 + s.position_m[layout.sheave] / r;
+            let shaft = torque + series.ripple_nm(theta, &ripple);
+            let lumped = line.lumped(&chain, s.position_m[layout.sheave]);
+            let brake = if moving { BrakeAction::Released } else { BrakeAction::Held };
+            let mut a = [0.0; MAX_NODES];
+            line.accelerations_of(&chain, &lumped, &s.position_m, &s.velocity_mps, shaft, brake, 0.0, &mut a);
+            if moving {
+                let masses = &lumped.masses_kg[..nodes];
+                let total: f64 = masses.iter().sum();
+                let mean = |x: &[f64; MAX_NODES]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
+                let (kp, kd) = tracking;
+                let body = kp * (u - mean(&s.position_m)) + kd * (v - mean(&s.velocity_mps));
+                a[..nodes].iter_mut().for_each(|a| *a += body);
+            }
+            NodeState { position_m: s.velocity_mps, velocity_mps: a }
+        };
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut estimate = ModelEstimate::new(&feedback, fs, travel.speed_estimate_radps[0]);
+    // The ripple as a polynomial of the angle about a recent one (refreshed
+    // between samples): a few multiply-adds per stage in place of the
+    // harmonics' sines.
+    let mut series = AngleSeries::default();
     for k in 0..n {
+        series.ensure(theta0 + state.position_m[layout.sheave] / r, &ripple, 0.0);
         if !travel.motion.contains(&k) {
             state.velocity_mps[layout.sheave] = 0.0;
             estimate.hold(travel.speed_estimate_radps[k]);
         }
         let e = (estimate.estimate_radps, estimate.departure_integral_rad);
-        let a = deriv(&state, k, 0.0, e).velocity_mps;
+        let a = deriv(&state, k, 0.0, e, &series).velocity_mps;
         car.push(a[layout.body]);
         cw.push(-a[layout.counterweight()]);
         if k + 1 == n {
@@ -554,7 +561,7 @@ fn torque_driven_accelerations_with(
         let sub = 1.0 / steps as f64;
         for j in 0..steps {
             let start = j as f64 * sub;
-            state = rk4_step(&state, nodes, h * sub, |s, frac| deriv(s, k, start + frac * sub, e));
+            state = rk4_step(&state, nodes, h * sub, |s, frac| deriv(s, k, start + frac * sub, e, &series));
         }
         estimate.advance(state.velocity_mps[layout.sheave] / r, travel.speed_estimate_radps[k], h);
         if !state.position_m[..nodes].iter().chain(&state.velocity_mps[..nodes]).all(|x| x.is_finite()) {

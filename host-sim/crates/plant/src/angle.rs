@@ -114,6 +114,17 @@ impl AngleSeries {
         [c[0], c[1], c[2], c[3]]
     }
 
+    /// Ripple torque (N m) at shaft angle `theta_rad` (rad): from the
+    /// polynomial where it holds, else computed directly from `ripple`.
+    pub fn ripple_nm(&self, theta_rad: f64, ripple: &RippleTorque) -> f64 {
+        let delta = theta_rad - self.theta_ref_rad;
+        if delta.abs() <= self.half_width_rad {
+            horner(&self.ripple_nm, delta)
+        } else {
+            ripple.torque_nm(theta_rad)
+        }
+    }
+
     /// Ripple torque (N m), `cos(p theta)` and `sin(p theta)` at shaft
     /// angle `theta_rad` (rad): from the polynomials where they hold, else
     /// computed directly from `ripple` and `pole_pairs`.
@@ -159,6 +170,7 @@ mod tests {
                     .map(|h| h.amplitude_nm * (h.mechanical_order * theta + h.phase_rad).cos())
                     .sum();
                 assert!((r - direct).abs() < 1e-12, "ripple at {theta}: {r} vs {direct}");
+                assert_eq!(series.ripple_nm(theta, &ripple), r);
                 assert!((c - (p * theta).cos()).abs() < 1e-13 && (s - (p * theta).sin()).abs() < 1e-13);
             }
             // The re-expanded coefficients against finite differences of the direct terms.
@@ -179,6 +191,8 @@ mod tests {
             assert!((q[1] - first).abs() < 1e-6 * first.abs().max(1.0), "{} vs {first}", q[1]);
             assert!((2.0 * q[2] - second).abs() < 1e-5 * second.abs().max(1.0), "{} vs {second}", 2.0 * q[2]);
             assert!(!series.covers(theta0 + 1.01 * half));
+            let outside = theta0 + 1.5 * half;
+            assert!((series.ripple_nm(outside, &ripple) - direct(outside)).abs() < 1e-12, "computed directly outside");
             let mut moved = series;
             moved.ensure(theta0 + 0.6 * half, &ripple, p);
             assert_ne!(moved, series, "refreshed beyond half the interval");
