@@ -27,6 +27,7 @@ use std::f64::consts::TAU;
 use rayon::prelude::*;
 
 use super::measure::{gap, Tolerances};
+use super::screen;
 use super::signals::Channel;
 use super::simulate::Counterpart;
 use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers, Segmentation};
@@ -297,8 +298,16 @@ impl Lab<'_> {
     /// Runs the model with each of `models` on every recording, in parallel;
     /// counts them as done and reports the progress.
     fn run_all(&self, models: &[Effects], count: &mut RunCount) -> Vec<Runs> {
-        let jobs: Vec<(usize, usize)> =
-            (0..models.len()).flat_map(|m| (0..self.targets.len()).map(move |t| (m, t))).collect();
+        let out = self.run_on(models, &self.all());
+        count.done += models.len();
+        (self.progress)(count.done, count.planned);
+        out
+    }
+
+    /// Runs the model with each of `models` on the recordings `set`, in
+    /// parallel: per model, per recording of `set` (in its order).
+    fn run_on(&self, models: &[Effects], set: &[usize]) -> Vec<Runs> {
+        let jobs: Vec<(usize, usize)> = (0..models.len()).flat_map(|m| set.iter().map(move |&t| (m, t))).collect();
         let results: Vec<Option<ChainSpectra>> = jobs
             .par_iter()
             .map(|&(m, t)| {
@@ -310,11 +319,49 @@ impl Lab<'_> {
                     .map(|signals| ChainSpectra::compute(&signals, &target.segmentation, self.bands))
             })
             .collect();
-        count.done += models.len();
-        (self.progress)(count.done, count.planned);
-        let mut out = vec![Vec::with_capacity(self.targets.len()); models.len()];
+        let mut out = vec![Vec::with_capacity(set.len()); models.len()];
         for ((m, _), r) in jobs.into_iter().zip(results) {
             out[m].push(r);
+        }
+        out
+    }
+
+    /// Step: the screened grid of every effect of `kinds` that is screened
+    /// ([`screen::is_screened`]): its dense line run on the recording the
+    /// nominal model (excess `nominal`, dB) misses most, and the best point
+    /// with its neighbours kept. An effect whose line did not run keeps its
+    /// grid.
+    fn screen(&self, kinds: &[EffectKind], nominal: &[f64], count: &mut RunCount) -> Vec<(EffectKind, Vec<Vec<f64>>)> {
+        let Some(t) = screen::screening_target(nominal) else {
+            return Vec::new();
+        };
+        let mut lines: Vec<(EffectKind, Vec<Vec<f64>>)> = Vec::new();
+        for &kind in kinds.iter().filter(|&&k| screen::is_screened(k)) {
+            if let Search::Grid(points) = search(kind, self.reference_tension_n) {
+                lines.push((kind, screen::dense_line(kind, &points[0])));
+            }
+        }
+        let models: Vec<Effects> =
+            lines.iter().flat_map(|(k, line)| line.iter().map(|p| effects_of(&[(*k, p.clone())]))).flatten().collect();
+        if models.len() != lines.iter().map(|(_, l)| l.len()).sum::<usize>() {
+            // A value the effect refuses: keep the grids.
+            return Vec::new();
+        }
+        let equivalent = models.len().div_ceil(self.targets.len().max(1));
+        count.planned += equivalent;
+        let runs = self.run_on(&models, &[t]);
+        count.done += equivalent;
+        (self.progress)(count.done, count.planned);
+        let mut scores = runs.iter().map(|r| match &r[0] {
+            Some(spectra) => self.excess(t, &CrossPowers::compute(&[spectra], self.bands).powers(&[1.0])),
+            None => f64::INFINITY,
+        });
+        let mut out = Vec::new();
+        for (kind, line) in lines {
+            let line_scores: Vec<f64> = scores.by_ref().take(line.len()).collect();
+            if let Some(kept) = screen::bracket(&line_scores) {
+                out.push((kind, kept.into_iter().map(|i| line[i].clone()).collect()));
+            }
         }
         out
     }
@@ -695,12 +742,20 @@ struct FirstStage {
 }
 
 /// Step: plans the first stage's runs of `kinds` (a point that the effect
-/// refuses runs as the nominal model).
-fn plan_first_stage(kinds: &[EffectKind], reference_tension_n: Option<f64>) -> FirstStage {
+/// refuses runs as the nominal model); a screened effect's grid is its
+/// points in `screened`.
+fn plan_first_stage(
+    kinds: &[EffectKind],
+    reference_tension_n: Option<f64>,
+    screened: &[(EffectKind, Vec<Vec<f64>>)],
+) -> FirstStage {
     let mut models: Vec<Effects> = Vec::new();
     let mut effects = Vec::new();
     for &kind in kinds {
-        let search = search(kind, reference_tension_n);
+        let search = match screened.iter().find(|(k, _)| *k == kind) {
+            Some((_, points)) => Search::Grid(points.clone()),
+            None => search(kind, reference_tension_n),
+        };
         let points = match &search {
             Search::Grid(points) => points.clone(),
             Search::Linear { probes, .. } => probes.clone(),
@@ -818,8 +873,10 @@ fn rank(candidates: &mut [Candidate]) {
 /// candidates ranked best first.
 pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
     let nominal = lab.nominal_excess();
-    let plan = plan_first_stage(kinds, lab.reference_tension_n);
-    let mut count = RunCount { done: 0, planned: plan.models.len() };
+    let mut count = RunCount { done: 0, planned: 0 };
+    let screened = lab.screen(kinds, &nominal, &mut count);
+    let plan = plan_first_stage(kinds, lab.reference_tension_n, &screened);
+    count.planned += plan.models.len();
     let runs = lab.run_all(&plan.models, &mut count);
     let nominal_runs: Runs = lab.targets.iter().map(|t| Some(t.nominal.clone())).collect();
     let mut families: Vec<Family> = Vec::new();
@@ -1063,7 +1120,7 @@ mod tests {
     #[test]
     fn first_stage_numbers_every_point_in_turn() {
         let kinds = [EffectKind::DivertingPulley, EffectKind::DeadTime, EffectKind::SheaveEccentricity];
-        let plan = plan_first_stage(&kinds, None);
+        let plan = plan_first_stage(&kinds, None, &[]);
         // 4 pulley inertias, 1 dead-time probe, 2 eccentricity probes.
         assert_eq!(plan.models.len(), 7);
         let idx: Vec<&[usize]> = plan.effects.iter().map(|e| e.models.as_slice()).collect();
@@ -1078,7 +1135,7 @@ mod tests {
 
     #[test]
     fn families_of_grid_and_linear_effects() {
-        let plan = plan_first_stage(&[EffectKind::RopeDiscretization, EffectKind::SheaveEccentricity], None);
+        let plan = plan_first_stage(&[EffectKind::RopeDiscretization, EffectKind::SheaveEccentricity], None, &[]);
         let all_runs: Vec<Runs> = (0..plan.models.len()).map(|m| runs(100 + m)).collect();
         let nominal = runs(7);
         let grid = family_of(&plan.effects[0], &all_runs, &nominal);

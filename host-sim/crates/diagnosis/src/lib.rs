@@ -37,6 +37,7 @@ pub mod locate;
 pub mod measure;
 pub mod replay;
 pub mod report;
+pub mod screen;
 pub mod signals;
 pub mod simulate;
 pub mod spectra;
