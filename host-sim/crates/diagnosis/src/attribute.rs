@@ -7,9 +7,11 @@
 //!
 //! - grid: effects whose parameters move natural frequencies (tension
 //!   stiffening, pulley, rope elements, frame mode, brake clamp) are
-//!   simulated on a grid of their fitted parameters, refined once around the
+//!   simulated on a grid of their fitted parameters, refined around the
 //!   best point on all recordings; a fold picks the grid point best on its
-//!   training recordings;
+//!   training recordings. The grid of an effect that places a resonance
+//!   with one parameter (pulley, tension stiffening, brake clamp) is the
+//!   bracket its screen found ([`super::screen`]), not a fixed coarse one;
 //! - linear: effects that add a small excitation (guide friction, sheave
 //!   eccentricity, dead time, current-sensor errors, encoder error) are
 //!   simulated once per probe; their influence for any parameter value is
