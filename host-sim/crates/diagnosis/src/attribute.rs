@@ -354,10 +354,8 @@ impl Lab<'_> {
         let runs = self.run_on(&models, &[t]);
         count.done += equivalent;
         (self.progress)(count.done, count.planned);
-        let mut scores = runs.iter().map(|r| match &r[0] {
-            Some(spectra) => self.excess(t, &CrossPowers::compute(&[spectra], self.bands).powers(&[1.0])),
-            None => f64::INFINITY,
-        });
+        let mut scores =
+            runs.iter().map(|r| r[0].as_ref().map_or(f64::INFINITY, |spectra| self.run_excess(t, spectra)));
         let mut out = Vec::new();
         for (kind, line) in lines {
             let line_scores: Vec<f64> = scores.by_ref().take(line.len()).collect();
@@ -372,11 +370,14 @@ impl Lab<'_> {
         gap(&self.targets[t].measured, &self.targets[t].noise, &self.targets[t].tolerances, powers).excess_db()
     }
 
+    /// The excess gap on recording `t` of one model's run there, dB.
+    fn run_excess(&self, t: usize, spectra: &ChainSpectra) -> f64 {
+        self.excess(t, &CrossPowers::compute(&[spectra], self.bands).powers(&[1.0]))
+    }
+
     /// The nominal model's excess gap on every recording, dB.
     pub fn nominal_excess(&self) -> Vec<f64> {
-        (0..self.targets.len())
-            .map(|t| self.excess(t, &CrossPowers::compute(&[&self.targets[t].nominal], self.bands).powers(&[1.0])))
-            .collect()
+        (0..self.targets.len()).map(|t| self.run_excess(t, &self.targets[t].nominal)).collect()
     }
 
     /// Every recording's index.
