@@ -119,3 +119,65 @@ fn one_broken_recording_is_left_out_with_its_reason_and_the_rest_gets_a_result()
     assert!(report.left_out.iter().any(|l| l.recording == bad_stem));
     assert_eq!(report.recordings.len(), data.len() - 1);
 }
+
+/// The time (s) by which `late` lags `on_time` over the samples where the
+/// shaft turns: the shift, on a grid of a hundredth of a sample, that
+/// brings the two closest (least squares).
+fn lag_s(on_time: &[f64], late: &[f64], fs: f64) -> f64 {
+    let moving: Vec<usize> =
+        (1..on_time.len() - 1).filter(|&k| (on_time[k + 1] - on_time[k - 1]).abs() > 1e-4).collect();
+    let mismatch = |shift: f64| {
+        let late_read = |k: usize| {
+            let x = k as f64 + shift;
+            let i = (x.floor().max(0.0) as usize).min(late.len() - 2);
+            late[i] + (x - i as f64) * (late[i + 1] - late[i])
+        };
+        let offset = moving.iter().map(|&k| late_read(k) - on_time[k]).sum::<f64>() / moving.len() as f64;
+        moving.iter().map(|&k| (late_read(k) - offset - on_time[k]).powi(2)).sum::<f64>()
+    };
+    let best = (0..=2000).map(|j| j as f64 / 100.0).min_by(|a, b| mismatch(*a).total_cmp(&mismatch(*b))).unwrap();
+    best / fs
+}
+
+/// A data acquisition that records only what the format requires, and one
+/// that samples the encoder late: the sample's first travel without its
+/// encoder column (the drive's speed estimate, integrated, stands for the
+/// angle, and the estimate lags), its second with the encoder column four
+/// samples late. The angle is put back on the currents' time base, by the
+/// delay that the sample's own encoder column shows, and the rig is still
+/// the nominal one.
+#[test]
+fn an_angle_that_lags_the_currents_is_put_back_on_their_time_and_the_rig_stays_nominal() {
+    use diagnosis::travel_signals::{shaft_angle_rad, travel_shaft_angle};
+    use recording::{ANGLE, SPEED};
+    let rig = rig();
+    let mut data = sample();
+    let travels: Vec<usize> =
+        (0..data.len()).filter(|&i| matches!(data[i].1.meta.kind, RecordingKind::Travel { .. })).collect();
+    let encoder_of = |r: &Recording| r.column(ANGLE).expect("the sample records the angle").values.clone();
+    let fs = data[travels[0]].1.meta.sample_rate_hz;
+
+    let without = &mut data[travels[0]].1;
+    let encoder = encoder_of(without);
+    without.columns.retain(|c| c.name != ANGLE);
+    let integrated = shaft_angle_rad(None, &without.column(SPEED).unwrap().values, fs);
+    let expected_s = lag_s(&encoder, &integrated, fs);
+    let (_, found) = travel_shaft_angle(&rig, without);
+    println!("without the encoder column: {}; the encoder column shows {:.3} ms", found.text(), 1e3 * expected_s);
+    assert!(!found.encoder_column);
+    assert!((found.advanced_s - expected_s).abs() < 0.1e-3 + 0.1 * expected_s, "{found:?} vs {expected_s}");
+
+    let late = &mut data[travels[1]].1;
+    let encoder = encoder_of(late);
+    let column = late.columns.iter_mut().find(|c| c.name == ANGLE).unwrap();
+    column.values = (0..encoder.len()).map(|k| encoder[k.saturating_sub(4)]).collect();
+    let (_, found) = travel_shaft_angle(&rig, late);
+    println!("encoder four samples late: {}", found.text());
+    assert!((found.advanced_s - 4.0 / fs).abs() < 0.1e-3, "{found:?}");
+
+    let report =
+        diagnose(&rig, "rig-sample, angles late", &data, &GapOptions::default(), &|_, _, _| {}).expect("a verdict");
+    println!("verdict {:?}, excess {:.3} dB", report.verdict, report.nominal_excess_db);
+    assert!(report.left_out.is_empty(), "{:?}", report.left_out);
+    assert_eq!(report.verdict, Verdict::Nominal, "excess {:.3} dB", report.nominal_excess_db);
+}

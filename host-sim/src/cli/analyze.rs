@@ -100,6 +100,8 @@ struct TravelAnalysis {
     constant_speed_end_s: f64,
     mechanical_frequency_hz: f64,
     electrical_offset_rad: f64,
+    /// Where the shaft angle comes from and its delay behind the currents.
+    shaft_angle: diagnosis::travel_signals::AngleAlignment,
     mean_torque_nm: f64,
     ripple_lines: Vec<RippleLine>,
     /// Orders whose line the Welch segment cannot resolve (too close to 0 Hz,
@@ -167,6 +169,7 @@ pub fn run(rig: &RigConfig, args: &AnalyzeArgs) -> anyhow::Result<()> {
             t.mechanical_frequency_hz,
             t.mean_torque_nm
         );
+        outln!("  shaft angle: {}", t.shaft_angle.text());
         for line in &t.ripple_lines {
             outln!(
                 "  {:>3} x f_mech {:>8.3} Hz: {:>8.4} N m  {}",
@@ -219,6 +222,7 @@ fn analyze_travel(
     let TravelTorque {
         speed_radps: speed,
         shaft_angle_rad: angle,
+        angle_alignment,
         electrical_offset_rad: offset,
         torque_nm: torque,
         constant_speed: stage,
@@ -335,6 +339,7 @@ fn analyze_travel(
         constant_speed_end_s: stage.end as f64 / fs,
         mechanical_frequency_hz: f_mech,
         electrical_offset_rad: offset,
+        shaft_angle: angle_alignment,
         mean_torque_nm: mean_torque,
         ripple_lines,
         unresolved_orders,

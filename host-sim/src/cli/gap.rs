@@ -172,6 +172,7 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
                 )
             }
         }
+        outln!("    shaft angle: {}", l.shaft_angle.text());
     }
     if let Some(note) = &report.attribution_note {
         outln!("attribution: {note}");

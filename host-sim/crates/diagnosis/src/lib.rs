@@ -25,6 +25,7 @@
 #![warn(missing_docs)]
 
 pub mod acquisition;
+pub mod angle_alignment;
 pub mod attribute;
 pub mod calibrate;
 pub mod drive_law;
@@ -157,6 +158,9 @@ pub struct RigSpeedLoop {
     pub controller: Option<drive_law::SpeedController>,
     /// Why not, otherwise.
     pub refused: Option<String>,
+    /// The shaft angle the travel's model follows: its source and its delay
+    /// behind the currents ([`travel_signals::travel_shaft_angle`]).
+    pub shaft_angle: travel_signals::AngleAlignment,
 }
 
 /// Settings of a diagnosis.
@@ -435,6 +439,8 @@ struct Prepared {
     /// The rig drive's speed loop as identified, or why not, where the
     /// model is driven.
     speed_loop: Option<Result<drive_law::SpeedController, String>>,
+    /// The shaft angle's source and alignment, where the model is driven.
+    shaft_angle: Option<travel_signals::AngleAlignment>,
     /// The direct-axis current's lines of the travel, or why not, where the
     /// model is driven ([`electrical_lines::travel_lines`]).
     direct_axis: Option<Result<electrical_lines::TravelLines, String>>,
@@ -624,6 +630,7 @@ fn counterpart(
     }
     let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
     let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
+    let shaft_angle = driven.then(|| travel_signals::travel_shaft_angle(models[0], recording).1);
     let direct_axis =
         driven.then(|| electrical_lines::travel_lines(models[0], recording, stem).map_err(|e| format!("{e:#}")));
     let transducer_lines = match &direct_axis {
@@ -697,6 +704,7 @@ fn counterpart(
         perturbed,
         noise_response,
         speed_loop,
+        shaft_angle,
         direct_axis,
         simulations,
         how,
@@ -903,12 +911,12 @@ fn compared(
             }
         };
         simulations += prepared.simulations;
-        if let Some(found) = &prepared.speed_loop {
+        if let (Some(found), Some(shaft_angle)) = (&prepared.speed_loop, prepared.shaft_angle.take()) {
             let (controller, refused) = match found {
                 Ok(c) => (Some(*c), None),
                 Err(reason) => (None, Some(reason.clone())),
             };
-            rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused });
+            rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused, shaft_angle });
         }
         let lines = prepared.direct_axis.take();
         match target_of(prepared, recording, bands_all.as_ref(), drive, model) {

@@ -110,13 +110,12 @@ pub fn replay_cells(
 ) -> Result<Vec<super::measure::CellGap>> {
     use super::signals::{decimation_factor, ChainSignals, Channel};
     use super::spectra::{cell_powers, ChainSpectra, Segmentation};
-    use recording::{RecordingKind, ANGLE, SPEED};
+    use recording::RecordingKind;
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         bail!("`{stem}`: only travels are replayed");
     };
     let fs = recording.meta.sample_rate_hz;
-    let speed = recording.column(SPEED).map(|c| c.values.as_slice()).unwrap_or(&[]);
-    let angle = crate::travel_signals::shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
+    let (angle, _) = crate::travel_signals::travel_shaft_angle(rig, recording);
     let factor = decimation_factor(fs);
     let angle = if factor > 1 { dsp::decimate(&angle, factor)? } else { angle };
     let len = measured.len().min(angle.len());

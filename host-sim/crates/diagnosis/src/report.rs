@@ -507,6 +507,10 @@ fn speed_loops(s: &mut String, loops: &[super::RigSpeedLoop]) {
             }
         }
     }
+    let _ = writeln!(s, "\nThe shaft angle the model follows, put on the currents' time base:\n");
+    for l in loops {
+        let _ = writeln!(s, "- {}: {}", l.recording, l.shaft_angle.text());
+    }
     let _ = writeln!(s);
 }
 

@@ -24,6 +24,86 @@ pub fn shaft_angle_rad(angle: Option<&[f64]>, speed_radps: &[f64], sample_rate_h
     theta
 }
 
+/// Where a travel's shaft angle comes from and how it was put on the
+/// currents' time base ([`crate::angle_alignment`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct AngleAlignment {
+    /// `true`: the recording's `angle_rad` column; `false`: the drive's speed
+    /// estimate integrated.
+    pub encoder_column: bool,
+    /// The angle's delay behind the currents as read from them.
+    pub delay: Option<crate::angle_alignment::AngleDelay>,
+    /// Why the delay could not be read, when it could not.
+    pub refused: Option<String>,
+    /// How much later the angle is read (the delay, where it is applied), s.
+    pub advanced_s: f64,
+}
+
+impl AngleAlignment {
+    /// One line for a report.
+    pub fn text(&self) -> String {
+        let source = if self.encoder_column { "the encoder column" } else { "the speed estimate integrated" };
+        match (&self.delay, &self.refused) {
+            (Some(d), _) if self.advanced_s != 0.0 => format!(
+                "{source}, {:.3} ms behind the currents (coherence {:.3}): read that much later",
+                1e3 * d.delay_s,
+                d.coherence
+            ),
+            (Some(d), _) => format!(
+                "{source}, {:.3} ms from the currents (coherence {:.3}): used as recorded",
+                1e3 * d.delay_s,
+                d.coherence
+            ),
+            (None, reason) => {
+                format!("{source}, used as recorded: its delay not read ({})", reason.as_deref().unwrap_or("-"))
+            }
+        }
+    }
+}
+
+/// Largest phase error (rad) of the rig's highest ripple order at the
+/// travel's top speed that an encoder column's delay behind the currents
+/// may leave before the column is read later: 0.1 rad moves a ripple line by
+/// a tenth of its amplitude. (The machine's current loop alone leaves a few
+/// hundredths of a millisecond, a hundredth of a radian at the 72nd order
+/// and 6 rad/s.)
+pub const MAX_RIPPLE_PHASE_ERROR_RAD: f64 = 0.1;
+
+/// The shaft angle of the travel `recording` (rad, [`shaft_angle_rad`]) on
+/// the phase currents' time base: its delay behind the currents read from
+/// them ([`crate::angle_alignment::angle_delay`]) and the angle read that
+/// much later where it comes from the speed estimate (whose filter and
+/// computation always delay it), or where an encoder column's delay turns
+/// the rig's highest ripple order by more than
+/// [`MAX_RIPPLE_PHASE_ERROR_RAD`] at the top speed. Without the phase
+/// currents or the speed, the angle as recorded.
+pub fn travel_shaft_angle(rig: &rig_config::RigConfig, recording: &recording::Recording) -> (Vec<f64>, AngleAlignment) {
+    use recording::{ANGLE, I_A, I_B, I_C, SPEED};
+    let fs = recording.meta.sample_rate_hz;
+    let column = |name: &str| recording.column(name).map(|c| c.values.as_slice());
+    let encoder = column(ANGLE);
+    let speed = column(SPEED).unwrap_or(&[]);
+    let angle = shaft_angle_rad(encoder, speed, fs);
+    let delay = match (column(I_A), column(I_B), column(I_C)) {
+        (Some(a), Some(b), Some(c)) => {
+            crate::angle_alignment::angle_delay([a, b, c], &angle, speed, rig.motor.pole_pairs)
+        }
+        _ => Err("the recording has no phase currents".to_string()),
+    };
+    let top_order = rig.ripple.iter().map(|r| f64::from(r.mechanical_order)).fold(0.0, f64::max);
+    let top_speed = speed.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    let advanced_s = match &delay {
+        Ok(d) if encoder.is_none() || top_order * top_speed * d.delay_s.abs() > MAX_RIPPLE_PHASE_ERROR_RAD => d.delay_s,
+        _ => 0.0,
+    };
+    let angle = if advanced_s != 0.0 { crate::angle_alignment::advanced(&angle, advanced_s, fs) } else { angle };
+    let (delay, refused) = match delay {
+        Ok(d) => (Some(d), None),
+        Err(e) => (None, Some(e)),
+    };
+    (angle, AngleAlignment { encoder_column: encoder.is_some(), delay, refused, advanced_s })
+}
+
 /// Counterweight-side rope length, m, along the travel: `l_w = l_w0 + r
 /// (theta - theta_0)` (car up: the shaft angle grows and so does `l_w`).
 pub fn counterweight_side_length_m(shaft_angle_rad: &[f64], lw_start_m: f64, sheave_radius_m: f64) -> Vec<f64> {
@@ -82,8 +162,10 @@ pub fn electrical_offset_rad(
 pub struct TravelTorque {
     /// Shaft speed from the encoder, rad/s.
     pub speed_radps: Vec<f64>,
-    /// Unwrapped shaft angle (the `angle_rad` column, or the integrated speed), rad.
+    /// Unwrapped shaft angle on the currents' time base ([`travel_shaft_angle`]), rad.
     pub shaft_angle_rad: Vec<f64>,
+    /// Where the angle comes from and how it was aligned.
+    pub angle_alignment: AngleAlignment,
     /// Electrical angle offset estimated from `i_d = 0`, rad.
     pub electrical_offset_rad: f64,
     /// Machine torque from the phase currents (dq0), N m.
@@ -98,7 +180,7 @@ pub fn travel_torque(
     recording: &recording::Recording,
     stem: &str,
 ) -> Result<TravelTorque> {
-    use recording::{ANGLE, I_A, I_B, I_C, SPEED};
+    use recording::{I_A, I_B, I_C, SPEED};
     let column = |name: &str| -> Result<&[f64]> {
         recording
             .column(name)
@@ -109,7 +191,7 @@ pub fn travel_torque(
     let mo = &rig.motor;
     let speed = column(SPEED)?;
     let (i_a, i_b, i_c) = (column(I_A)?, column(I_B)?, column(I_C)?);
-    let angle = shaft_angle_rad(recording.column(ANGLE).map(|c| c.values.as_slice()), speed, fs);
+    let (angle, angle_alignment) = travel_shaft_angle(rig, recording);
     let offset = electrical_offset_rad(i_a, i_b, i_c, &angle, mo.pole_pairs)?;
     let mut torque =
         dsp::machine_torque_nm(i_a, i_b, i_c, &angle, mo.pole_pairs, mo.flux_linkage_wb, mo.ld_h, mo.lq_h, offset)?;
@@ -133,6 +215,7 @@ pub fn travel_torque(
         constant_speed: dsp::constant_speed_stage(speed, fs)?,
         speed_radps: speed.to_vec(),
         shaft_angle_rad: angle,
+        angle_alignment,
         electrical_offset_rad: offset,
         torque_nm: torque,
     })
