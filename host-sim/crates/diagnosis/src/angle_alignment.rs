@@ -59,15 +59,18 @@ pub fn angle_delay(
     let [i_a, i_b, i_c] = currents_a;
     let n = i_a.len().min(i_b.len()).min(i_c.len()).min(angle_rad.len()).min(speed_radps.len());
     let p = f64::from(pole_pairs);
-    let vector = |k: usize| {
-        let alpha = (2.0 * i_a[k] - i_b[k] - i_c[k]) / 3.0;
-        let beta = (i_b[k] - i_c[k]) / 3f64.sqrt();
-        (alpha.hypot(beta), beta.atan2(alpha))
-    };
-    let used = usable_samples(n, vector, speed_radps)?;
+    // The current vector (magnitude, angle) of every sample.
+    let vectors: Vec<(f64, f64)> = (0..n)
+        .map(|k| {
+            let alpha = (2.0 * i_a[k] - i_b[k] - i_c[k]) / 3.0;
+            let beta = (i_b[k] - i_c[k]) / 3f64.sqrt();
+            (alpha.hypot(beta), beta.atan2(alpha))
+        })
+        .collect();
+    let used = usable_samples(&vectors, speed_radps)?;
     // Twice the current vector's angle relative to `p theta`: a negative
     // quadrature current (half a turn) folds onto a positive one.
-    let doubled: Vec<(f64, f64)> = used.iter().map(|&k| (2.0 * (vector(k).1 - p * angle_rad[k])).sin_cos()).collect();
+    let doubled: Vec<(f64, f64)> = used.iter().map(|&k| (2.0 * (vectors[k].1 - p * angle_rad[k])).sin_cos()).collect();
     let (s, c) = doubled.iter().fold((0.0, 0.0), |(s, c), (ds, dc)| (s + ds, c + dc));
     let coherence = s.hypot(c) / used.len() as f64;
     if coherence < MIN_COHERENCE {
@@ -84,10 +87,12 @@ pub fn angle_delay(
     Ok(AngleDelay { delay_s: slope / p, coherence, residual_rad: rms, samples: used.len() })
 }
 
-/// The samples of a travel whose current vector and speed are large enough
-/// to read the vector's angle ([`MIN_CURRENT_FRACTION`], [`MIN_SPEED_FRACTION`]).
-fn usable_samples(n: usize, vector: impl Fn(usize) -> (f64, f64), speed_radps: &[f64]) -> Result<Vec<usize>, String> {
-    let mut magnitudes: Vec<f64> = (0..n).map(|k| vector(k).0).collect();
+/// The samples of a travel whose current vector (`vectors`: magnitude and
+/// angle) and speed are large enough to read the vector's angle
+/// ([`MIN_CURRENT_FRACTION`], [`MIN_SPEED_FRACTION`]).
+fn usable_samples(vectors: &[(f64, f64)], speed_radps: &[f64]) -> Result<Vec<usize>, String> {
+    let n = vectors.len();
+    let mut magnitudes: Vec<f64> = vectors.iter().map(|v| v.0).collect();
     let top_speed = speed_radps[..n].iter().fold(0.0f64, |m, w| m.max(w.abs()));
     if n == 0 || top_speed <= 0.0 {
         return Err("the shaft does not turn".to_string());
@@ -95,7 +100,7 @@ fn usable_samples(n: usize, vector: impl Fn(usize) -> (f64, f64), speed_radps: &
     magnitudes.sort_by(f64::total_cmp);
     let floor = MIN_CURRENT_FRACTION * magnitudes[(9 * n / 10).min(n - 1)];
     let used: Vec<usize> =
-        (0..n).filter(|&k| vector(k).0 > floor && speed_radps[k].abs() >= MIN_SPEED_FRACTION * top_speed).collect();
+        (0..n).filter(|&k| vectors[k].0 > floor && speed_radps[k].abs() >= MIN_SPEED_FRACTION * top_speed).collect();
     if used.len() < MIN_SAMPLES {
         return Err(format!(
             "{} samples turn with current; expected at least {MIN_SAMPLES} to read the current vector's angle",
