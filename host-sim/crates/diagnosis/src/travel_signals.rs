@@ -64,9 +64,9 @@ impl AngleAlignment {
 /// Largest phase error (rad) of the rig's highest ripple order at the
 /// travel's top speed that an encoder column's delay behind the currents
 /// may leave before the column is read later: 0.1 rad moves a ripple line by
-/// a tenth of its amplitude. (The machine's current loop alone leaves a few
-/// hundredths of a millisecond, a hundredth of a radian at the 72nd order
-/// and 6 rad/s.)
+/// a tenth of its amplitude. (The machine's current loop alone leaves
+/// 0.04-0.06 ms on the project's and the foreign emulator's drives, up to
+/// 0.03 rad at the 72nd order and 6.15 rad/s.)
 pub const MAX_RIPPLE_PHASE_ERROR_RAD: f64 = 0.1;
 
 /// The shaft angle of the travel `recording` (rad, [`shaft_angle_rad`]) on
