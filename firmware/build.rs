@@ -2,7 +2,12 @@
 //!
 //! 1. Puts the workspace's `memory.x` on the linker search path and passes
 //!    cortex-m-rt's `link.x` and defmt's `defmt.x` linker scripts to the binary.
-//! 2. Generates `$OUT_DIR/drive_config.rs` from `configs/rig.toml`, through
+//! 2. Generates `$OUT_DIR/board_generated.rs` (pin types, alternate
+//!    functions, active levels, current-sense sign) from the board
+//!    description `configs/boards/$DRIVE_BOARD.toml` (default
+//!    `nucleo-g474re-ihm08m1`), and
+//!    `$OUT_DIR/drive_config.rs` from `configs/rig.toml` and that board
+//!    (the board's sensing scales, bus voltage and trip levels), through
 //!    the same `rig-config` code the host simulator uses, so firmware and host
 //!    run the controller with identical values: the drive parameters as a
 //!    `drive_core::DriveConfig` constant, the drive's chain model
@@ -27,9 +32,25 @@ fn main() {
 
     println!("cargo:rerun-if-changed=build.rs");
     link_scripts(&workspace_root, &out_dir);
-    let source = drive_config(&workspace_root);
+    let board = board(&workspace_root);
+    let source = drive_config(&workspace_root, &board);
     let path = out_dir.join("drive_config.rs");
     fs::write(&path, source).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+    let path = out_dir.join("board_generated.rs");
+    fs::write(&path, board.firmware_source(&format!("configs/boards/{}.toml", board.name)))
+        .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+}
+
+/// The board description: `configs/boards/$DRIVE_BOARD.toml`, by default
+/// `rig_config::board::DEFAULT_BOARD` (NUCLEO-G474RE with X-NUCLEO-IHM08M1).
+fn board(workspace_root: &std::path::Path) -> rig_config::board::Board {
+    println!("cargo:rerun-if-env-changed=DRIVE_BOARD");
+    let name = env::var("DRIVE_BOARD").unwrap_or_else(|_| rig_config::board::DEFAULT_BOARD.to_string());
+    let path = workspace_root.join("configs").join("boards").join(format!("{name}.toml"));
+    println!("cargo:rerun-if-changed={}", path.display());
+    let text = fs::read_to_string(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    rig_config::board::Board::from_toml_str(&text, &path.display().to_string())
+        .unwrap_or_else(|e| panic!("{} is not a valid board description: {e}", path.display()))
 }
 
 /// Copies `memory.x` into OUT_DIR and adds the linker scripts.
@@ -46,7 +67,7 @@ fn link_scripts(workspace_root: &std::path::Path, out_dir: &std::path::Path) {
 
 /// Source of `pub const DRIVE_CONFIG: drive_core::DriveConfig = ...;` and
 /// `pub const DEAD_TIME_S: f32 = ...;`.
-fn drive_config(workspace_root: &std::path::Path) -> String {
+fn drive_config(workspace_root: &std::path::Path, board: &rig_config::board::Board) -> String {
     let rig_toml = workspace_root.join("configs").join("rig.toml");
     println!("cargo:rerun-if-changed={}", rig_toml.display());
 
@@ -68,7 +89,7 @@ fn drive_config(workspace_root: &std::path::Path) -> String {
         "{}: [travel].lw_high_m - lw_low_m = {shaft_travel_mm} mm is not a DCP distance (1..=65535 mm)",
         rig_toml.display()
     );
-    // The same generators the PIL target uses, so both run identical values.
+    // The rig generators the PIL target uses; the DRIVE_CONFIG is the rig on this board.
     format!(
         "{}{}/// Inverter dead time between the switches of one leg, s (`[inverter].dead_time_s`).\n\
          pub const DEAD_TIME_S: f32 = {dead_time_s:?};\n\
@@ -77,7 +98,9 @@ fn drive_config(workspace_root: &std::path::Path) -> String {
          lw_lowest_landing_m: {:?}, shaft_travel_mm: {} }};\n\
          /// Car mass of the load weighing until one is stored: the heaviest car of `[mechanics].m_car_kg`, kg.\n\
          pub const DEFAULT_CAR_MASS_KG: f32 = {:?};\n{}",
-        rig.drive_config_source("configs/rig.toml"),
+        board
+            .drive_config_source(&rig, "configs/rig.toml")
+            .unwrap_or_else(|e| panic!("the rig does not fit the board: {e}")),
         rig.chain_model_source("configs/rig.toml"),
         lw_low as f32,
         shaft_travel_mm as u32,

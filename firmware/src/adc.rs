@@ -36,7 +36,8 @@ const _: () = assert!(DRIVE_CONFIG.adc_bits == 12, "the ADCs run at their 12-bit
 /// One PWM period's raw conversions, ADC codes (0..=4095).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Samples {
-    /// Phase currents U, V, W (controller phases a, b, c), raw codes.
+    /// Phase currents U, V, W (controller phases a, b, c), codes with the
+    /// board's sign ([`board_sign`]).
     pub phase_codes: [u16; 3],
     /// DC-bus divider, raw code.
     pub dc_bus_code: u16,
@@ -93,6 +94,25 @@ pub fn sequence_done() -> bool {
     pac::ADC2.isr().read().jeos()
 }
 
+/// Largest ADC code.
+const ADC_MAX_CODE: u16 = ((1u32 << crate::DRIVE_CONFIG.adc_bits) - 1) as u16;
+
+/// A phase-current code with the board's sign: mirrored (`4095 - code`)
+/// when the board's amplifiers invert
+/// ([`crate::board::CURRENT_SENSE_INVERTED`]: on the IHM08M1 a current into
+/// the machine lowers the reading), so that the drive core, which reads a
+/// current into the machine above mid-scale, sees the right sign. The
+/// mirror keeps both rails on rails; its one-code shift of mid-scale is
+/// taken out by the offset calibration.
+#[inline]
+pub fn board_sign(code: u16) -> u16 {
+    if crate::board::CURRENT_SENSE_INVERTED {
+        ADC_MAX_CODE - code.min(ADC_MAX_CODE)
+    } else {
+        code
+    }
+}
+
 /// Reads both sequences' results and clears their end-of-sequence flags.
 /// Call when [`sequence_done`]; waits briefly for ADC1 if needed.
 #[inline]
@@ -107,7 +127,11 @@ pub fn take() -> Result<Samples, Incomplete> {
         }
     }
     let samples = Samples {
-        phase_codes: [adc1.jdr(0).read().jdata(), adc2.jdr(0).read().jdata(), adc1.jdr(1).read().jdata()],
+        phase_codes: [
+            board_sign(adc1.jdr(0).read().jdata()),
+            board_sign(adc2.jdr(0).read().jdata()),
+            board_sign(adc1.jdr(1).read().jdata()),
+        ],
         dc_bus_code: adc2.jdr(1).read().jdata(),
     };
     clear_flags();

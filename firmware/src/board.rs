@@ -1,36 +1,47 @@
-//! NUCLEO-G474RE board support: the pin map of the drive and the clock tree.
+//! NUCLEO-G474RE board support: the pin map of the drive (generated from
+//! the board description), the clock tree, the brake output and the safe
+//! state.
 //!
-//! # Pin map (the one place it is stated)
+//! # Pin map
 //!
-//! Three-phase inverter: ST X-NUCLEO-IHM08M1 (STL220N6F7 bridge, L6398 gate
-//! drivers) on the morpho connectors, with its STM32G4 mapping of the
-//! complementary outputs.
+//! The pins, their alternate functions and active levels come from the
+//! board description (`configs/boards/nucleo-g474re-ihm08m1.toml`, or the
+//! one `DRIVE_BOARD` names), through `build.rs` into
+//! `$OUT_DIR/board_generated.rs`: one type alias per pin (`PwmULow`), its
+//! AF and active level (`PWM_U_LOW_ACTIVE_LOW`), a `board_pin!` macro that
+//! takes the pin from embassy's `Peripherals`, and the current-sense sign.
+//! The table with the manual behind each row is in `docs/firmware.md`
+//! ("Pin map and scales"); `cargo test -p rig-config board` checks that the
+//! description says what that table says. The `const _` block at the end
+//! of this module checks every pin against embassy-stm32's pin traits
+//! (ST's own STM32G474RE data): a pin that cannot carry its signal does not
+//! build.
 //!
-//! | Function                         | Pin   | Peripheral signal | AF |
-//! |----------------------------------|-------|-------------------|----|
-//! | Phase U high side                | PA8   | TIM1_CH1          | 6  |
-//! | Phase V high side                | PA9   | TIM1_CH2          | 6  |
-//! | Phase W high side                | PA10  | TIM1_CH3          | 6  |
-//! | Phase U low side                 | PC13  | TIM1_CH1N         | 4  |
-//! | Phase V low side                 | PA12  | TIM1_CH2N         | 6  |
-//! | Phase W low side                 | PB15  | TIM1_CH3N         | 4  |
-//! | Over-current break (gates off)   | PA6   | TIM1_BKIN         | 6  |
-//! | Motor encoder A                  | PB6   | TIM4_CH1          | 2  |
-//! | Motor encoder B                  | PB7   | TIM4_CH2          | 2  |
-//! | Brake release (high = released)  | PC8   | GPIO output       | -  |
-//! | Phase U current (Curr_fdbk1)     | PA0   | ADC1_IN1          | an |
-//! | Phase V current (Curr_fdbk2)     | PC1   | ADC2_IN7          | an |
-//! | Phase W current (Curr_fdbk3)     | PC0   | ADC1_IN6          | an |
-//! | DC-bus voltage divider (VBUS)    | PA1   | ADC2_IN2          | an |
-//! | DCP (RS-485) transmit, to DI     | PC10  | USART3_TX         | 7  |
-//! | DCP (RS-485) receive, from RO    | PC11  | USART3_RX         | 7  |
-//! | DCP (RS-485) driver enable DE+/RE| PB14  | USART3_DE         | 7  |
-//!
-//! ("an": analog mode.) All four analog pins are ADC12 inputs, i.e. both ADC1
-//! and ADC2 can convert them, on the same channel numbers (PA0 IN1, PA1 IN2,
-//! PC0 IN6, PC1 IN7). They are split so that each injected sequence (two
-//! ranks, triggered together by TIM1_TRGO2) samples two phase currents at the
-//! same instant:
+//! On the IHM08M1 (facts and sources in the table):
+//! - Gates: high sides PA8/PA9/PA10 (TIM1_CH1-CH3), low sides PA7/PB0/PB1
+//!   (TIM1_CH1N-CH3N, AF6). The L6398's HIN is active high and its LIN
+//!   active low (datasheet truth table), so the timer's complementary
+//!   outputs are active low (CCxNP = 1) with an idle level high (OISxN = 1):
+//!   with MOE = 0 every gate input is at its off level (`pwm.rs`). Before
+//!   `pwm::init` the pins are high-impedance and the L6398's own input
+//!   bias keeps the switches off (HIN pull-down, LIN pull-up: datasheet
+//!   table 8, the input bias currents).
+//! - TIM1_BKIN on PA6, active low (UM1996: the over-current circuit pulls
+//!   BKIN to ground).
+//! - Brake on PC8 as TIM8_CH3 in forced-output mode ([`Brake`]): released
+//!   only while TIM8's MOE is set and the channel is forced active; idle,
+//!   a debug halt (DBG_TIM8_STOP: the outputs go to their idle level as if
+//!   MOE were 0, RM0440 advanced-control timers, debug mode), a reset
+//!   (pin high-impedance, the brake driver's pull-down) and
+//!   [`force_safe_state`] all apply it.
+//! - The DCP transceiver on UART5 (PC12 TX, PD2 RX, PB4 DE): not on PB14,
+//!   USART3's only DE pin on this package, reported on the shield's
+//!   break/over-current net. Not on PA12 (the shield's comparator output
+//!   CPOUT) nor PC13 (the user button B1): no output of the firmware is.
+//! - The phase currents on PA0 (ADC1_IN1), PC1 (ADC2_IN7), PC0 (ADC1_IN6),
+//!   the bus on PA1 (ADC2_IN2): each injected sequence (two ranks,
+//!   triggered together by TIM1_TRGO2) samples two phase currents at the
+//!   same instant:
 //!
 //! | ADC  | rank 1                 | rank 2                  |
 //! |------|------------------------|-------------------------|
@@ -40,121 +51,44 @@
 //! (Sampling times in ADC clock cycles at 42.5 MHz, see [`clock_config`].)
 //! The DC bus gets the longer sampling time because its divider is a high
 //! impedance source; it also makes ADC2 finish last, so ADC2's end of
-//! sequence (JEOS) is the control interrupt.
+//! sequence (JEOS) is the control interrupt. The shield's amplifiers invert
+//! ([`CURRENT_SENSE_INVERTED`]): `adc.rs` mirrors each current code so the
+//! drive core sees a current into the machine above mid-scale.
 //!
-//! What is verified and what is not:
-//! - Every pin/signal/AF pair above is checked at compile time (the `const _`
-//!   block at the end of this module) against embassy-stm32's pin traits,
-//!   which come from ST's STM32G474RE data (stm32-metapac). A wrong pin
-//!   does not build.
-//! - The routing of the IHM08M1 gate inputs to PC13/PA12/PB15 (instead of
-//!   the PA7/PB0/PB1 of its STM32F30x Nucleo mapping), PA6 as its
-//!   over-current signal (project's board choice), and PB6/PB7/PC8 being
-//!   free on both boards (chosen here) are NOT verified against
-//!   UM1996 (IHM08M1) and UM2505 (NUCLEO-G474RE) solder-bridge settings:
-//!   check them before powering the bridge.
-//! - PC13 is also the NUCLEO's blue user button B1, and as an RTC-domain pin
-//!   it has weak drive (G474 datasheet: at most 2 MHz into 30 pF, 3 mA,
-//!   not to be used as a current source). Into the L6398's logic input at
-//!   16 kHz PWM that is usable, but B1 must not be pressed while the bridge
-//!   is powered, and its solder bridge should be opened.
+//! Not verified without the boards (also in `docs/firmware.md`): the
+//! IHM08M1's solder bridges and jumpers for three shunts (J5/J6) and for
+//! BKIN on PA6, that PB4, PB6, PB7, PC8, PC12 and PD2 are free on the
+//! shield, the brake driver's pull-down, the sign of the encoder count.
+//!
 //! - TIM4 is a 16-bit timer: `encoder.rs` extends its count to the `u32` of
-//!   `drive_core::SensorFrame` in software (unambiguous, since the shaft moves
-//!   far less than 2^15 counts in one PWM period).
+//!   `drive_core::SensorFrame` in software.
 //! - The timer of the Embassy time driver is TIM15 (Cargo feature
-//!   `time-driver-tim15`), so it never takes TIM1 or TIM4.
-//! - The analog pins are the IHM08M1's Arduino/morpho analog signals as ST's
-//!   STM32 Nucleo-64 mapping of that board routes them (A0 = PA0 Curr_fdbk1,
-//!   A1 = PA1 VBUS, A4 = PC1 Curr_fdbk2, A5 = PC0 Curr_fdbk3; PC2 carries
-//!   its NTC, unused here), and the ADC1/ADC2 channel of each pin is checked
-//!   at compile time below and at start-up against embassy-stm32's channel
-//!   numbers. NOT verified against the UM1996 schematic and its three-shunt
-//!   jumper settings (the IHM08M1 reportedly ships set up for one shunt): check
-//!   J5/J6 and the op-amp gain before trusting the currents.
-//! - NOT verified, and in conflict with `configs/rig.toml` as it stands:
-//!   the IHM08M1 is a 10-48 V board (60 V MOSFETs) while the rig file
-//!   assumes a 100 V bus, and the shield's current and bus-voltage scales
-//!   (amplifier gain and offset, divider ratio) are not the rig file's
-//!   assumed +-50 A and 200 V full scales. The firmware converts nothing
-//!   itself: it hands the raw codes to the controller, which scales them
-//!   with `configs/rig.toml`. Fix the rig file to the shield before running.
-//! - NOT verified: the L6398 gate-driver inputs are taken as active high on
-//!   both sides (TIM1 CCxP = CCxNP = 0), so a low gate pin is a switch off.
-//! - NOT verified: the sign of the shunt amplifier outputs (positive phase
-//!   current = current into the machine must read above mid-scale) and the
-//!   direction of the encoder count (car up must count up).
-//! - NOT verified: PA12, used here as TIM1_CH2N, is the IHM08M1's CPOUT
-//!   (comparator output to TIM1_ETR) in ST's Nucleo-64 mapping; the shield
-//!   must not drive that pin (open its resistor/solder bridge) or the two
-//!   outputs fight.
-//! - TIM1_BKIN on PA6 is active LOW: the IHM08M1's over-current circuit pulls
-//!   the line to ground (UM1996: "generates a fault condition at the BKIN
-//!   pin that goes to ground"); the pin has no internal pull, the shield's
-//!   pull-up defines its idle level (NOT verified).
-//! - DCP: an RS-485 transceiver (e.g. a 3.3 V MAX3485-class part) with DE
-//!   and /RE tied together on PB14, which USART3 drives itself around each
-//!   reply; A/B to the lift controller's DCP bus with its termination. The
-//!   three USART3 pins are checked at compile time by the driver's pin
-//!   traits (`dcp.rs`, `main.rs`); that PC10, PC11 and PB14 are free on the
-//!   IHM08M1 and reachable on the NUCLEO's morpho connectors is NOT
-//!   verified. Only a transceiver with a receiver that is
-//!   disabled while transmitting keeps the drive from reading its own reply.
+//!   `time-driver-tim15`), so it never takes TIM1, TIM4 or TIM8.
 //! - Timer 2 (32-bit) is the 1 MHz time base of the control interrupt's time
 //!   stamps; it uses no pin.
-//!
-//! Before `pwm::init` configures TIM1, the six gate pins are in their reset
-//! state (analog mode, high impedance) and the gate-driver inputs rely on the
-//! inverter board's pull-downs to keep every switch off: confirm that on the
-//! IHM08M1 schematic before powering the bridge. From then on TIM1 drives
-//! them, low (all switches off) whenever its main output enable MOE is 0.
 
-use embassy_stm32::gpio::{Level, Output, Speed};
+use embassy_stm32::gpio::{AfType, Flex, OutputType, Speed};
+use embassy_stm32::pac::timer::vals::{Lock, Ocm, Ossi, Ossr};
 use embassy_stm32::rcc::{mux, AHBPrescaler, APBPrescaler, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+use embassy_stm32::timer::{Ch3, TimerPin};
 use embassy_stm32::{pac, peripherals};
 use embassy_stm32::{Config, Peri};
+
+include!(concat!(env!("OUT_DIR"), "/board_generated.rs"));
 
 /// Inverter PWM timer: advanced-control timer with complementary outputs,
 /// dead time and break input.
 pub type PwmTimer = peripherals::TIM1;
-/// Phase U high-side gate, TIM1_CH1.
-pub type PwmUHigh = peripherals::PA8;
-/// Phase V high-side gate, TIM1_CH2.
-pub type PwmVHigh = peripherals::PA9;
-/// Phase W high-side gate, TIM1_CH3.
-pub type PwmWHigh = peripherals::PA10;
-/// Phase U low-side gate, TIM1_CH1N.
-pub type PwmULow = peripherals::PC13;
-/// Phase V low-side gate, TIM1_CH2N.
-pub type PwmVLow = peripherals::PA12;
-/// Phase W low-side gate, TIM1_CH3N.
-pub type PwmWLow = peripherals::PB15;
-/// Over-current signal of the inverter board, TIM1_BKIN: forces the gate
-/// outputs to their safe state in hardware, without software.
-pub type BreakIn = peripherals::PA6;
-
 /// Encoder timer, in quadrature encoder mode.
 pub type EncoderTimer = peripherals::TIM4;
-/// Encoder track A, TIM4_CH1.
-pub type EncoderA = peripherals::PB6;
-/// Encoder track B, TIM4_CH2.
-pub type EncoderB = peripherals::PB7;
-
-/// Brake output: high releases the machine brake, low applies it.
-pub type BrakePin = peripherals::PC8;
-
+/// Brake timer: an advanced-control timer, so that a debug halt and MOE = 0
+/// put its output to the idle level (brake applied).
+pub type BrakeTimer = peripherals::TIM8;
 /// ADC converting phases U and W (ranks 1 and 2 of its injected sequence).
 pub type AdcUw = peripherals::ADC1;
 /// ADC converting phase V and the DC bus (ranks 1 and 2); its end of
 /// sequence is the control interrupt.
 pub type AdcVBus = peripherals::ADC2;
-/// Phase U current, shunt amplifier output (IHM08M1 Curr_fdbk1).
-pub type CurrentUPin = peripherals::PA0;
-/// Phase V current, shunt amplifier output (IHM08M1 Curr_fdbk2).
-pub type CurrentVPin = peripherals::PC1;
-/// Phase W current, shunt amplifier output (IHM08M1 Curr_fdbk3).
-pub type CurrentWPin = peripherals::PC0;
-/// DC-bus voltage divider output (IHM08M1 VBUS).
-pub type DcBusPin = peripherals::PA1;
 /// ADC1 channel of [`CurrentUPin`].
 pub const CURRENT_U_CHANNEL: u8 = 1;
 /// ADC2 channel of [`CurrentVPin`].
@@ -204,48 +138,93 @@ pub fn clock_config() -> Config {
 }
 
 /// Puts the drive in its safe state from any context, without any driver:
-/// TIM1's main output enable off (every gate low, both switches of each leg
-/// off; takes effect immediately, not at the next PWM period) and the brake
-/// applied (PC8 low). For the panic and fault handlers: TIM1 keeps switching
-/// on its own when the core stops. Harmless before TIM1 is set up (its
-/// registers ignore writes while its clock is off).
+/// TIM1's main output enable off (every gate input at its off level: high
+/// sides low, low sides high; immediate) and TIM8's off (the brake output
+/// at its idle level: applied). For the panic and fault handlers: the
+/// timers keep running on their own when the core stops. Harmless before
+/// the timers are set up (their registers ignore writes while their clocks
+/// are off).
 pub fn force_safe_state() {
     pac::TIM1.bdtr().modify(|w| w.set_moe(false));
-    pac::GPIOC.bsrr().write(|w| w.set_br(8, true));
+    pac::TIM8.bdtr().modify(|w| w.set_moe(false));
 }
 
-/// While a debugger halts the core: stops TIM1, whose outputs then go to
-/// their safe state as if MOE were cleared (RM0440, debug support of the
-/// advanced-control timers), and the independent watchdog, so that a
-/// breakpoint neither leaves the bridge switching nor resets the chip. No
-/// effect without a debugger.
+/// While a debugger halts the core: stops TIM1 and TIM8, whose outputs then
+/// go to their idle levels as if MOE were cleared (RM0440, debug mode of the
+/// advanced-control timers; OSSI = 1 on both): gates off and brake applied;
+/// and stops the independent watchdog, so that a breakpoint does not reset
+/// the chip. No effect without a debugger.
 pub fn freeze_on_debug_halt() {
-    pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
+    pac::DBGMCU.apb2fzr().modify(|w| {
+        w.set_tim1(true);
+        w.set_tim8(true);
+    });
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
 }
 
-/// Configures the brake output, applied (low) from the first instruction.
-///
-/// Fail-safe polarity: low applies the brake, so a reset (all pins
-/// high-impedance inputs) also applies it, provided the brake driver's input
-/// has a pull-down.
-pub fn brake_output(pin: Peri<'static, BrakePin>) -> Output<'static> {
-    Output::new(pin, Level::Low, Speed::Low)
+/// The brake output: PC8 as TIM8_CH3 in forced-output mode. Released only
+/// while TIM8's MOE is 1 and the channel is forced active; MOE = 0 (idle,
+/// [`force_safe_state`], a debug halt) drives the idle level, which
+/// applies the brake, and so does the pin's reset state (high impedance,
+/// the brake driver's pull-down).
+pub struct Brake(());
+
+impl Brake {
+    /// Sets TIM8 and the pin up, brake applied.
+    pub fn new(tim: Peri<'static, BrakeTimer>, pin: Peri<'static, BrakePin>) -> Self {
+        // The low-level driver enables and resets TIM8's clock; it is leaked
+        // so that its Drop never stops the clock.
+        core::mem::forget(embassy_stm32::timer::low_level::Timer::new(tim));
+        let t = pac::TIM8;
+        t.bdtr().modify(|w| {
+            w.set_moe(false);
+            w.set_ossi(Ossi::IDLE_LEVEL);
+            w.set_ossr(Ossr::IDLE_LEVEL);
+        });
+        let active_low = BRAKE_PIN_ACTIVE_LOW;
+        // Idle level = the applied level (low for an active-high release).
+        t.cr2().modify(|w| w.set_ois(2, active_low));
+        t.ccmr_output(1).modify(|w| w.set_ocm(0, Ocm::FORCE_INACTIVE));
+        t.ccer().modify(|w| {
+            w.set_ccp(2, active_low);
+            w.set_cce(2, true);
+        });
+        // LOCK level 1: the idle level and off-state selection stay as set
+        // (level 3 would also lock the output mode, which releases it).
+        t.bdtr().modify(|w| w.set_lock(Lock::LEVEL1));
+        t.cr1().modify(|w| w.set_cen(true));
+        let af = <BrakePin as TimerPin<BrakeTimer, Ch3>>::af_num(&pin);
+        let mut flex = Flex::new(pin);
+        flex.set_as_af_unchecked(af, AfType::output(OutputType::PushPull, Speed::Low));
+        core::mem::forget(flex);
+        Brake(())
+    }
+
+    /// Releases (`true`) or applies the brake, immediately.
+    #[inline]
+    pub fn set_released(&mut self, released: bool) {
+        let t = pac::TIM8;
+        t.ccmr_output(1).modify(|w| w.set_ocm(0, if released { Ocm::FORCE_ACTIVE } else { Ocm::FORCE_INACTIVE }));
+        t.bdtr().modify(|w| w.set_moe(released));
+    }
 }
 
 // Compile-time check of the pin map against the G474RE's alternate functions
 // and ADC inputs (the channel numbers are checked when `adc::init` runs).
 const _: () = {
     use embassy_stm32::adc::AdcChannel;
-    use embassy_stm32::timer::{BkIn1, BreakInputPin, Ch1, Ch2, Ch3};
-    use embassy_stm32::timer::{TimerChannel, TimerComplementaryPin, TimerPin};
+    use embassy_stm32::timer::{BkIn1, BreakInputPin, Ch1, Ch2};
+    use embassy_stm32::timer::{TimerChannel, TimerComplementaryPin};
+    use embassy_stm32::usart::{DePin, RxPin, TxPin};
 
     // Each compiles only if pin P carries the signal on the G474RE.
     const fn pwm<P: TimerPin<PwmTimer, C>, C: TimerChannel>() {}
     const fn pwm_n<P: TimerComplementaryPin<PwmTimer, C>, C: TimerChannel>() {}
     const fn break_in<P: BreakInputPin<PwmTimer, BkIn1>>() {}
     const fn encoder<P: TimerPin<EncoderTimer, C>, C: TimerChannel>() {}
+    const fn brake<P: TimerPin<BrakeTimer, Ch3>>() {}
     const fn analog<P: AdcChannel<A>, A: embassy_stm32::adc::Instance>() {}
+    const fn dcp<Tx: TxPin<DcpUart>, Rx: RxPin<DcpUart>, De: DePin<DcpUart>>() {}
 
     pwm::<PwmUHigh, Ch1>();
     pwm::<PwmVHigh, Ch2>();
@@ -256,8 +235,20 @@ const _: () = {
     break_in::<BreakIn>();
     encoder::<EncoderA, Ch1>();
     encoder::<EncoderB, Ch2>();
+    brake::<BrakePin>();
     analog::<Peri<'static, CurrentUPin>, AdcUw>();
     analog::<Peri<'static, CurrentWPin>, AdcUw>();
     analog::<Peri<'static, CurrentVPin>, AdcVBus>();
     analog::<Peri<'static, DcBusPin>, AdcVBus>();
+    dcp::<DcpTx, DcpRx, DcpDe>();
+
+    // The gate polarity the L6398 needs: high sides active high, low sides
+    // active low (the description's rows; pwm.rs programs CCxP/CCxNP and
+    // OISx/OISxN from them).
+    assert!(!PWM_U_HIGH_ACTIVE_LOW && !PWM_V_HIGH_ACTIVE_LOW && !PWM_W_HIGH_ACTIVE_LOW);
+    assert!(PWM_U_LOW_ACTIVE_LOW == PWM_V_LOW_ACTIVE_LOW && PWM_V_LOW_ACTIVE_LOW == PWM_W_LOW_ACTIVE_LOW);
+    assert!(BREAK_IN_ACTIVE_LOW, "pwm.rs programs TIM1's break input active low");
 };
+
+/// The UART of the DCP line (the description's `DcpTx`/`DcpRx`/`DcpDe` pins).
+pub type DcpUart = peripherals::UART5;

@@ -43,14 +43,13 @@ use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError,
 use drive_core::lift_drive::{self, ApplyError, ControllerCommand};
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::{ControlOutput, Controller, DriveState, SensorFrame};
-use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use heapless::Deque;
 
 use crate::adc::{self, Incomplete, Samples};
 use crate::encoder::{self, Extender};
-use crate::{pwm, timebase, DRIVE_CONFIG};
+use crate::{board, pwm, timebase, DRIVE_CONFIG};
 
 /// PWM periods to wait after start before calibrating, letting the ADCs and
 /// the shunt amplifiers settle: 160 periods = 10 ms.
@@ -248,7 +247,7 @@ struct Drive {
     phase: Phase,
     fault: Option<FirmwareFault>,
     encoder: Extender,
-    brake: Output<'static>,
+    brake: board::Brake,
     steps: u32,
 }
 
@@ -273,7 +272,7 @@ const ZERO_CODE: u16 = 1 << (DRIVE_CONFIG.adc_bits - 1);
 /// Hands the controller and the brake pin to the interrupt and enables it.
 /// Call after `pwm::init` and `adc::init`; the drive then settles,
 /// calibrates and goes idle on its own.
-pub fn start(controller: Controller, brake: Output<'static>) {
+pub fn start(controller: Controller, brake: board::Brake) {
     critical_section::with(|cs| {
         DRIVE.borrow_ref_mut(cs).replace(Drive {
             controller,
@@ -437,7 +436,7 @@ impl Drive {
         // Fail-safe: the brake is released only while the inverter drives
         // the machine, whatever the controller asks.
         let brake_released = pwm_on && brake_wanted;
-        self.brake.set_level(if brake_released { Level::High } else { Level::Low });
+        self.brake.set_released(brake_released);
 
         let cycles = DWT::cycle_count().wrapping_sub(entry_cycles);
         if cycles > pwm::PERIOD_CYCLES {
@@ -603,7 +602,7 @@ impl Drive {
     /// state at once.
     fn latch(&mut self, cs: CriticalSection, fault: FirmwareFault) {
         pwm::set_outputs_enabled(false);
-        self.brake.set_level(Level::Low);
+        self.brake.set_released(false);
         if self.fault.is_none() {
             self.fault = Some(fault);
             push_event(cs, Event::Fault(fault));

@@ -1,9 +1,10 @@
 //! The lift controller's link: the DCP slave (`drive_core::lift_drive::DcpPort`)
-//! on USART3, RS-485 half duplex, 38 400 baud 8N1.
+//! on UART5, RS-485 half duplex, 38 400 baud 8N1.
 //!
-//! Pins (see `board.rs`): PC10 USART3_TX (AF7) to the transceiver's DI, PC11
-//! USART3_RX (AF7, pull-up: the transceiver's RO floats while it drives) from
-//! RO, PB14 USART3_DE (AF7) to DE and /RE tied together. The USART drives DE
+//! Pins (the board description, `board.rs`): PC12 UART5_TX (AF5) to the
+//! transceiver's DI, PD2 UART5_RX (AF5, pull-up: the transceiver's RO floats
+//! while it drives) from RO, PB4 UART5_DE (AF8) to DE and /RE tied together
+//! (not PB14, USART3's DE, reported on the IHM08M1's break net). The UART drives DE
 //! itself around every transmission (assertion and de-assertion times of one
 //! bit), so the line is released as soon as the reply's stop bit is out; the
 //! receiver is disabled while the drive talks, so its own reply is never
@@ -74,7 +75,7 @@ fn status() -> drive_core::dcp::DriveStatus {
 #[embassy_executor::task]
 pub async fn run(mut uart: BufferedUart<'static>, mut port: DcpPort) {
     info!(
-        "DCP slave on USART3 (RS-485, {=u32} baud 8N1): waiting for the lift controller",
+        "DCP slave on UART5 (RS-485, {=u32} baud 8N1): waiting for the lift controller",
         drive_core::dcp::frame::BAUD
     );
     let mut pending: Option<Command> = None;

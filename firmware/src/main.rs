@@ -9,7 +9,7 @@
 //!   the DC bus, started by TRGO2; ADC2's end of sequence is the control
 //!   interrupt.
 //! - TIM4 (`encoder.rs`): quadrature encoder; TIM2 (`timebase.rs`): 1 MHz
-//!   time stamps; PC8: brake (low = applied); IWDG (`watchdog.rs`).
+//!   time stamps; TIM8 on PC8: brake (idle = applied); IWDG (`watchdog.rs`).
 //!
 //! The control interrupt (`control.rs`, highest priority) runs
 //! `drive_core::Controller::step` once per PWM period with the measured values;
@@ -37,7 +37,7 @@
 //! encoder; a failure latches a fault), the brake is set, and the drive is
 //! Idle and reports itself ready to the lift controller.
 //!
-//! Travel commands come from a lift controller over DCP (`dcp.rs`: USART3,
+//! Travel commands come from a lift controller over DCP (`dcp.rs`: UART5,
 //! RS-485 half duplex with the USART driving the transceiver's DE): DCP4
 //! distance travels with the position message after each stop, or DCP3
 //! speed-mode travels (the variant is a stored parameter, settable on the
@@ -73,6 +73,7 @@
 #![warn(missing_docs)]
 
 mod adc;
+#[macro_use]
 mod board;
 mod control;
 mod dcp;
@@ -94,7 +95,7 @@ use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::Controller;
 use embassy_executor::Spawner;
-use embassy_stm32::peripherals::{LPUART1, USART3};
+use embassy_stm32::peripherals::{LPUART1, UART5};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::{bind_interrupts, usart};
 
@@ -107,7 +108,7 @@ pub const DEFAULT_STRATEGY: Strategy = Strategy::Table;
 pub const DCP_MODE: Mode = Mode::Dcp4;
 
 bind_interrupts!(struct Irqs {
-    USART3 => usart::BufferedInterruptHandler<USART3>;
+    UART5 => usart::BufferedInterruptHandler<UART5>;
     LPUART1 => usart::BufferedInterruptHandler<LPUART1>;
 });
 
@@ -131,10 +132,10 @@ const _: () = assert!(
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(board::clock_config());
     board::freeze_on_debug_halt();
-    let brake = board::brake_output(p.PC8);
+    let brake = board::Brake::new(p.TIM8, board_pin!(p, BrakePin));
 
     let clocks = embassy_stm32::rcc::clocks(&p.RCC);
-    info!("clocks: {}", clocks);
+    info!("board: {=str}; clocks: {}", board::BOARD_NAME, clocks);
     defmt::assert!(
         clocks.sys.to_hertz() == Some(Hertz(board::SYSCLK_HZ)),
         "SYSCLK is not the 170 MHz the drive timing assumes"
@@ -148,8 +149,17 @@ async fn main(spawner: Spawner) {
     core.DWT.enable_cycle_counter();
 
     timebase::init(p.TIM2);
-    encoder::init(p.TIM4, p.PB6, p.PB7);
-    if let Err(e) = pwm::init(p.TIM1, p.PA8, p.PA9, p.PA10, p.PC13, p.PA12, p.PB15, p.PA6) {
+    encoder::init(p.TIM4, board_pin!(p, EncoderA), board_pin!(p, EncoderB));
+    if let Err(e) = pwm::init(
+        p.TIM1,
+        board_pin!(p, PwmUHigh),
+        board_pin!(p, PwmVHigh),
+        board_pin!(p, PwmWHigh),
+        board_pin!(p, PwmULow),
+        board_pin!(p, PwmVLow),
+        board_pin!(p, PwmWLow),
+        board_pin!(p, BreakIn),
+    ) {
         error!("TIM1 setup failed ({}): the inverter stays off", e);
         halt();
     }
@@ -161,7 +171,14 @@ async fn main(spawner: Spawner) {
         pwm::DTG,
         pwm::TRIGGER_LEAD_COUNTS
     );
-    adc::init(p.ADC1, p.ADC2, p.PA0, p.PC1, p.PC0, p.PA1);
+    adc::init(
+        p.ADC1,
+        p.ADC2,
+        board_pin!(p, CurrentUPin),
+        board_pin!(p, CurrentVPin),
+        board_pin!(p, CurrentWPin),
+        board_pin!(p, DcBusPin),
+    );
 
     let mut store = params::ParamStore::new(p.FLASH);
     let (stored, params_status) = store.load().await;
@@ -220,10 +237,10 @@ async fn main(spawner: Spawner) {
     let tx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 32] = [0; 32]));
     let rx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 64] = [0; 64]));
     let uart = match usart::BufferedUart::new_with_de(
-        p.USART3,
-        p.PC11,
-        p.PC10,
-        p.PB14,
+        p.UART5,
+        board_pin!(p, DcpRx),
+        board_pin!(p, DcpTx),
+        board_pin!(p, DcpDe),
         Irqs,
         tx_buffer,
         rx_buffer,
@@ -231,7 +248,7 @@ async fn main(spawner: Spawner) {
     ) {
         Ok(uart) => uart,
         Err(e) => {
-            error!("USART3 (DCP) setup failed ({}): no lift controller link, the drive stays idle", e);
+            error!("UART5 (DCP) setup failed ({}): no lift controller link, the drive stays idle", e);
             return;
         }
     };

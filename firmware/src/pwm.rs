@@ -12,8 +12,9 @@
 //!   counter peak, in the middle of the zero vector where all three low
 //!   sides conduct and the low-side shunts carry the phase currents.
 //! - CR2: MMS2 = OC4REF, so TRGO2 (ADC1/ADC2 injected trigger JEXTSEL 8)
-//!   rises once per period at the peak; OISx = OISxN = 0 (idle: every gate
-//!   low).
+//!   rises once per period at the peak; OISx = 0, OISxN = 1 on the
+//!   IHM08M1 (idle: high-side inputs low, low-side inputs high, every
+//!   switch off; from the board description's active levels).
 //! - RCR: repetition counter 1 with the update event phased onto the
 //!   counter underflow (`lock_update_to_underflow` sets and checks the
 //!   phase), so the preloaded compares written by the control interrupt
@@ -21,13 +22,15 @@
 //!   valley, half a period after the sample.
 //! - BDTR: dead time DTG from `DEAD_TIME_S` (1 us = 170 ticks, exact), break
 //!   input 1 enabled (BKE) active low (BKP = 0) with an 8-sample filter (47 ns),
-//!   OSSI = OSSR = 1 (outputs driven to their idle level, every gate low,
+//!   OSSI = OSSR = 1 (outputs driven to their idle level, every switch off,
 //!   when MOE = 0), AOE = 0 (only software sets MOE again after a break),
 //!   MOE = 0 at start, then LOCK level 3 (dead time, break, polarities,
 //!   off-states and output modes can no longer be written until reset).
 //! - AF1: BKINE = 1, BKINP = 0: the PA6 pin feeds break input 1 unchanged.
-//! - CCER: CC1E-CC3E and CC1NE-CC3NE set, active-high polarities; CC4E set
-//!   too, though CH4 has no pin (OC4REF is internal).
+//! - CCER: CC1E-CC3E and CC1NE-CC3NE set; CCxP from the high sides' and
+//!   CCxNP from the low sides' active level (on the IHM08M1 CCxP = 0,
+//!   CCxNP = 1: the L6398's LIN is active low); CC4E set too, though CH4
+//!   has no pin (OC4REF is internal).
 //! - SR: BIF (break flag) polled by the control interrupt, UIF during [`init`].
 //!
 //! A break (the IHM08M1's over-current comparator pulling PA6 low) clears MOE
@@ -46,6 +49,11 @@ use embassy_stm32::Peri;
 
 use crate::board;
 use crate::{DEAD_TIME_S, DRIVE_CONFIG};
+
+/// The high-side gate inputs are active low (board description).
+const HIGH_ACTIVE_LOW: bool = board::PWM_U_HIGH_ACTIVE_LOW;
+/// The low-side gate inputs are active low (board description: the L6398's LIN).
+const LOW_ACTIVE_LOW: bool = board::PWM_U_LOW_ACTIVE_LOW;
 
 /// Auto-reload value: counter peak, and the compare of a 100 % duty, timer ticks.
 pub const PERIOD_COUNTS: u16 = DRIVE_CONFIG.pwm_period_counts;
@@ -116,7 +124,7 @@ pub enum PwmError {
 }
 
 /// Sets TIM1 up as described in the module doc and starts it, outputs off
-/// (MOE = 0: every gate low). Call once; TIM1 and its pins then belong to the
+/// (MOE = 0: every switch off). Call once; TIM1 and its pins then belong to the
 /// control interrupt for the rest of the run.
 #[allow(clippy::too_many_arguments)]
 pub fn init(
@@ -177,10 +185,21 @@ pub fn init(
     // Safe state and break input.
     pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
     pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
+    // Gate polarities from the board description: the L6398's HIN active
+    // high, its LIN active low (datasheet truth table). The idle levels
+    // (OISx, OISxN) are pin levels (RM0440, output control bits of the
+    // complementary channels): each the inactive level of its input, so
+    // MOE = 0 turns every switch off.
+    t.ccer().modify(|w| {
+        for channel in 0..3 {
+            w.set_ccp(channel, HIGH_ACTIVE_LOW);
+            w.set_ccnp(channel, LOW_ACTIVE_LOW);
+        }
+    });
     t.cr2().modify(|w| {
         for channel in 0..3 {
-            w.set_ois(channel, false);
-            w.set_oisn(channel, false);
+            w.set_ois(channel, HIGH_ACTIVE_LOW);
+            w.set_oisn(channel, !LOW_ACTIVE_LOW);
         }
     });
     t.bdtr().modify(|w| w.set_dtg(DTG));
@@ -194,7 +213,7 @@ pub fn init(
     pwm.set_break_enable(true);
 
     // Outputs under timer control from now on: with MOE = 0 and OSSI = 1
-    // they drive their idle level, every gate low.
+    // they drive their idle level, every switch off.
     for channel in [Channel::Ch1, Channel::Ch2, Channel::Ch3] {
         pwm.enable(channel);
     }
@@ -294,7 +313,7 @@ pub fn set_compares(compare: [u16; 3]) {
 }
 
 /// Main output enable (BDTR.MOE), immediate: `false` is the safe state
-/// (every gate low). Setting it has no effect while the break input is
+/// (every switch off). Setting it has no effect while the break input is
 /// active.
 #[inline]
 pub fn set_outputs_enabled(enabled: bool) {

@@ -12,6 +12,8 @@
 
 use std::path::Path;
 
+pub mod board;
+
 use drive_core::DriveConfig;
 use serde::Deserialize;
 
