@@ -6,8 +6,10 @@
 //! conversions, the interrupt
 //! 1. reads the time stamp (TIM2), the encoder (TIM4) and the four injected
 //!    conversions (ADC1/ADC2 JDR1-2), and TIM1's break flag;
-//! 2. applies at most one queued command (travel or reset);
-//! 3. during start-up feeds the current-offset calibration, afterwards
+//! 2. applies at most one queued command (travel, align or reset);
+//! 3. runs the start-up sequence (`drive_core::startup`: settling, the
+//!    current-offset calibration with the outputs off, the safe state until
+//!    the alignment is commanded, the protected alignment), afterwards
 //!    steps the controller with the offset-corrected codes;
 //! 4. writes the three compares (taking effect at the next PWM valley), sets
 //!    MOE from `pwm_enabled` and drives the brake from `brake_released`
@@ -29,19 +31,23 @@
 //! hundred cycles at most, the longest the task can delay the interrupt).
 //!
 //! Firmware faults latch on top of the controller's own supervisor: PWM off
-//! (MOE = 0), brake applied, until a reset command; a failed calibration
-//! latches until the chip restarts (there are no valid offsets to run with).
+//! (MOE = 0), brake applied, until a reset command (the service port's
+//! `reset`); after a failed calibration the reset calibrates again.
 
 use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::DWT;
 use critical_section::{CriticalSection, Mutex};
-use drive_core::alignment::{Alignment, AlignmentError, AlignmentParams, AlignmentStep, Injection};
+use drive_core::alignment::AlignmentError;
 use drive_core::controller::Telemetry;
-use drive_core::current_offset::{CurrentOffsets, OffsetCalibration, OffsetError, OffsetLimits};
+use drive_core::current_offset::{CurrentOffsets, OffsetError};
 use drive_core::lift_drive::{self, ApplyError, ControllerCommand};
 use drive_core::ripple::harmonics::HarmonicTable;
+use drive_core::startup::{
+    Startup, StartupCommand, StartupEvent, StartupFault, StartupOutput, StartupRefusal, StartupStep,
+};
+use drive_core::supervisor::Fault;
 use drive_core::{ControlOutput, Controller, DriveState, SensorFrame};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -50,13 +56,6 @@ use heapless::Deque;
 use crate::adc::{self, Incomplete, Samples};
 use crate::encoder::{self, Extender};
 use crate::{board, pwm, timebase, DRIVE_CONFIG};
-
-/// PWM periods to wait after start before calibrating, letting the ADCs and
-/// the shunt amplifiers settle: 160 periods = 10 ms.
-pub const SETTLE_STEPS: u16 = 160;
-
-/// PWM periods averaged by the current-offset calibration: 1024 = 64 ms.
-pub const CALIBRATION_SAMPLES: u16 = 1024;
 
 /// Every how many steps the interrupt queues a telemetry record (16: 1 kHz).
 pub const RECORD_DECIMATION: u32 = 16;
@@ -77,14 +76,15 @@ pub enum Command {
     /// slave's timeout or a travel interruption; it changes nothing when
     /// idle or tripped, and never clears a fault).
     Drive(ControllerCommand),
-    /// Clear latched faults: the controller's, and the firmware's overrun and
-    /// break latches (not a failed calibration). Refused when nothing is
-    /// latched, so that it can never stop a running travel.
-    #[allow(
-        dead_code,
-        reason = "no reset source yet (the chip reset clears faults): the DCP fault-reset message is not implemented"
-    )]
+    /// Clear latched faults: the controller's, the firmware's (overrun,
+    /// break, ADC) and the start-up sequence's (a failed calibration
+    /// calibrates again). Refused when nothing is latched, so that it can
+    /// never stop a running travel. From the service port's `reset`.
     Reset,
+    /// Run the rotor alignment (brake open, current injected): accepted
+    /// only in the safe state after the calibration, with nothing latched.
+    /// From the service port's `align`.
+    Align,
 }
 
 /// Why a command was not applied.
@@ -92,8 +92,10 @@ pub enum Command {
 pub enum Refusal {
     /// Refused by the controller.
     Controller(ApplyError),
-    /// The drive is still calibrating, or a firmware fault is latched.
+    /// The drive is still calibrating or not aligned, or a fault is latched.
     NotReady,
+    /// The start-up sequence is not waiting for that command.
+    Busy,
     /// Reset with no fault latched.
     NothingToReset,
 }
@@ -115,8 +117,20 @@ pub enum FirmwareFault {
     AdcSequenceIncomplete,
     /// The start-up current-offset calibration was rejected.
     Calibration(OffsetError),
-    /// The start-up rotor alignment failed its checks.
+    /// The commanded rotor alignment failed its checks.
     Alignment(AlignmentError),
+    /// A protection tripped while the alignment switched the bridge.
+    Protection(Fault),
+}
+
+impl From<StartupFault> for FirmwareFault {
+    fn from(fault: StartupFault) -> Self {
+        match fault {
+            StartupFault::Calibration(e) => FirmwareFault::Calibration(e),
+            StartupFault::Alignment(e) => FirmwareFault::Alignment(e),
+            StartupFault::Protection(f) => FirmwareFault::Protection(f),
+        }
+    }
 }
 
 /// Something the task should log.
@@ -175,6 +189,9 @@ pub struct Snapshot {
     pub speed_radps: f32,
     /// Current offsets calibrated, rotor aligned and no firmware fault latched.
     pub ready_gate: bool,
+    /// A fault is latched: the firmware's, the start-up sequence's or the
+    /// controller's (the DCP status's fault bit).
+    pub fault: bool,
     /// Inverter outputs on after the latest step (also during the alignment).
     pub pwm_on: bool,
     /// Brake released after the latest step (also during the alignment).
@@ -217,34 +234,11 @@ pub fn snapshot() -> Snapshot {
     critical_section::with(|cs| SNAPSHOT.borrow(cs).get())
 }
 
-enum Phase {
-    Settling(u16),
-    Calibrating(OffsetCalibration),
-    /// Rotor alignment: current injected, brake open.
-    Aligning(Alignment, Injection, CurrentOffsets),
-    /// Aligned: brake applied, current kept at electrical zero while it sets.
-    BrakeSetting(u32, Injection, CurrentOffsets),
-    Running(CurrentOffsets),
-    Failed,
-}
-
-/// The inverter outputs of a start-up step that drives the machine itself
-/// (rotor alignment), outside the controller.
-#[derive(Clone, Copy)]
-struct Injected {
-    compare: [u16; 3],
-    brake_released: bool,
-}
-
-/// PWM periods the current is kept after the alignment while the brake sets:
-/// the controller's brake-set time.
-const BRAKE_SET_STEPS: u32 = (drive_core::controller::BRAKE_SET_S * DRIVE_CONFIG.current_loop_hz) as u32;
-
 struct Drive {
     controller: Controller,
-    /// The injected current measured at the latest alignment step, A.
-    measured_a: f32,
-    phase: Phase,
+    /// Settling, calibration, the safe state until the alignment command,
+    /// the commanded alignment (`drive_core::startup`).
+    startup: Startup,
     fault: Option<FirmwareFault>,
     encoder: Extender,
     brake: board::Brake,
@@ -259,6 +253,7 @@ static SNAPSHOT: Mutex<Cell<Snapshot>> = Mutex::new(Cell::new(Snapshot {
     state: None,
     speed_radps: 0.0,
     ready_gate: false,
+    fault: false,
     pwm_on: false,
     brake_released: false,
 }));
@@ -266,18 +261,16 @@ static STEPS: AtomicU32 = AtomicU32::new(0);
 static MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
 static DROPPED: AtomicU32 = AtomicU32::new(0);
 
-/// ADC code of zero phase current (mid-scale, as `DriveConfig::adc_zero_code`).
-const ZERO_CODE: u16 = 1 << (DRIVE_CONFIG.adc_bits - 1);
-
 /// Hands the controller and the brake pin to the interrupt and enables it.
 /// Call after `pwm::init` and `adc::init`; the drive then settles,
-/// calibrates and goes idle on its own.
+/// calibrates and stays in its safe state (gates off, brake applied) until
+/// the alignment is commanded ([`Command::Align`]).
 pub fn start(controller: Controller, brake: board::Brake) {
     critical_section::with(|cs| {
+        let startup = Startup::new(&DRIVE_CONFIG, *controller.supervisor_limits());
         DRIVE.borrow_ref_mut(cs).replace(Drive {
             controller,
-            measured_a: 0.0,
-            phase: Phase::Settling(SETTLE_STEPS),
+            startup,
             fault: None,
             encoder: Extender::new(encoder::raw_count()),
             brake,
@@ -312,8 +305,9 @@ pub fn pause_if_idle() -> bool {
         let waiting = !COMMANDS.borrow_ref(cs).is_empty();
         let idle = !waiting
             && drive.as_ref().is_some_and(|d| {
-                matches!(d.phase, Phase::Running(_))
-                    && matches!(d.controller.state(), DriveState::Idle | DriveState::Tripped(_))
+                d.startup.is_waiting_for_alignment()
+                    || (d.startup.is_running()
+                        && matches!(d.controller.state(), DriveState::Idle | DriveState::Tripped(_)))
             });
         if idle {
             interrupt::ADC1_2.disable();
@@ -423,7 +417,7 @@ impl Drive {
         };
 
         let (pwm_on, compare, brake_wanted) = match injected {
-            Some(i) => (self.fault.is_none(), i.compare, i.brake_released),
+            Some(i) => (self.fault.is_none() && i.pwm_on, i.compare, i.brake_released),
             None => (
                 self.fault.is_none() && output.is_some_and(|o| o.pwm_enabled),
                 output.map_or([0; 3], |o| o.pwm_compare),
@@ -448,7 +442,8 @@ impl Drive {
         SNAPSHOT.borrow(cs).set(Snapshot {
             state: output.map(|o| o.state),
             speed_radps: output.map_or(0.0, |o| o.telemetry.speed_radps),
-            ready_gate: self.fault.is_none() && matches!(self.phase, Phase::Running(_)),
+            ready_gate: self.fault.is_none() && self.startup.is_running(),
+            fault: self.fault.is_some() || output.is_some_and(|o| matches!(o.state, DriveState::Tripped(_))),
             pwm_on,
             brake_released,
         });
@@ -475,82 +470,28 @@ impl Drive {
     }
 
     /// Start-up sequence or controller step; returns the controller's output
-    /// (if it ran) and the phase codes it saw.
+    /// (if it ran), the start-up sequence's outputs (if it drives them) and
+    /// the phase codes it saw.
     fn sense(
         &mut self,
         cs: CriticalSection,
         samples: Samples,
         encoder_count: u32,
         time_us: u32,
-    ) -> (Option<ControlOutput>, Option<Injected>, [u16; 3]) {
-        match &mut self.phase {
-            Phase::Settling(left) => {
-                *left = left.saturating_sub(1);
-                if *left == 0 {
-                    let limits = OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits);
-                    self.phase = Phase::Calibrating(OffsetCalibration::new(CALIBRATION_SAMPLES, limits));
+    ) -> (Option<ControlOutput>, Option<StartupOutput>, [u16; 3]) {
+        match self.startup.step(samples.phase_codes, samples.dc_bus_code, encoder_count) {
+            StartupStep::Drive(out) => {
+                match out.event {
+                    Some(StartupEvent::Calibrated(offsets)) => push_event(cs, Event::Calibrated(offsets)),
+                    Some(StartupEvent::Aligned(count)) => push_event(cs, Event::Aligned(count)),
+                    Some(StartupEvent::Fault(fault)) => self.latch(cs, fault.into()),
+                    None => {}
                 }
-                (None, None, samples.phase_codes)
+                (None, Some(out), out.codes)
             }
-            Phase::Calibrating(calibration) => {
-                calibration.push(samples.phase_codes);
-                if calibration.is_complete() {
-                    match calibration.finish() {
-                        Ok(offsets) => {
-                            self.phase = Phase::Aligning(
-                                Alignment::new(AlignmentParams::for_drive(&DRIVE_CONFIG)),
-                                Injection::new(&DRIVE_CONFIG),
-                                offsets,
-                            );
-                            push_event(cs, Event::Calibrated(offsets));
-                        }
-                        Err(error) => {
-                            self.phase = Phase::Failed;
-                            self.latch(cs, FirmwareFault::Calibration(error));
-                        }
-                    }
-                }
-                (None, None, samples.phase_codes)
-            }
-            Phase::Aligning(alignment, injection, offsets) => {
-                let codes = offsets.correct(samples.phase_codes, ZERO_CODE);
-                let (angle, current_a) = match alignment.step(encoder_count, self.measured_a) {
-                    AlignmentStep::Inject { angle, current_a } => (angle, current_a),
-                    AlignmentStep::Done(Ok(count)) => {
-                        push_event(cs, Event::Aligned(count));
-                        self.phase = Phase::BrakeSetting(BRAKE_SET_STEPS, *injection, *offsets);
-                        (0, AlignmentParams::for_drive(&DRIVE_CONFIG).current_a)
-                    }
-                    AlignmentStep::Done(Err(error)) => {
-                        self.phase = Phase::Failed;
-                        self.latch(cs, FirmwareFault::Alignment(error));
-                        return (None, None, codes);
-                    }
-                };
-                let injection = match &mut self.phase {
-                    Phase::Aligning(_, injection, _) | Phase::BrakeSetting(_, injection, _) => injection,
-                    _ => return (None, None, codes),
-                };
-                let (compare, measured_a) = injection.step(codes, samples.dc_bus_code, angle, current_a);
-                self.measured_a = measured_a;
-                let brake_released = matches!(self.phase, Phase::Aligning(..));
-                (None, Some(Injected { compare, brake_released }), codes)
-            }
-            Phase::BrakeSetting(left, injection, offsets) => {
-                let codes = offsets.correct(samples.phase_codes, ZERO_CODE);
-                let current_a = AlignmentParams::for_drive(&DRIVE_CONFIG).current_a;
-                let (compare, _) = injection.step(codes, samples.dc_bus_code, 0, current_a);
-                *left = left.saturating_sub(1);
-                if *left == 0 {
-                    // The controller's first step follows with the rotor at
-                    // electrical zero: its angle reference.
-                    self.phase = Phase::Running(*offsets);
-                }
-                (None, Some(Injected { compare, brake_released: false }), codes)
-            }
-            Phase::Running(offsets) => {
+            StartupStep::Run(codes) => {
                 let frame = SensorFrame {
-                    phase_current_codes: offsets.correct(samples.phase_codes, ZERO_CODE),
+                    phase_current_codes: codes,
                     encoder_count,
                     dc_bus_code: samples.dc_bus_code,
                     time_us,
@@ -559,9 +500,8 @@ impl Drive {
                 if self.controller.observer_input_waiting() {
                     crate::observer::input_published();
                 }
-                (Some(output), None, frame.phase_current_codes)
+                (Some(output), None, codes)
             }
-            Phase::Failed => (None, None, samples.phase_codes),
         }
     }
 
@@ -569,23 +509,37 @@ impl Drive {
         let result = match command {
             Command::Drive(command) => {
                 let starts = matches!(command, ControllerCommand::Travel(_) | ControllerCommand::SpeedTravel(_));
-                if starts && (self.fault.is_some() || !matches!(self.phase, Phase::Running(_))) {
+                if starts && (self.fault.is_some() || !self.startup.is_running()) {
                     Err(Refusal::NotReady)
                 } else {
                     lift_drive::apply(command, &mut self.controller).map_err(Refusal::Controller)
                 }
             }
+            Command::Align => {
+                if self.fault.is_some() {
+                    Err(Refusal::NotReady)
+                } else {
+                    self.startup.command(StartupCommand::Align).map_err(|e| match e {
+                        StartupRefusal::Faulted => Refusal::NotReady,
+                        _ => Refusal::Busy,
+                    })
+                }
+            }
             Command::Reset => {
                 let controller_tripped = matches!(self.controller.state(), DriveState::Tripped(_));
-                match self.fault {
-                    Some(FirmwareFault::Calibration(_) | FirmwareFault::Alignment(_)) => Err(Refusal::NotReady),
-                    None if !controller_tripped => Err(Refusal::NothingToReset),
-                    _ => {
-                        pwm::clear_break_flag();
-                        self.fault = None;
-                        self.controller.reset();
-                        Ok(())
+                let startup_fault = self.startup.fault().is_some();
+                if self.fault.is_none() && !controller_tripped && !startup_fault {
+                    Err(Refusal::NothingToReset)
+                } else {
+                    pwm::clear_break_flag();
+                    self.fault = None;
+                    if startup_fault {
+                        let _ = self.startup.command(StartupCommand::Reset);
                     }
+                    if controller_tripped {
+                        self.controller.reset();
+                    }
+                    Ok(())
                 }
             }
         };

@@ -57,18 +57,23 @@ fn now_us() -> u32 {
     Instant::now().as_micros() as u32
 }
 
+/// The drive's status for the lift controller, from the control interrupt's
+/// snapshot: the fault bit set by any latched fault (the firmware's, the
+/// start-up sequence's, the controller's), "brake open" and "travelling"
+/// from the outputs actually driven (brake output released, inverter on),
+/// not from the controller's state.
 fn status() -> drive_core::dcp::DriveStatus {
     let s = control::snapshot();
-    match s.state {
+    let mut status = match s.state {
         Some(state) => drive_status(state, s.speed_radps, s.ready_gate, &DRIVE_CONFIG),
-        // Calibrating or aligning (or failed): not ready; during the
-        // alignment the inverter drives the machine with the brake open.
-        None => drive_core::dcp::DriveStatus {
-            travelling: s.pwm_on,
-            brake_open: s.brake_released,
-            ..drive_core::dcp::DriveStatus::default()
-        },
-    }
+        // Calibrating, waiting for the alignment command or aligning: not ready.
+        None => drive_core::dcp::DriveStatus::default(),
+    };
+    status.fault |= s.fault;
+    status.ready &= !s.fault;
+    status.brake_open = s.brake_released;
+    status.travelling = s.pwm_on || s.brake_released;
+    status
 }
 
 /// The DCP task: owns the USART and the port until the chip stops.

@@ -31,11 +31,14 @@
 //! matched legs, and the bridge would be switching before its current
 //! readings are trustworthy. (The switching noise that couples into the
 //! readings is therefore not part of the offset.) A rejected calibration
-//! latches a fault (PWM off, brake applied) and the log says why; otherwise
-//! the rotor alignment follows (`drive_core::alignment`: current injected at
-//! electrical 0, +90 and 0 degrees with the brake open, checked from the
-//! encoder; a failure latches a fault), the brake is set, and the drive is
-//! Idle and reports itself ready to the lift controller.
+//! latches a fault (PWM off, brake applied) and the log says why. Then the
+//! drive stays in its safe state (gates off, brake applied, not ready)
+//! until the service port commands the rotor alignment (`align`:
+//! `drive_core::startup`, current injected at electrical 0, +90 and 0
+//! degrees with the brake open, checked from the encoder and guarded by the
+//! controller's protections); after it the brake is set and the drive is
+//! Idle and reports itself ready to the lift controller. The same holds
+//! after every reset (power-up, watchdog, reset button).
 //!
 //! Travel commands come from a lift controller over DCP (`dcp.rs`: UART5,
 //! RS-485 half duplex with the USART driving the transceiver's DE): DCP4
@@ -45,8 +48,8 @@
 //! timeout watchdog stops the drive safely (inverter off, brake applied)
 //! when the master falls silent. The car mass of the load weighing is a
 //! parameter (`params.rs`, settable on the service port), the heaviest car
-//! of the rig until one is stored. A latched fault is cleared by restarting the chip (reset button
-//! B2), which also repeats the calibration.
+//! of the rig until one is stored. A latched fault is cleared by the service
+//! port's `reset` (a failed calibration then calibrates again).
 //!
 //! Service port (`service.rs`): LPUART1 on the ST-LINK virtual COM port,
 //! the line protocol of `drive_core::service` (`host-sim drive --port`):

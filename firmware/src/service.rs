@@ -16,14 +16,17 @@
 //! the controller learned in its latest travel with `adaptive` or
 //! `car-observer` (`drive_core::lift_drive::kept_table`, read from the
 //! paused controller), else the table installed. During a travel or the
-//! start-up `save` is answered `error busy`.
+//! start-up `save` is answered `error busy`. `reset` clears latched faults
+//! (`error nothing-to-reset` when none is latched) and `align` commands
+//! the rotor alignment (accepted only in the safe state after the
+//! calibration): both go to the control interrupt's command queue.
 
 use core::cell::RefCell;
 
 use critical_section::Mutex;
 use defmt::warn;
 use drive_core::param_store::DriveParameters;
-use drive_core::service::{answer, ServiceState, MAX_LINE};
+use drive_core::service::{answer, parse, Request, ServiceState, MAX_LINE};
 use embassy_stm32::usart::{self, BufferedUart};
 use embedded_io_async::{Read, Write};
 
@@ -104,8 +107,17 @@ pub async fn run(mut uart: BufferedUart<'static>, mut store: ParamStore, encoder
         // after a learning travel), as the PIL target's application layer.
         let installed = state.table;
         state.table = control::kept_table(&installed);
+        let request = parse(&line[..len]).ok();
         let reply = answer(&line[..len], &mut state);
         let mut text: &[u8] = reply.as_bytes();
+        if text.starts_with(b"ok") {
+            match request {
+                Some(Request::Reset) if !snapshot.fault => text = b"error nothing-to-reset",
+                Some(Request::Reset) if control::submit(control::Command::Reset).is_err() => text = b"error busy",
+                Some(Request::Align) if control::submit(control::Command::Align).is_err() => text = b"error busy",
+                _ => {}
+            }
+        }
         if state.save_requested {
             state.save_requested = false;
             if !control::pause_if_idle() {

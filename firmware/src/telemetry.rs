@@ -116,7 +116,7 @@ fn log_event(event: &Event) {
             let [u, v, w] = offsets.zero_current_codes;
             info!(
                 "current offsets calibrated with the inverter off: zero-current codes U {=u16} V {=u16} W {=u16} \
-                 (mid-scale {=u16}); aligning the rotor (brake open, current injected)",
+                 (mid-scale {=u16}); safe state (gates off, brake applied) until the align command",
                 u,
                 v,
                 w,
@@ -169,16 +169,19 @@ fn log_fault(fault: FirmwareFault) {
                 }
                 AlignmentError::Runaway(c) => ("the load pulled the rotor off the current vector (counts)", c),
             };
-            error!("rotor alignment failed: {=str} {=i32}: {=str} until restart", what, counts, SAFE)
+            error!("rotor alignment failed: {=str} {=i32}: {=str} until a reset command", what, counts, SAFE)
+        }
+        FirmwareFault::Protection(fault) => {
+            error!("protection tripped during the alignment: {=str}: {=str}", fault.name(), SAFE)
         }
         FirmwareFault::Calibration(error) => match error {
             OffsetError::NotEnoughSamples { samples, required } => error!(
-                "current-offset calibration incomplete ({=u16} of {=u16} samples): {=str} until restart",
+                "current-offset calibration incomplete ({=u16} of {=u16} samples): {=str} until a reset command",
                 samples, required, SAFE
             ),
             OffsetError::Noisy { phase, peak_to_peak_codes } => error!(
                 "current-offset calibration failed: phase {=str} spans {=u16} codes peak to peak (limit {=u16}): \
-                 {=str} until restart",
+                 {=str} until a reset command",
                 phase_name(phase),
                 peak_to_peak_codes,
                 drive_core::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_peak_to_peak_codes,
@@ -186,7 +189,7 @@ fn log_fault(fault: FirmwareFault) {
             ),
             OffsetError::OffsetOutOfRange { phase, zero_current_code } => error!(
                 "current-offset calibration failed: phase {=str} reads {=u16} at zero current, more than {=u16} \
-                 codes from mid-scale {=u16}: {=str} until restart",
+                 codes from mid-scale {=u16}: {=str} until a reset command",
                 phase_name(phase),
                 zero_current_code,
                 drive_core::current_offset::OffsetLimits::for_adc_bits(DRIVE_CONFIG.adc_bits).max_offset_codes,
@@ -214,6 +217,7 @@ fn command_name(command: &Command) -> &'static str {
         Command::Drive(ControllerCommand::Stop) => "stop",
         Command::Drive(ControllerCommand::SafeStop(_)) => "safe stop",
         Command::Reset => "reset",
+        Command::Align => "align",
     }
 }
 
@@ -226,7 +230,8 @@ fn refusal_name(refusal: Refusal) -> &'static str {
         }
         Refusal::Controller(ApplyError::Speed(SpeedCommandError::NoSpeedTravel)) => "no speed travel running",
         Refusal::Controller(ApplyError::Speed(SpeedCommandError::OutOfRange)) => "speed out of range",
-        Refusal::NotReady => "drive not calibrated, or a firmware fault is latched",
+        Refusal::NotReady => "drive not calibrated or not aligned, or a fault is latched",
+        Refusal::Busy => "the start-up sequence is not waiting for it",
         Refusal::NothingToReset => "no fault latched",
     }
 }

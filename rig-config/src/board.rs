@@ -417,6 +417,96 @@ mod tests {
         assert!(c.dc_bus_overvoltage_v < c.dc_bus_sense_full_scale_v);
     }
 
+    /// The commanded alignment on the board, closed around a star-connected
+    /// R-L machine held at rest (ideal inverter, phase voltages from the
+    /// compares and the bus), the shunt amplifiers as the board has them
+    /// (inverting) and the firmware's mirror of the codes when the
+    /// description says they invert (`firmware/src/adc.rs`); returns the
+    /// largest phase current, A, and the fault, with whether the outputs
+    /// ended off and the brake applied. `r`: the machine's phase resistance, ohm.
+    fn align_on_the_board(mirror_codes: bool, r: f64) -> (f64, Option<drive_core::startup::StartupFault>, bool) {
+        use drive_core::startup::{Startup, StartupCommand, StartupEvent, StartupStep};
+        let board = Board::embedded_default().unwrap();
+        let rig = RigConfig::embedded_default().unwrap();
+        let config = board.drive_config(&rig).unwrap();
+        let mut startup = Startup::new(&config, *drive_core::Controller::new(&config).supervisor_limits());
+        let lsb = config.current_sense_full_scale_a as f64 / 2048.0;
+        let bus_v = board.operation.dc_bus_nominal_v;
+        let bus_code = (bus_v / config.dc_bus_sense_full_scale_v as f64 * 4095.0).round() as u16;
+        let l = rig.motor.ld_h;
+        let dt = 1.0 / config.current_loop_hz as f64;
+        let period = config.pwm_period_counts as f64;
+        let mut i = [0.0f64; 3];
+        let mut peak: f64 = 0.0;
+        let mut fault = None;
+        let mut safe_after = false;
+        for n in 0..16_000 {
+            // The board's amplifier inverts: a current into the machine reads below mid-scale.
+            let raw = i.map(|x| (2048.0 - x / lsb).round().clamp(0.0, 4095.0) as u16);
+            let codes = if mirror_codes { raw.map(|c| 4095 - c) } else { raw };
+            if n == 2000 {
+                assert!(startup.is_waiting_for_alignment());
+                startup.command(StartupCommand::Align).unwrap();
+            }
+            let out = match startup.step(codes, bus_code, 1000) {
+                StartupStep::Drive(out) => out,
+                StartupStep::Run(_) => break,
+            };
+            if let Some(StartupEvent::Fault(f)) = out.event {
+                fault = Some(f);
+            }
+            if fault.is_some() {
+                safe_after = !out.pwm_on && !out.brake_released;
+                if n > 2000 + 100 && out.event.is_none() {
+                    break;
+                }
+            }
+            let v = if out.pwm_on { out.compare.map(|c| c as f64 / period * bus_v) } else { [0.0; 3] };
+            let mean = (v[0] + v[1] + v[2]) / 3.0;
+            for k in 0..3 {
+                // Outputs off: the currents decay through the body diodes (taken as zero voltage).
+                i[k] += (v[k] - mean - r * i[k]) / l * dt;
+            }
+            peak = peak.max(i.iter().fold(0.0f64, |m, x| m.max(x.abs())));
+        }
+        (peak, fault, safe_after)
+    }
+
+    #[test]
+    fn the_alignment_on_the_board_reaches_its_current_without_a_trip() {
+        let rig = RigConfig::embedded_default().unwrap();
+        let (peak, fault, _) = align_on_the_board(true, rig.motor.stator_resistance_ohm);
+        assert_eq!(fault, None);
+        assert!(peak > 5.0 && peak < 15.0, "{peak} A");
+    }
+
+    /// A current-sign error at start-up (the amplifiers' inversion not
+    /// taken out): the loop runs away to the voltage limit. With the rig's
+    /// machine (1.2 ohm) that limit is 16.5 A on the 36 V bus and the
+    /// alignment refuses the current it never reaches; with a machine of
+    /// 0.1 ohm the over-current protection trips. Either way the current
+    /// stays below the board's rated peak, and the drive ends with gates
+    /// off and the brake applied.
+    #[test]
+    fn a_current_sign_error_at_start_up_trips_before_the_board_limit() {
+        use drive_core::startup::StartupFault;
+        let board = Board::embedded_default().unwrap();
+        let rig = RigConfig::embedded_default().unwrap();
+        for (r, expected) in [
+            (
+                rig.motor.stator_resistance_ohm,
+                StartupFault::Alignment(drive_core::alignment::AlignmentError::CurrentNotReached),
+            ),
+            (0.1, StartupFault::Protection(drive_core::supervisor::Fault::OverCurrent)),
+        ] {
+            let (peak, fault, safe) = align_on_the_board(false, r);
+            assert_eq!(fault, Some(expected), "{r} ohm: peak {peak} A");
+            assert!(peak < board.phase_current_max_peak_a() + 0.5, "{r} ohm: {peak} A");
+            assert!(peak < board.current_full_scale_a());
+            assert!(safe, "{r} ohm: gates off and brake applied after the trip");
+        }
+    }
+
     #[test]
     fn a_description_without_a_pin_is_refused() {
         let text = EMBEDDED_BOARD_TOML.replacen("name = \"DcpDe\"", "name = \"Other\"", 1);

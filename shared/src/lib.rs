@@ -31,6 +31,7 @@ pub mod ripple;
 pub mod service;
 pub mod speed_estimator;
 pub mod speed_loop;
+pub mod startup;
 pub mod supervisor;
 pub mod svpwm;
 pub mod trig;

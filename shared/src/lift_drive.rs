@@ -462,8 +462,23 @@ impl LiftDrive {
         s.dcp_mode = parameters.dcp_mode;
         s.strategy_settable = self.chain.is_some();
         let before = *s;
+        let request = crate::service::parse(&self.line[..self.line_len]).ok();
         let answer = crate::service::answer(&self.line[..self.line_len], s);
         self.line_len = 0;
+        // `reset` clears a tripped controller; `align` is the firmware's
+        // (this layer's controller takes its angle reference as given).
+        let refused: Option<&[u8]> = match request {
+            Some(crate::service::Request::Reset) => {
+                if matches!(self.controller.state(), DriveState::Tripped(_)) {
+                    self.controller.reset();
+                    None
+                } else {
+                    Some(b"error nothing-to-reset")
+                }
+            }
+            Some(crate::service::Request::Align) => Some(b"error unsupported"),
+            _ => None,
+        };
         let after = *s;
         if after.strategy != before.strategy {
             if let Some(chain) = self.chain {
@@ -483,7 +498,7 @@ impl LiftDrive {
             None
         };
         let mut reply = ServiceReply { bytes: [0; MAX_SERVICE_REPLY], len: 0, save };
-        let text = answer.as_bytes();
+        let text = refused.unwrap_or(answer.as_bytes());
         reply.bytes[..text.len()].copy_from_slice(text);
         reply.bytes[text.len()..text.len() + 2].copy_from_slice(b"\r\n");
         reply.len = text.len() + 2;

@@ -64,6 +64,12 @@ pub enum Request {
     GetParams,
     /// `save`.
     Save,
+    /// `reset`: clear latched faults (the drive's own answer says whether
+    /// one was latched).
+    Reset,
+    /// `align`: run the rotor alignment (brake open, current injected), on
+    /// a drive that needs one.
+    Align,
 }
 
 /// The name of a DCP variant on the service port.
@@ -150,6 +156,8 @@ pub fn parse(line: &[u8]) -> Result<Request, RequestError> {
         (Some("get"), Some("dcp-mode"), None) => Request::GetDcpMode,
         (Some("get"), Some("params"), None) => Request::GetParams,
         (Some("save"), None, None) => Request::Save,
+        (Some("reset"), None, None) => Request::Reset,
+        (Some("align"), None, None) => Request::Align,
         (Some("set"), Some("dcp-mode"), Some(name)) => Request::SetDcpMode(match name {
             "dcp3" => Mode::Dcp3,
             "dcp4" => Mode::Dcp4,
@@ -250,8 +258,10 @@ impl Write for Answer {
 pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
     let mut out = Answer::new();
     let result = parse(line).and_then(|request| {
-        let is_set =
-            matches!(request, Request::SetStrategy(_) | Request::SetMass(_) | Request::SetDcpMode(_) | Request::Save);
+        let is_set = matches!(
+            request,
+            Request::SetStrategy(_) | Request::SetMass(_) | Request::SetDcpMode(_) | Request::Save | Request::Align
+        );
         if is_set && state.travelling {
             Err(RequestError::Busy)
         } else if (matches!(request, Request::SetStrategy(_)) && !state.strategy_settable)
@@ -302,6 +312,10 @@ pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
             state.save_requested = true;
             write!(out, "ok saved")
         }
+        // Carried out by the caller, which answers `error nothing-to-reset`
+        // (or `error unsupported` for `align`) instead when it does not apply.
+        Ok(Request::Reset) => write!(out, "ok reset"),
+        Ok(Request::Align) => write!(out, "ok align"),
     };
     out
 }
@@ -394,6 +408,19 @@ mod tests {
         assert_eq!(ask("set strategy off", &mut s), "error unsupported");
         s.strategy_settable = true;
         assert_eq!(s, before);
+    }
+
+    #[test]
+    fn reset_and_align_are_requests_the_caller_carries_out() {
+        let mut s = state();
+        assert_eq!(parse(b"reset"), Ok(Request::Reset));
+        assert_eq!(parse(b"align"), Ok(Request::Align));
+        assert_eq!(parse(b"reset now"), Err(RequestError::Unknown));
+        assert_eq!(ask("reset", &mut s), "ok reset");
+        assert_eq!(ask("align", &mut s), "ok align");
+        // No alignment during a travel.
+        s.travelling = true;
+        assert_eq!(ask("align", &mut s), "error busy");
     }
 
     #[test]
