@@ -11,6 +11,15 @@
 //! says so before the work starts, where the names are known, and
 //! [`OutputDir::commit`] checks every file again before it moves any.
 //!
+//! Interruption: SIGINT and SIGTERM (Ctrl-C, `kill`, a CI timeout) remove
+//! the run's staging directories and exit with status 130; a signal that
+//! arrives while a commit moves files waits until the commit has moved
+//! them all, so an output directory holds one run's files or the other's,
+//! never half of each. A staging directory left by a run that could not
+//! clean up (SIGKILL, a power cut) is removed by the next run that writes
+//! to the same directory, once its process has gone. An output directory
+//! never lies inside the inputs of the run ([`refuse_inside_inputs`]).
+//!
 //! Standard output: [`print_line`] (the CLI's `outln!`) writes a line and
 //! handles a closed pipe (`host-sim ... | head -1`): the rest of the run's
 //! lines are dropped quietly and the command finishes its work; any other
@@ -20,7 +29,7 @@ use std::fs;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
-use std::sync::Mutex;
+use std::sync::{Mutex, Once};
 
 /// Prefix of the staging directory's name (followed by the process id and a
 /// counter); a directory of that name is left behind only by a killed run.
@@ -36,6 +45,22 @@ pub enum OutputError {
         path: PathBuf,
         /// Cause.
         source: io::Error,
+    },
+    /// The output directory named is an existing file.
+    #[error("the output directory `{}` is a file; expected a directory (new or existing)", .0.display())]
+    NotADirectory(PathBuf),
+    /// The output directory is, or lies inside, an input of the run.
+    #[error(
+        "the output directory `{}` is inside the input `{}`: a run never writes into its own inputs, \
+         --force or not; give another --out",
+        .out.display(),
+        .input.display()
+    )]
+    InsideInput {
+        /// The output directory as given.
+        out: PathBuf,
+        /// The input it lies in, as given.
+        input: PathBuf,
     },
     /// Outputs of this run exist already and `--force` was not given.
     #[error(
@@ -75,14 +100,20 @@ impl OutputDir {
     /// [`OutputDir::commit`]; without, they stop the run.
     pub fn create(dir: &Path, force: bool) -> Result<Self, OutputError> {
         static COUNTER: AtomicU32 = AtomicU32::new(0);
+        if fs::metadata(dir).is_ok_and(|m| !m.is_dir()) {
+            return Err(OutputError::NotADirectory(dir.to_path_buf()));
+        }
         let created: Vec<PathBuf> =
             dir.ancestors().take_while(|d| !d.as_os_str().is_empty() && !d.exists()).map(Path::to_path_buf).collect();
         fs::create_dir_all(dir).map_err(|source| OutputError::Io { path: dir.to_path_buf(), source })?;
+        remove_stale_staging(dir);
+        install_interrupt_handler();
         loop {
             let n = COUNTER.fetch_add(1, Ordering::Relaxed);
             let staging = dir.join(format!("{STAGING_PREFIX}{}-{n}", std::process::id()));
             match fs::create_dir(&staging) {
                 Ok(()) => {
+                    lock(&LIVE_STAGING).push(staging.clone());
                     return Ok(Self { dir: dir.to_path_buf(), staging, force, committed: false, created });
                 }
                 // A killed run of a process with the same id left it: take the next.
@@ -148,6 +179,8 @@ impl OutputDir {
     /// directory. Without `--force`, nothing is moved when any of them
     /// exists already. Returns the published files, sorted.
     pub fn commit(mut self) -> Result<Vec<PathBuf>, OutputError> {
+        // An interrupt waits for the whole commit (see the module documentation).
+        let _moving = lock(&COMMITTING);
         let mut staged = Vec::new();
         staged_files(&self.staging, Path::new(""), &mut staged)?;
         staged.sort();
@@ -166,6 +199,7 @@ impl OutputDir {
         }
         fs::remove_dir_all(&self.staging).map_err(|source| OutputError::Io { path: self.staging.clone(), source })?;
         self.committed = true;
+        forget_staging(&self.staging);
         Ok(published)
     }
 }
@@ -176,11 +210,107 @@ impl Drop for OutputDir {
             // Best effort: a failed run's files must not linger; the run's
             // own error is what gets reported.
             let _ = fs::remove_dir_all(&self.staging);
+            forget_staging(&self.staging);
             for dir in &self.created {
                 // Only an empty directory goes: another process may have
                 // written there since.
                 let _ = fs::remove_dir(dir);
             }
+        }
+    }
+}
+
+/// Refuses an output directory `out` that is one of the folders `inputs`
+/// (datasets the run reads) or lies inside one: compared as real paths, so
+/// a symbolic link or `..` does not get round it. `out` need not exist yet.
+/// A file among `inputs` is no folder to write into (an output directory
+/// that is a file is refused by [`OutputDir::create`]).
+pub fn refuse_inside_inputs(out: &Path, inputs: &[&Path]) -> Result<(), OutputError> {
+    let out_real = real_path(out);
+    for input in inputs {
+        // A single file given as input (a recording's metadata, an export)
+        // is refused as an output directory by `create`; a folder, also
+        // what lies inside it.
+        let input_real = real_path(input);
+        if input_real.is_dir() && out_real.starts_with(&input_real) {
+            return Err(OutputError::InsideInput { out: out.to_path_buf(), input: input.to_path_buf() });
+        }
+    }
+    Ok(())
+}
+
+/// `path` with its longest existing ancestor resolved
+/// (`fs::canonicalize`) and the rest appended: the real path of a
+/// directory that is about to be created.
+fn real_path(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut rest = Vec::new();
+    let mut base = absolute.as_path();
+    loop {
+        if let Ok(real) = fs::canonicalize(base) {
+            return rest.iter().rev().fold(real, |p, c| p.join(c));
+        }
+        match (base.parent(), base.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                base = parent;
+            }
+            _ => return absolute,
+        }
+    }
+}
+
+/// Staging directories of this process not yet committed or dropped: what
+/// an interrupt removes.
+static LIVE_STAGING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+/// Held while a commit moves files; an interrupt waits for it.
+static COMMITTING: Mutex<()> = Mutex::new(());
+
+/// Locks `m`, also after a panic elsewhere poisoned it (the data are paths).
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+fn forget_staging(staging: &Path) {
+    lock(&LIVE_STAGING).retain(|s| s != staging);
+}
+
+/// Installs, once per process, the SIGINT/SIGTERM handler that waits for a
+/// commit in progress, removes the live staging directories and exits with
+/// status 130. A process that cannot install it (another handler is set)
+/// keeps the default behaviour; the next run then removes what it left.
+fn install_interrupt_handler() {
+    static INSTALL: Once = Once::new();
+    INSTALL.call_once(|| {
+        let _ = ctrlc::set_handler(|| {
+            let _moving = lock(&COMMITTING);
+            for staging in lock(&LIVE_STAGING).drain(..) {
+                let _ = fs::remove_dir_all(staging);
+            }
+            eprintln!("error: interrupted; no output of this run was written");
+            std::process::exit(130);
+        });
+    });
+}
+
+/// Removes the staging directories in `dir` whose process has ended (the
+/// process id is part of the name). Where the system gives no way to tell
+/// (no `/proc`), nothing is removed.
+fn remove_stale_staging(dir: &Path) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) =
+            name.to_str().and_then(|n| n.strip_prefix(STAGING_PREFIX)).and_then(|rest| rest.split('-').next())
+        else {
+            continue;
+        };
+        let alive = pid.parse::<u32>().is_ok_and(|pid| Path::new("/proc").join(pid.to_string()).exists());
+        if !alive && entry.file_type().is_ok_and(|t| t.is_dir()) {
+            let _ = fs::remove_dir_all(entry.path());
         }
     }
 }
@@ -295,6 +425,46 @@ mod tests {
         out.commit().unwrap();
         assert_eq!(fs::read_to_string(dir.join("a.toml")).unwrap(), "new");
         assert_eq!(names(dir), ["a.toml"]);
+    }
+
+    #[test]
+    fn a_staging_directory_of_an_ended_process_is_removed_by_the_next_run() {
+        let tmp = tempfile::tempdir().unwrap();
+        // A process id above Linux's maximum (2^22) belongs to no process.
+        let stale = tmp.path().join(format!("{STAGING_PREFIX}4294967295-0"));
+        fs::create_dir(&stale).unwrap();
+        fs::write(stale.join("travel.csv"), "half a recording").unwrap();
+        // One of a live process (this one) stays.
+        let live = tmp.path().join(format!("{STAGING_PREFIX}{}-999999", std::process::id()));
+        fs::create_dir(&live).unwrap();
+        let out = OutputDir::create(tmp.path(), false).unwrap();
+        if Path::new("/proc/self").exists() {
+            assert!(!stale.exists(), "the dead run's staging directory is still there");
+        }
+        assert!(live.exists(), "a live run's staging directory was removed");
+        drop(out);
+        fs::remove_dir(&live).unwrap();
+        assert!(names(tmp.path()).is_empty() || !Path::new("/proc/self").exists(), "{:?}", names(tmp.path()));
+    }
+
+    #[test]
+    fn an_output_inside_an_input_is_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dataset = tmp.path().join("dataset");
+        fs::create_dir(&dataset).unwrap();
+        fs::write(dataset.join("free_decays.csv"), "t\n").unwrap();
+        // The dataset itself, a folder inside it (not yet made), the same
+        // folder by `..`.
+        for out in [dataset.clone(), dataset.join("results/new"), dataset.join("../dataset")] {
+            let err = refuse_inside_inputs(&out, &[&dataset]).unwrap_err().to_string();
+            assert!(err.contains("inside the input") && err.contains("dataset"), "{err}");
+        }
+        // Beside a single recording given as input is fine: it is not
+        // a dataset the run reads.
+        refuse_inside_inputs(&dataset, &[&dataset.join("free_decays.csv")]).unwrap();
+        // A sibling folder is fine, and so is the dataset's parent.
+        refuse_inside_inputs(&tmp.path().join("out"), &[&dataset]).unwrap();
+        refuse_inside_inputs(tmp.path(), &[&dataset]).unwrap();
     }
 
     #[test]

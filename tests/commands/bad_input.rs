@@ -530,3 +530,12 @@ fn the_torque_sign_is_resolved_by_the_travel_and_refused_when_the_currents_contr
     let err = travel_torque(&rig, &unrelated, "up").err().expect("unrelated currents are refused").to_string();
     assert!(err.contains("recording `up`") && err.contains("neither follows nor opposes"), "{err}");
 }
+
+#[test]
+fn a_fault_after_the_end_of_the_travel_is_refused_not_reported_undetected() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("faults");
+    let err = run_err(&["faults", "--quiet", "--direction", "up", "--fault", "current-stuck@300", "--out", s(&out)]);
+    assert!(err.contains("current-stuck@300") && err.contains("never injected"), "{err}");
+    assert!(!out.exists(), "a refused run wrote {out:?}");
+}

@@ -7,6 +7,7 @@ mod cli;
 mod doc_commands;
 mod foreign_rig;
 mod input_fuzz;
+mod outputs;
 mod recording_read;
 mod ride_quality;
 mod rig_sample;

@@ -1,7 +1,10 @@
 //! Reading datasets in measurement format version 1 and `EVIMP1` exports:
 //! round trips with the writer, every kind of malformed input refused with a
 //! message naming the file, the line/field/column and what was expected,
-//! inputs never modified, and no panic on arbitrary or mutated input.
+//! inputs never modified, and no panic on arbitrary or mutated input. The
+//! format is tested through `parse_recording` and `parse_dataset` (the
+//! samples here stress the text, not the physics); the checks of a
+//! recording against itself are in `recording::consistency`.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -10,8 +13,9 @@ use std::time::{Instant, SystemTime};
 
 use proptest::prelude::*;
 use recording::{
-    read_dataset, read_evimp, read_recording, write_recording, CarDirection, Column, ReadError, Recording,
-    RecordingKind, RecordingMeta, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, I_A, I_B, I_C, REF_SPEED, SPEED, TIME_S,
+    parse_dataset, parse_recording, read_evimp, read_recording, write_recording, CarDirection, Column, ReadError,
+    Recording, RecordingKind, RecordingMeta, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, I_A, I_B, I_C, REF_SPEED, SPEED,
+    TIME_S,
 };
 use rig_config::RigConfig;
 
@@ -105,7 +109,7 @@ fn travel_round_trip_is_bit_identical() {
     let dir = tempfile::tempdir().unwrap();
     let rec = travel_recording(2000);
     let (toml_path, _) = write_recording(dir.path(), "travel_up_m70.5_01", &rec).unwrap();
-    let back = read_recording(&toml_path, rope_total()).unwrap();
+    let back = parse_recording(&toml_path, rope_total()).unwrap();
     assert_bit_identical(&rec, &back);
     assert_eq!(rec, back);
 }
@@ -115,7 +119,7 @@ fn free_decay_round_trip_is_bit_identical() {
     let dir = tempfile::tempdir().unwrap();
     let rec = decay_recording(300);
     let (toml_path, _) = write_recording(dir.path(), "decay_l4.0_m33", &rec).unwrap();
-    let back = read_recording(&toml_path, rope_total()).unwrap();
+    let back = parse_recording(&toml_path, rope_total()).unwrap();
     assert_bit_identical(&rec, &back);
 }
 
@@ -153,7 +157,7 @@ fn hand_written_dataset_with_windows_line_ends_bom_quotes_and_integers_loads() {
         VALID_CSV.lines().skip(1).map(|l| format!("{l},\"7\"")).collect::<Vec<_>>().join("\r\n")
     );
     let path = write_pair(dir.path(), "windows", toml.replace('\n', "\r\n"), csv);
-    let rec = read_recording(&path, rope_total()).unwrap();
+    let rec = parse_recording(&path, rope_total()).unwrap();
     assert_eq!(rec.meta.sample_rate_hz, 1000.0);
     assert_eq!(rec.meta.description.as_deref(), Some("hand-written"));
     assert!(matches!(rec.meta.kind, RecordingKind::Travel { m_cw_kg: 33.0, .. }));
@@ -172,7 +176,7 @@ fn dataset_reads_every_pair_sorted_by_stem_and_ignores_other_files() {
     fs::write(dir.path().join("README.txt"), "notes").unwrap();
     fs::write(dir.path().join("orphan.csv"), "not a recording").unwrap();
     fs::create_dir(dir.path().join("plots.toml")).unwrap();
-    let set = read_dataset(dir.path(), rope_total()).unwrap();
+    let set = parse_dataset(dir.path(), rope_total()).unwrap();
     let stems: Vec<&str> = set.iter().map(|(s, _)| s.as_str()).collect();
     assert_eq!(stems, ["a_hand", "decay_l4.0_m33", "travel_b"]);
     assert_bit_identical(&set[2].1, &travel_recording(20));
@@ -188,7 +192,7 @@ fn dataset_reads_every_pair_sorted_by_stem_and_ignores_other_files() {
 fn refused(toml: impl AsRef<[u8]>, csv: impl AsRef<[u8]>, named: &str, needles: &[&str]) -> ReadError {
     let dir = tempfile::tempdir().unwrap();
     let path = write_pair(dir.path(), "rec_01", toml, csv);
-    let err = read_recording(&path, rope_total()).expect_err("malformed input was accepted");
+    let err = parse_recording(&path, rope_total()).expect_err("malformed input was accepted");
     let msg = err.to_string();
     assert!(msg.contains(&format!("rec_01.{named}`")), "message {msg:?} does not name rec_01.{named}");
     assert!(msg.contains("expected"), "message {msg:?} does not say what was expected");
@@ -214,19 +218,19 @@ fn k01_missing_files() {
     // The .csv of a recording is missing.
     let path = dir.path().join("lonely.toml");
     fs::write(&path, VALID_TOML).unwrap();
-    let msg = read_recording(&path, rope_total()).unwrap_err().to_string();
+    let msg = parse_recording(&path, rope_total()).unwrap_err().to_string();
     assert!(msg.contains("lonely.toml") && msg.contains("lonely.csv") && msg.contains("expected"), "{msg}");
     // In a dataset too.
-    let msg = read_dataset(dir.path(), rope_total()).unwrap_err().to_string();
+    let msg = parse_dataset(dir.path(), rope_total()).unwrap_err().to_string();
     assert!(msg.contains("lonely.csv") && msg.contains("in pairs"), "{msg}");
     // The .toml itself is missing (but its .csv exists).
     fs::write(dir.path().join("ghost.csv"), VALID_CSV).unwrap();
-    let err = read_recording(&dir.path().join("ghost.toml"), rope_total()).unwrap_err();
+    let err = parse_recording(&dir.path().join("ghost.toml"), rope_total()).unwrap_err();
     assert!(matches!(err, ReadError::Io { .. }), "{err:?}");
     let msg = err.to_string();
     assert!(msg.contains("ghost.toml") && msg.contains("cannot read") && msg.contains("expected"), "{msg}");
     // Not a .toml path.
-    let msg = read_recording(&dir.path().join("ghost.csv"), rope_total()).unwrap_err().to_string();
+    let msg = parse_recording(&dir.path().join("ghost.csv"), rope_total()).unwrap_err().to_string();
     assert!(msg.contains("ghost.csv") && msg.contains("expected a path ending in `.toml`"), "{msg}");
 }
 
@@ -234,11 +238,11 @@ fn k01_missing_files() {
 fn k02_empty_or_unreadable_dataset() {
     let dir = tempfile::tempdir().unwrap();
     fs::write(dir.path().join("orphan.csv"), VALID_CSV).unwrap();
-    let msg = read_dataset(dir.path(), rope_total()).unwrap_err().to_string();
+    let msg = parse_dataset(dir.path(), rope_total()).unwrap_err().to_string();
     assert!(msg.contains(&dir.path().display().to_string()) && msg.contains("no recording"), "{msg}");
     assert!(msg.contains("expected at least one `<stem>.toml`"), "{msg}");
     let missing = dir.path().join("no_such_dir");
-    let msg = read_dataset(&missing, rope_total()).unwrap_err().to_string();
+    let msg = parse_dataset(&missing, rope_total()).unwrap_err().to_string();
     assert!(msg.contains("no_such_dir") && msg.contains("cannot read"), "{msg}");
 }
 
@@ -503,7 +507,7 @@ fn k18_time_not_uniform() {
     refused(VALID_TOML, csv_with("0.001,", "0.001000002,"), "csv", &["line 3"]);
     let dir = tempfile::tempdir().unwrap();
     let ok = write_pair(dir.path(), "jitter", VALID_TOML, csv_with("0.001,", "0.0010000005,"));
-    read_recording(&ok, rope_total()).unwrap();
+    parse_recording(&ok, rope_total()).unwrap();
 }
 
 #[test]
@@ -527,7 +531,7 @@ fn k20_blank_line_inside_the_samples() {
     // Blank lines at the end are fine.
     let dir = tempfile::tempdir().unwrap();
     let ok = write_pair(dir.path(), "tail", VALID_TOML, format!("{VALID_CSV}\n\n"));
-    assert_eq!(read_recording(&ok, rope_total()).unwrap().columns[0].values.len(), 4);
+    assert_eq!(parse_recording(&ok, rope_total()).unwrap().columns[0].values.len(), 4);
 }
 
 #[test]
@@ -578,9 +582,9 @@ fn reading_does_not_modify_the_dataset() {
     std::thread::sleep(std::time::Duration::from_millis(20));
     let before = (snapshot(dir.path()), snapshot(&bad));
 
-    read_dataset(dir.path(), rope_total()).unwrap();
-    read_recording(&dir.path().join("travel.toml"), rope_total()).unwrap();
-    read_dataset(&bad, rope_total()).unwrap_err();
+    parse_dataset(dir.path(), rope_total()).unwrap();
+    parse_recording(&dir.path().join("travel.toml"), rope_total()).unwrap();
+    parse_dataset(&bad, rope_total()).unwrap_err();
     read_evimp(&bad.join("rec.evimp.txt")).unwrap_err();
 
     let after = (snapshot(dir.path()), snapshot(&bad));
@@ -786,7 +790,7 @@ fn read_time_of_a_20_s_recording_at_16384_hz() {
     let mut best = f64::INFINITY;
     for _ in 0..5 {
         let start = Instant::now();
-        let back = read_recording(&toml_path, rope_total()).unwrap();
+        let back = parse_recording(&toml_path, rope_total()).unwrap();
         best = best.min(start.elapsed().as_secs_f64());
         assert_eq!(back.columns[0].values.len(), rows);
     }

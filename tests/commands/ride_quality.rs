@@ -177,7 +177,9 @@ fn a_travel_recording_takes_its_regions_from_its_speed_and_keeps_its_direction()
     let tmp = tempfile::tempdir().unwrap();
     let fs_hz = 1000.0;
     let run = Run { v: 0.4, a: 0.5, j: 1.0, rest: 1.0, cruise: 5.0 };
-    let sheave_radius_m = 0.0325;
+    // The reference rig's sheave radius (configs/rig.toml): the car's speed
+    // is the shaft speed times it.
+    let sheave_radius_m = 0.065;
     let mut csv = String::from("time_s,acc_car_mps2,i_a_A,i_b_A,i_c_A,speed_radps\n");
     for k in 0..(run.duration() * fs_hz) as usize {
         let t = k as f64 / fs_hz;
@@ -257,4 +259,32 @@ fn the_public_eva_export_agrees_with_its_analyzer_report_within_5_percent() {
     let r = json(&out);
     let cs = &r["regions"]["constant_speed_s"];
     assert!((f(&cs[0]) - 11.6).abs() < 0.25 && (f(&cs[1]) - 22.0).abs() < 0.25, "{cs}");
+}
+
+/// A travel of the foreign rig sample (`../shared/rig-sample`, read in
+/// place): its accelerometers do not measure DC (the measurement format's
+/// piezoelectric sensors), so the motion comes from the recorded speed. The
+/// distance is held against the metadata's rope lengths, the velocity
+/// against the recorded reference speed: neither is what the command reads.
+#[test]
+fn a_foreign_travel_gets_its_motion_from_the_recorded_speed_not_from_ac_coupled_accelerometers() {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/rig-sample");
+    let file = sample.join("travel_up_m70.5.toml");
+    assert!(file.is_file(), "{}: the foreign rig sample is expected beside the repository", file.display());
+    let meta: toml::Value = toml::from_str(&fs::read_to_string(&file).unwrap()).unwrap();
+    let lw = |k: &str| meta[k].as_float().unwrap();
+    let distance_m = (lw("lw_end_m") - lw("lw_start_m")).abs();
+    let mut reader = csv::Reader::from_path(sample.join("travel_up_m70.5.csv")).unwrap();
+    let column = reader.headers().unwrap().iter().position(|h| h == "ref_speed_mps").unwrap();
+    let ref_max = reader.records().map(|r| r.unwrap()[column].parse::<f64>().unwrap().abs()).fold(0.0_f64, f64::max);
+    let tmp = tempfile::tempdir().unwrap();
+    for flag in ["auto", "acceleration"] {
+        let out = tmp.path().join(flag);
+        let o = host_sim(&["--regions-from", flag], &file, &out);
+        assert!(o.status.success(), "{flag}: {}", String::from_utf8_lossy(&o.stderr));
+        let motion = &json(&out)["motion"];
+        assert!(motion["from"].as_str().unwrap().starts_with("recorded speed"), "{flag}: {motion}");
+        close(f(&motion["distance_m"]), distance_m, 0.03, "distance against the metadata's rope lengths");
+        close(f(&motion["max_velocity_mps"]), ref_max, 0.03, "max velocity against the reference speed");
+    }
 }

@@ -13,7 +13,7 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::{check_count, check_open_range, output_dir};
+use super::{check_count, check_open_range, output_dir_reading};
 use diagnosis::travel_signals::{counterweight_side_length_m, travel_torque, TravelTorque};
 use dsp::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Psd, Spectrogram};
 use plant::modes::natural_modes;
@@ -134,7 +134,7 @@ pub fn run(rig: &RigConfig, args: &AnalyzeArgs) -> anyhow::Result<()> {
     check_count("--burg-order", args.burg_order, 1, MAX_BURG_ORDER)?;
     check_open_range("--stft-window", args.stft_window_s, 0.0, MAX_WINDOW_S)?;
     let dataset = read_dataset(&args.dataset, rig.mechanics.rope_total_length_m)?;
-    let out = output_dir(&args.out, args.force)?;
+    let out = output_dir_reading(&args.out, args.force, &[&args.dataset])?;
     let travels = dataset.iter().filter(|(_, r)| matches!(r.meta.kind, RecordingKind::Travel { .. }));
     out.refuse_existing(
         std::iter::once("analyze.json".to_string()).chain(travels.map(|(stem, _)| format!("{stem}/torque_psd.csv"))),

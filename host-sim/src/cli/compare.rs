@@ -65,11 +65,7 @@ pub fn run(rig: &RigConfig, args: &CompareArgs) -> anyhow::Result<()> {
         if args.shard.is_some() {
             bail!("--merge and --shard exclude each other");
         }
-        let mut rows = Vec::new();
-        for path in &args.merge {
-            rows.extend(read_rows(path)?);
-        }
-        rows.sort_by_key(|r| r.case_index);
+        let rows = merge_shards(&args.merge)?;
         let out = output_dir(&args.out, args.force)?;
         out.refuse_existing(OUTPUTS)?;
         write_outputs(&out, &rows, None)?;
@@ -125,6 +121,41 @@ const OUTPUTS: [&str; 6] =
 /// Largest `compare.csv` that `--merge` reads, bytes (a full sweep's is
 /// about 100 kB).
 const MAX_MERGE_CSV_BYTES: u64 = 64 << 20;
+
+/// The rows of every shard `paths`, sorted by case. Refused: a file with no
+/// row (not a shard), and a case and strategy given twice (the same shard
+/// merged twice, or overlapping shards), naming both files.
+fn merge_shards(paths: &[PathBuf]) -> anyhow::Result<Vec<CompareRow>> {
+    let mut rows: Vec<(CompareRow, &Path)> = Vec::new();
+    for path in paths {
+        let shard = read_rows(path)?;
+        if shard.is_empty() {
+            bail!(
+                "{}: no data row; expected a compare.csv written by `host-sim compare --shard` (a header and one \
+                 row per case and strategy)",
+                path.display()
+            );
+        }
+        for row in shard {
+            if let Some((_, first)) =
+                rows.iter().find(|(r, _)| r.case_index == row.case_index && r.strategy == row.strategy)
+            {
+                bail!(
+                    "--merge: case {} with strategy `{}` is in {} and again in {}; expected each case once (merge \
+                     every shard once, shards of one sweep)",
+                    row.case_index,
+                    row.strategy,
+                    first.display(),
+                    path.display()
+                );
+            }
+            rows.push((row, path));
+        }
+    }
+    let mut rows: Vec<CompareRow> = rows.into_iter().map(|(r, _)| r).collect();
+    rows.sort_by_key(|r| r.case_index);
+    Ok(rows)
+}
 
 fn read_rows(path: &Path) -> anyhow::Result<Vec<CompareRow>> {
     let size = std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?.len();

@@ -16,7 +16,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use super::{check_open_range, default_car_mass_kg, output_dir};
-use closed_loop::faults::run::{default_matrix, run_case_with, FaultCase, FaultOutcome};
+use closed_loop::faults::run::{default_matrix, profile_timing_s, run_case_with, FaultCase, FaultOutcome};
 use closed_loop::faults::{parse_fault, parse_fault_toml, FaultSpec};
 use closed_loop::TravelSpec;
 use rig_config::RigConfig;
@@ -118,6 +118,7 @@ pub fn run(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<()> {
         .collect();
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
+    refuse_never_injected(rig, &cases, &outcomes)?;
 
     let rows: Vec<Row> = outcomes.iter().map(Row::of).collect();
     let md = markdown(&rows);
@@ -134,6 +135,36 @@ pub fn run(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<()> {
     outln!("{}", md.trim_end_matches('\n'));
     outln!("{} faulted travels in {elapsed:.1} s; tables in {}", rows.len(), args.out.display());
     Ok(())
+}
+
+/// Refuses a run in which a given fault never started (its onset after
+/// the end of the simulated travel): a "not detected" row would report a
+/// fault that was never there.
+fn refuse_never_injected(rig: &RigConfig, cases: &[FaultCase], outcomes: &[FaultOutcome]) -> anyhow::Result<()> {
+    for (case, outcome) in cases.iter().zip(outcomes) {
+        if outcome.observed.first_onset_s.is_none() && outcome.error.is_none() {
+            let (start_s, duration_s) = profile_timing_s(rig, &case.travel);
+            anyhow::bail!(
+                "--fault {}: never injected: the {} kg car's travel {} ends its motion {:.2} s after the travel \
+                 command and the simulation stopped before the onset; expected an onset before {:.2} s, or start, \
+                 accel, cruise or decel",
+                outcome.label,
+                case.travel.m_car_kg,
+                direction_name(case.travel.direction),
+                start_s + duration_s,
+                start_s + duration_s
+            );
+        }
+    }
+    Ok(())
+}
+
+/// `up` or `down`.
+fn direction_name(direction: Direction) -> &'static str {
+    match direction {
+        Direction::Up => "up",
+        Direction::Down => "down",
+    }
 }
 
 /// One line of the table.
@@ -182,10 +213,7 @@ impl Row {
             fault: fault.join("+"),
             parameters: o.parameters.clone(),
             instant: instant.join("+"),
-            direction: match o.direction {
-                Direction::Up => "up",
-                Direction::Down => "down",
-            },
+            direction: direction_name(o.direction),
             onset_s: o.onset_s,
             detection_ms: o.detection_s.map(|s| s * 1e3),
             reason_code: o.reason.map(|r| r.code()),

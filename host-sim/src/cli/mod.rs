@@ -201,6 +201,14 @@ pub fn output_dir(dir: &Path, force: bool) -> anyhow::Result<crate::output::Outp
     Ok(crate::output::OutputDir::create(dir, force)?)
 }
 
+/// [`output_dir`] for a command that reads `inputs` (datasets or
+/// recordings): refused when the output directory is one of them or lies
+/// inside one, `--force` or not.
+pub fn output_dir_reading(dir: &Path, force: bool, inputs: &[&Path]) -> anyhow::Result<crate::output::OutputDir> {
+    crate::output::refuse_inside_inputs(dir, inputs)?;
+    output_dir(dir, force)
+}
+
 /// Checks a count on the command line: inside `[lo, hi]`.
 pub fn check_count(flag: &str, value: usize, lo: usize, hi: usize) -> anyhow::Result<()> {
     if (lo..=hi).contains(&value) {

@@ -13,7 +13,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::output_dir;
+use super::output_dir_reading;
 use dsp::ride_quality::MPS2_PER_MG;
 use dsp::{
     regions_from_acceleration, regions_from_speed, ride_report, RegionFigures, RideInput, RideRegions, RideReport,
@@ -66,8 +66,11 @@ struct Run {
     y: Option<Vec<f64>>,
     /// Sound level, dB(A), when recorded.
     sound: Option<Vec<f64>>,
-    /// Speed, rad/s, of a travel of the project's format.
+    /// Shaft speed, rad/s, of a travel of the measurement format.
     speed: Option<Vec<f64>>,
+    /// The car's vertical speed from it (shaft speed times sheave radius,
+    /// 1:1 roping), m/s, positive up.
+    car_speed_mps: Option<Vec<f64>>,
     /// Travel direction, when the file records one.
     direction: Option<&'static str>,
 }
@@ -88,6 +91,7 @@ fn load(rig: &RigConfig, path: &Path) -> anyhow::Result<Run> {
     let first = first_line(path)?;
     if first == "EVIMP1" {
         let e = read_evimp(path)?;
+        refuse_dead_sensor(&e.z_mg, "z", path)?;
         let mps2 = |v: &[f64]| v.iter().map(|a| a * MPS2_PER_MG).collect::<Vec<f64>>();
         let source = if e.sound_dba.is_some() {
             "EVIMP1 export: x, y, z in mg, sound in dB(A)"
@@ -102,6 +106,7 @@ fn load(rig: &RigConfig, path: &Path) -> anyhow::Result<Run> {
             y: Some(mps2(&e.y_mg)),
             sound: e.sound_dba,
             speed: None,
+            car_speed_mps: None,
             direction: None,
         });
     }
@@ -114,9 +119,12 @@ fn load(rig: &RigConfig, path: &Path) -> anyhow::Result<Run> {
             }
             RecordingKind::FreeDecay { .. } => (None, None),
         };
+        refuse_dead_sensor(&acc, ACC_CAR, path)?;
         let source = "measurement format: vertical acc_car_mps2 (no horizontal axes, no sound)";
         let fs = recording.meta.sample_rate_hz;
-        return Ok(Run { source, fs, z: acc, x: None, y: None, sound: None, speed, direction });
+        let radius_m = rig.mechanics.sheave_radius_m;
+        let car_speed_mps = speed.as_ref().map(|w| w.iter().map(|w| w * radius_m).collect());
+        return Ok(Run { source, fs, z: acc, x: None, y: None, sound: None, speed, car_speed_mps, direction });
     }
     let sibling = path.with_extension("toml");
     let hint = if path.extension().is_some_and(|e| e == "csv") && sibling.is_file() {
@@ -130,6 +138,23 @@ fn load(rig: &RigConfig, path: &Path) -> anyhow::Result<Run> {
          `<stem>.csv` beside it",
         path.display()
     )
+}
+
+/// Refuses an acceleration that never changes over the run (every sample
+/// equal: a dead, saturated or disconnected sensor), which would report a
+/// ride of 0 mg.
+fn refuse_dead_sensor(samples: &[f64], column: &str, path: &Path) -> anyhow::Result<()> {
+    if let Some(&first) = samples.first() {
+        if samples.iter().all(|&a| a == first) {
+            anyhow::bail!(
+                "`{}`: column `{column}` is {first} in all {} samples: a dead, saturated or disconnected \
+                 accelerometer; expected a live vertical acceleration (a ride always vibrates)",
+                path.display(),
+                samples.len()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The regions of `run` as `--regions-from` asks; `None` with a note when the
@@ -161,7 +186,7 @@ fn find_regions(run: &Run, from: RegionsFrom, file: &Path) -> anyhow::Result<Opt
 pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
     let run = load(rig, &args.file)?;
     let regions = find_regions(&run, args.regions_from, &args.file)?;
-    let out = output_dir(&args.out, args.force)?;
+    let out = output_dir_reading(&args.out, args.force, &[&args.file])?;
     out.refuse_existing(OUTPUTS)?;
     let input = RideInput {
         sample_rate_hz: run.fs,
@@ -169,6 +194,7 @@ pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
         x_mps2: run.x.as_deref(),
         y_mps2: run.y.as_deref(),
         sound_dba: run.sound.as_deref(),
+        speed_mps: run.car_speed_mps.as_deref(),
     };
     let report = ride_report(&input, regions.as_ref())
         .with_context(|| format!("`{}`: ride quality (ISO 18738-1)", args.file.display()))?;
@@ -229,6 +255,7 @@ struct JsonMotion {
     max_deceleration_mg: f64,
     max_velocity_mps: f64,
     distance_m: f64,
+    from: &'static str,
 }
 
 /// `ride_quality.json`.
@@ -299,6 +326,7 @@ impl JsonReport {
                 max_deceleration_mg: m.max_deceleration_mg,
                 max_velocity_mps: m.max_velocity_mps,
                 distance_m: m.distance_m,
+                from: m.source.describe(),
             }),
             vibration,
         }
@@ -377,12 +405,13 @@ fn print_table(r: &JsonReport) {
     match &r.motion {
         Some(m) => outln!(
             "max acceleration {:.1} mg, max deceleration {:.1} mg, max jerk {:.3} m/s^3, max velocity {:.3} m/s, \
-             distance {:.2} m",
+             distance {:.2} m (motion from the {})",
             m.max_acceleration_mg,
             m.max_deceleration_mg,
             r.max_jerk_mps3,
             m.max_velocity_mps,
-            m.distance_m
+            m.distance_m,
+            m.from
         ),
         None => outln!("max jerk {:.3} m/s^3", r.max_jerk_mps3),
     }

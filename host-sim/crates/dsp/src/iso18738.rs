@@ -90,6 +90,12 @@ pub struct RideInput<'a> {
     pub y_mps2: Option<&'a [f64]>,
     /// A-weighted sound level, dB(A), if recorded.
     pub sound_dba: Option<&'a [f64]>,
+    /// Vertical speed of the car as the drive records it (shaft speed times
+    /// sheave radius), m/s, positive up, if recorded. When given, the
+    /// motion figures (velocity, distance, acceleration and deceleration)
+    /// come from it: accelerometers that do not measure DC (piezoelectric,
+    /// the measurement format's) cannot give them by integration.
+    pub speed_mps: Option<&'a [f64]>,
 }
 
 /// Vibration of one axis over one region.
@@ -143,6 +149,31 @@ pub struct MotionFigures {
     /// Distance travelled: the magnitude of the displacement (integral of
     /// the velocity; a lift run goes one way), m.
     pub distance_m: f64,
+    /// Where the velocity came from.
+    pub source: MotionSource,
+}
+
+/// The signal the motion figures were computed from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MotionSource {
+    /// The recorded speed ([`RideInput::speed_mps`]): velocity as recorded,
+    /// acceleration its derivative low-passed like the acceleration.
+    RecordedSpeed,
+    /// The vertical acceleration, its offset over the standstills removed,
+    /// integrated over the motion.
+    IntegratedAcceleration,
+}
+
+impl MotionSource {
+    /// A short description for reports.
+    pub fn describe(self) -> &'static str {
+        match self {
+            MotionSource::RecordedSpeed => "recorded speed (acceleration: its derivative, 10 Hz low-pass)",
+            MotionSource::IntegratedAcceleration => {
+                "integrated vertical acceleration (offset of the standstills removed)"
+            }
+        }
+    }
 }
 
 /// Result of [`ride_report`].
@@ -173,7 +204,12 @@ fn check_input(input: &RideInput<'_>) -> Result<(), AnalysisError> {
     let window = jerk_window_len(input.sample_rate_hz);
     check_signal(input.z_mps2, window, "ride quality (one 0.5 s jerk fit window)")?;
     let n = input.z_mps2.len();
-    for (name, signal) in [("x_mps2", input.x_mps2), ("y_mps2", input.y_mps2), ("sound_dba", input.sound_dba)] {
+    for (name, signal) in [
+        ("x_mps2", input.x_mps2),
+        ("y_mps2", input.y_mps2),
+        ("sound_dba", input.sound_dba),
+        ("speed_mps", input.speed_mps),
+    ] {
         if let Some(s) = signal {
             if s.len() != n {
                 return Err(AnalysisError::InvalidParameter {
@@ -186,6 +222,18 @@ fn check_input(input: &RideInput<'_>) -> Result<(), AnalysisError> {
         }
     }
     Ok(())
+}
+
+/// The derivative of `signal` sampled at `fs` (central differences, one-sided
+/// at the ends), in its unit per second. `signal` has at least 2 samples.
+fn derivative(signal: &[f64], fs: f64) -> Vec<f64> {
+    let n = signal.len();
+    (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            (signal[b] - signal[a]) * fs / (b - a) as f64
+        })
+        .collect()
 }
 
 /// Checks that `regions` lie inside `n` samples.
@@ -276,15 +324,24 @@ pub fn ride_report(input: &RideInput<'_>, regions: Option<&RideRegions>) -> Resu
     let lowpassed = lowpass_acceleration(input.z_mps2, fs);
     let slopes = sliding_slopes(&lowpassed, jerk_window_len(fs));
     let max_jerk_mps3 = slopes.iter().fold(0.0_f64, |m, s| m.max(s.abs())) * fs;
-    let velocity = regions.map(|r| velocity_from_acceleration(input.z_mps2, fs, r.motion()));
+    let velocity = regions.map(|r| match input.speed_mps {
+        Some(speed) => speed.to_vec(),
+        None => velocity_from_acceleration(input.z_mps2, fs, r.motion()),
+    });
     let motion = regions.zip(velocity.as_ref()).map(|(r, v)| {
-        let offset = motion_offset(input.z_mps2, fs, r.motion());
-        let level: Vec<f64> = lowpassed.iter().map(|v| v - offset).collect();
+        let (level, source) = match input.speed_mps {
+            Some(speed) => (lowpass_acceleration(&derivative(speed, fs), fs), MotionSource::RecordedSpeed),
+            None => {
+                let offset = motion_offset(input.z_mps2, fs, r.motion());
+                (lowpassed.iter().map(|v| v - offset).collect(), MotionSource::IntegratedAcceleration)
+            }
+        };
         MotionFigures {
             max_acceleration_mg: max_abs(&level, r.acceleration.clone()) / MPS2_PER_MG,
             max_deceleration_mg: max_abs(&level, r.deceleration.clone()) / MPS2_PER_MG,
             max_velocity_mps: max_abs(&smoothed_speed(v, fs), 0..n),
             distance_m: (v.iter().sum::<f64>() / fs).abs(),
+            source,
         }
     });
     let report = RideReport {
@@ -338,7 +395,14 @@ mod tests {
         let fs = 256.0;
         let n = (30.0 * fs) as usize;
         let s = sine(n, fs, 2.0, 10.0 * MPS2_PER_MG);
-        let input = RideInput { sample_rate_hz: fs, z_mps2: &s, x_mps2: Some(&s), y_mps2: Some(&s), sound_dba: None };
+        let input = RideInput {
+            sample_rate_hz: fs,
+            z_mps2: &s,
+            x_mps2: Some(&s),
+            y_mps2: Some(&s),
+            sound_dba: None,
+            speed_mps: None,
+        };
         let report = ride_report(&input, None).unwrap();
         assert!(report.motion.is_none() && report.constant_speed.is_none());
         let axes = &report.whole_run.axes;
@@ -363,7 +427,14 @@ mod tests {
             sound[100 + (k * 37) % 200] = (k + 1) as f64;
         }
         let z = vec![0.0; n];
-        let input = RideInput { sample_rate_hz: fs, z_mps2: &z, x_mps2: None, y_mps2: None, sound_dba: Some(&sound) };
+        let input = RideInput {
+            sample_rate_hz: fs,
+            z_mps2: &z,
+            x_mps2: None,
+            y_mps2: None,
+            sound_dba: Some(&sound),
+            speed_mps: None,
+        };
         let report = ride_report(&input, None).unwrap();
         let s = report.whole_run.sound.unwrap();
         assert_eq!(s.max_dba, 200.0);
@@ -404,7 +475,8 @@ mod tests {
             })
             .collect();
         let (regions, _) = regions_from_acceleration(&z, fs).unwrap();
-        let input = RideInput { sample_rate_hz: fs, z_mps2: &z, x_mps2: None, y_mps2: None, sound_dba: None };
+        let input =
+            RideInput { sample_rate_hz: fs, z_mps2: &z, x_mps2: None, y_mps2: None, sound_dba: None, speed_mps: None };
         let report = ride_report(&input, Some(&regions)).unwrap();
         let m = report.motion.unwrap();
         let plateau_mg = a / MPS2_PER_MG;
@@ -417,23 +489,72 @@ mod tests {
         // Jerk 1 m/s^3 on linear ramps of 0.8 s (longer than the 0.5 s fit).
         assert!((report.max_jerk_mps3 - j).abs() < 0.01, "{}", report.max_jerk_mps3);
         assert!(report.constant_speed.is_some());
+        assert_eq!(m.source, MotionSource::IntegratedAcceleration);
+
+        // The same run through an AC-coupled accelerometer (2nd-order 1 Hz
+        // high-pass, no DC), with the drive's speed recorded: the motion
+        // figures come from the speed and stay right; integrating the
+        // high-passed acceleration would not.
+        let mut z_ac: Vec<f64> = z.iter().map(|x| x - 4.0 * MPS2_PER_MG).collect();
+        crate::biquad::Biquad::butterworth_highpass(fs, 1.0).filter_in_place(&mut z_ac, [0.0; 2]);
+        let speed: Vec<f64> = z
+            .iter()
+            .scan(0.0, |v, x| {
+                *v += (x - 4.0 * MPS2_PER_MG) / fs;
+                Some(*v)
+            })
+            .collect();
+        let integrated = ride_report(&RideInput { z_mps2: &z_ac, speed_mps: None, ..input }, Some(&regions))
+            .unwrap()
+            .motion
+            .unwrap();
+        assert!((integrated.distance_m / distance - 1.0).abs() > 0.2, "{integrated:?}");
+        let from_speed = ride_report(&RideInput { z_mps2: &z_ac, speed_mps: Some(&speed), ..input }, Some(&regions))
+            .unwrap()
+            .motion
+            .unwrap();
+        assert_eq!(from_speed.source, MotionSource::RecordedSpeed);
+        assert!((from_speed.max_velocity_mps - v).abs() < 0.005, "{from_speed:?}");
+        assert!((from_speed.distance_m / distance - 1.0).abs() < 0.005, "{from_speed:?}");
+        assert!((from_speed.max_acceleration_mg / plateau_mg - 1.0).abs() < 0.01, "{from_speed:?}");
+        assert!((from_speed.max_deceleration_mg / plateau_mg - 1.0).abs() < 0.01, "{from_speed:?}");
     }
 
     #[test]
     fn bad_inputs_are_errors() {
         let z = vec![0.0; 1000];
         let short = vec![0.0; 999];
-        let input =
-            RideInput { sample_rate_hz: 256.0, z_mps2: &z, x_mps2: Some(&short), y_mps2: None, sound_dba: None };
+        let input = RideInput {
+            sample_rate_hz: 256.0,
+            z_mps2: &z,
+            x_mps2: Some(&short),
+            y_mps2: None,
+            sound_dba: None,
+            speed_mps: None,
+        };
         match ride_report(&input, None) {
             Err(AnalysisError::InvalidParameter { name, .. }) => assert_eq!(name, "x_mps2"),
             other => panic!("{other:?}"),
         }
         let mut nan = z.clone();
         nan[3] = f64::NAN;
-        let input = RideInput { sample_rate_hz: 256.0, z_mps2: &z, x_mps2: None, y_mps2: None, sound_dba: Some(&nan) };
+        let input = RideInput {
+            sample_rate_hz: 256.0,
+            z_mps2: &z,
+            x_mps2: None,
+            y_mps2: None,
+            sound_dba: Some(&nan),
+            speed_mps: None,
+        };
         assert!(matches!(ride_report(&input, None), Err(AnalysisError::NonFinite { index: 3, .. })));
-        let input = RideInput { sample_rate_hz: 10.0, z_mps2: &z, x_mps2: None, y_mps2: None, sound_dba: None };
+        let input = RideInput {
+            sample_rate_hz: 10.0,
+            z_mps2: &z,
+            x_mps2: None,
+            y_mps2: None,
+            sound_dba: None,
+            speed_mps: None,
+        };
         assert!(ride_report(&input, None).is_err());
     }
 }

@@ -55,7 +55,9 @@ pub(crate) mod test_signals {
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
 pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::highpass_zero_phase;
-pub use iso18738::{ride_report, Axis, AxisFigures, MotionFigures, RegionFigures, RideInput, RideReport, SoundFigures};
+pub use iso18738::{
+    ride_report, Axis, AxisFigures, MotionFigures, MotionSource, RegionFigures, RideInput, RideReport, SoundFigures,
+};
 pub use iso2631::{
     wd_digital_gain, wd_gain, wd_weighting, weighting, weighting_digital_gain, weighting_gain, wk_digital_gain,
     wk_gain, wk_weighting, Weighting,

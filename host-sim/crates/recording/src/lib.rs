@@ -17,12 +17,15 @@
 
 use std::path::PathBuf;
 
+pub mod consistency;
 pub mod evimp;
 pub mod read;
 pub mod write;
 
 pub use evimp::{read_evimp, EvimpRecording};
-pub use read::{read_columns, read_dataset, read_meta, read_recording, ReadError, META_FIELDS};
+pub use read::{
+    parse_dataset, parse_recording, read_columns, read_dataset, read_meta, read_recording, ReadError, META_FIELDS,
+};
 pub use write::write_recording;
 
 /// Value of the metadata field `format` for version 1 of the format.

@@ -343,6 +343,22 @@ pub enum ReadError {
         /// Unit of the bound (and what it amounts to).
         unit: &'static str,
     },
+    /// The samples contradict themselves or their metadata (a wrapped or
+    /// glitched angle, a dead accelerometer, a travel that moves the other
+    /// way than its metadata says): [`crate::consistency`].
+    #[error("`{}`{}, column `{column}`: {found}; expected {expected}", .path.display(), .line.map(|l| format!(" line {l}")).unwrap_or_default())]
+    Inconsistent {
+        /// The file (the samples file, or the metadata file for a field).
+        path: PathBuf,
+        /// Line (1-based) of the first offending sample, if one.
+        line: Option<usize>,
+        /// The column (or metadata field) at fault.
+        column: String,
+        /// What the data show.
+        found: String,
+        /// What the format or the physics require.
+        expected: String,
+    },
     /// Fewer than 2 samples.
     #[error("`{}`: {found} sample row(s); expected at least 2", .path.display())]
     TooFewSamples {
@@ -469,6 +485,19 @@ pub(super) fn open(path: &Path) -> Result<File, ReadError> {
 /// A [`ReadError`] naming the file, line, field or column and what was
 /// expected; see the module documentation for the checks.
 pub fn read_recording(toml_path: &Path, rope_total_length_m: f64) -> Result<Recording, ReadError> {
+    let recording = parse_recording(toml_path, rope_total_length_m)?;
+    crate::consistency::check(&recording, toml_path, &toml_path.with_extension("csv"))?;
+    Ok(recording)
+}
+
+/// [`read_recording`] without the checks of the samples against themselves
+/// and their metadata ([`crate::consistency`]): the format alone (fields,
+/// columns, bounds, time step). For tools that test the format itself; the
+/// commands read with [`read_recording`].
+///
+/// # Errors
+/// A [`ReadError`] naming the file, line, field or column.
+pub fn parse_recording(toml_path: &Path, rope_total_length_m: f64) -> Result<Recording, ReadError> {
     if toml_path.extension().is_none_or(|e| e != "toml") {
         return Err(ReadError::NotTomlPath { path: toml_path.to_path_buf() });
     }
@@ -497,6 +526,23 @@ pub fn read_recording(toml_path: &Path, rope_total_length_m: f64) -> Result<Reco
 /// listed, holds no `<stem>.toml` ([`ReadError::EmptyDataset`]) or a
 /// `<stem>.toml` has no `<stem>.csv` ([`ReadError::MissingCsv`]).
 pub fn read_dataset(dir: &Path, rope_total_length_m: f64) -> Result<Vec<(String, Recording)>, ReadError> {
+    read_dataset_with(dir, rope_total_length_m, read_recording)
+}
+
+/// [`read_dataset`] with [`parse_recording`]: the format alone, without the
+/// checks of [`crate::consistency`].
+///
+/// # Errors
+/// As [`read_dataset`].
+pub fn parse_dataset(dir: &Path, rope_total_length_m: f64) -> Result<Vec<(String, Recording)>, ReadError> {
+    read_dataset_with(dir, rope_total_length_m, parse_recording)
+}
+
+fn read_dataset_with(
+    dir: &Path,
+    rope_total_length_m: f64,
+    read: fn(&Path, f64) -> Result<Recording, ReadError>,
+) -> Result<Vec<(String, Recording)>, ReadError> {
     let io_err = |source| ReadError::Io { path: dir.to_path_buf(), source };
     let mut stems = Vec::new();
     for entry in fs::read_dir(dir).map_err(io_err)? {
@@ -523,10 +569,7 @@ pub fn read_dataset(dir: &Path, rope_total_length_m: f64) -> Result<Vec<(String,
             return Err(ReadError::MissingCsv { toml_path: toml_path.clone(), csv_path });
         }
     }
-    stems
-        .into_iter()
-        .map(|(stem, toml_path)| read_recording(&toml_path, rope_total_length_m).map(|rec| (stem, rec)))
-        .collect()
+    stems.into_iter().map(|(stem, toml_path)| read(&toml_path, rope_total_length_m).map(|rec| (stem, rec))).collect()
 }
 
 /// One metadata field: its value and the line it is on.

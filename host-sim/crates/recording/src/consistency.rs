@@ -1,0 +1,283 @@
+//! A recording checked against itself and its metadata, after every sample
+//! has been read and bounded ([`crate::read`]) and before any analysis sees
+//! it. What is refused here would otherwise give a silently wrong answer:
+//!
+//! * a **dead accelerometer**: an acceleration column whose samples are all
+//!   equal (a disconnected, saturated or switched-off sensor; a real frame
+//!   always vibrates, and the format's piezoelectric sensors have no DC to
+//!   hold);
+//! * a **wrapped or glitched angle**: `angle_rad` is the unwrapped shaft
+//!   angle, so between two samples it changes by at most what the fastest
+//!   recorded speed turns the shaft in two sample periods (plus an encoder
+//!   line's worth); a wrap to `[0, 2 pi)` or `(-pi, pi]` jumps by about
+//!   `2 pi`;
+//! * an **angle that contradicts the speed**: over the recording the angle
+//!   must turn as far as the recorded speed integrates to, in the same
+//!   sense (a constant angle, an angle that runs backwards);
+//! * a **travel that moves the other way** than its metadata's `direction`:
+//!   `speed_radps` is positive when the car moves up (the format), so a
+//!   travel up integrates to a positive shaft angle.
+//!
+//! Each error names the file, the line of the first offending sample where
+//! there is one, the column or field, what the data show and what is
+//! expected.
+
+use std::path::Path;
+
+use crate::read::ReadError;
+use crate::{CarDirection, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, SPEED};
+
+/// Slack of the angle-step bound, rad: an encoder of 256 lines or more
+/// resolves far finer; a wrap jumps by about `2 pi`.
+pub const ANGLE_STEP_SLACK_RAD: f64 = 0.05;
+
+/// The sample-to-sample angle change allowed is this many times what the
+/// fastest recorded speed turns in one period: the speed column is a
+/// filtered estimate that may lag or undershoot the true speed.
+pub const ANGLE_STEP_SPEED_FACTOR: f64 = 2.0;
+
+/// The recorded angle and the integrated speed must agree over the
+/// recording within this fraction of the larger (speed estimates filter and
+/// lag; both come from the one encoder) ...
+pub const ANGLE_SPEED_AGREEMENT: f64 = 0.1;
+/// ... plus this many rad (a few samples of estimator lag at rated speed).
+pub const ANGLE_SPEED_SLACK_RAD: f64 = 0.5;
+
+/// A travel is checked against its `direction` only when its shaft turned
+/// mostly one way: the net angle at least this fraction of the total turned.
+pub const ONE_WAY_FRACTION: f64 = 0.5;
+/// ... and by at least this many rad (a recording at standstill has no
+/// direction to contradict).
+pub const MIN_TRAVEL_ANGLE_RAD: f64 = 1.0;
+
+/// The line of sample row `row` (0-based) of a samples file: the header is
+/// line 1 and rows follow without blank lines ([`crate::read`]).
+fn line_of(row: usize) -> usize {
+    row + 2
+}
+
+/// Checks `recording` (read from `toml_path` and `csv_path`) against itself
+/// and its metadata; see the module documentation.
+///
+/// # Errors
+/// [`ReadError::Inconsistent`] naming the file, line, column or field.
+pub fn check(recording: &Recording, toml_path: &Path, csv_path: &Path) -> Result<(), ReadError> {
+    for name in [ACC_CAR, ACC_CW, ACC_MACHINE] {
+        if let Some(column) = recording.column(name) {
+            check_live(&column.values, name, csv_path)?;
+        }
+    }
+    let dt = 1.0 / recording.meta.sample_rate_hz;
+    let speed = recording.column(SPEED).map(|c| c.values.as_slice());
+    if let Some(angle) = recording.column(ANGLE) {
+        check_angle_steps(&angle.values, speed, dt, csv_path)?;
+        if let Some(speed) = speed {
+            check_angle_against_speed(&angle.values, speed, dt, csv_path)?;
+        }
+    }
+    if let (RecordingKind::Travel { direction, .. }, Some(speed)) = (&recording.meta.kind, speed) {
+        check_direction(*direction, speed, dt, toml_path)?;
+    }
+    Ok(())
+}
+
+fn inconsistent(path: &Path, line: Option<usize>, column: &str, found: String, expected: &str) -> ReadError {
+    ReadError::Inconsistent {
+        path: path.to_path_buf(),
+        line,
+        column: column.to_string(),
+        found,
+        expected: expected.to_string(),
+    }
+}
+
+/// An acceleration whose samples are not all equal.
+fn check_live(values: &[f64], name: &str, path: &Path) -> Result<(), ReadError> {
+    match values.first() {
+        Some(&first) if values.len() > 1 && values.iter().all(|&a| a == first) => Err(inconsistent(
+            path,
+            None,
+            name,
+            format!("every one of its {} samples is {first}: a dead, saturated or disconnected sensor", values.len()),
+            "a live accelerometer (a frame always vibrates), or leave the column out",
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// No step of the angle larger than the fastest recorded speed allows.
+fn check_angle_steps(angle: &[f64], speed: Option<&[f64]>, dt: f64, path: &Path) -> Result<(), ReadError> {
+    let fastest = match speed {
+        Some(s) => s.iter().fold(0.0_f64, |m, w| m.max(w.abs())),
+        None => crate::column_bound(SPEED).map_or(f64::INFINITY, |(bound, _)| bound),
+    };
+    let limit = ANGLE_STEP_SPEED_FACTOR * fastest * dt + ANGLE_STEP_SLACK_RAD;
+    let Some(k) = angle.windows(2).position(|w| (w[1] - w[0]).abs() > limit) else {
+        return Ok(());
+    };
+    let step = angle[k + 1] - angle[k];
+    let wrap =
+        if (step.abs() - std::f64::consts::TAU).abs() < 1.0 { " (a wrap by one revolution)" } else { " (a glitch)" };
+    Err(inconsistent(
+        path,
+        Some(line_of(k + 1)),
+        ANGLE,
+        format!("the angle jumps by {step:.4} rad from the line before{wrap}"),
+        &format!(
+            "the unwrapped shaft angle (the format), which moves by at most {limit:.4} rad per sample at the \
+             recording's fastest speed ({fastest:.4} rad/s)"
+        ),
+    ))
+}
+
+/// The angle turned over the recording agrees with the integrated speed.
+fn check_angle_against_speed(angle: &[f64], speed: &[f64], dt: f64, path: &Path) -> Result<(), ReadError> {
+    let (Some(first), Some(last)) = (angle.first(), angle.last()) else { return Ok(()) };
+    let turned = last - first;
+    let integrated = integral(speed, dt);
+    let tolerance = ANGLE_SPEED_AGREEMENT * turned.abs().max(integrated.abs()) + ANGLE_SPEED_SLACK_RAD;
+    if (turned - integrated).abs() <= tolerance {
+        return Ok(());
+    }
+    Err(inconsistent(
+        path,
+        None,
+        ANGLE,
+        format!(
+            "the angle turns by {turned:.3} rad over the recording, but `{SPEED}` integrates to {integrated:.3} rad"
+        ),
+        "an angle and a speed from the same shaft (both positive when the car moves up), or leave the angle out",
+    ))
+}
+
+/// A travel that turned the shaft mostly one way turned it the way its
+/// metadata's `direction` says.
+fn check_direction(direction: CarDirection, speed: &[f64], dt: f64, toml_path: &Path) -> Result<(), ReadError> {
+    let net = integral(speed, dt);
+    let total: f64 = speed.iter().map(|w| w.abs() * dt).sum();
+    if total < MIN_TRAVEL_ANGLE_RAD || net.abs() < ONE_WAY_FRACTION * total {
+        return Ok(());
+    }
+    let (said, moved) = match direction {
+        CarDirection::Up => ("up", if net > 0.0 { None } else { Some("down") }),
+        CarDirection::Down => ("down", if net < 0.0 { None } else { Some("up") }),
+    };
+    let Some(moved) = moved else { return Ok(()) };
+    Err(inconsistent(
+        toml_path,
+        None,
+        "direction",
+        format!(
+            "the metadata says direction = \"{said}\", but `{SPEED}` (positive when the car moves up) integrates to \
+             {net:+.2} rad over the samples: the car moved {moved}"
+        ),
+        "the direction the samples show (or the speed with the format's sign)",
+    ))
+}
+
+/// The integral of `signal` sampled every `dt` (rectangle rule), in its unit times s.
+fn integral(signal: &[f64], dt: f64) -> f64 {
+    signal.iter().sum::<f64>() * dt
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Column, RecordingMeta, TIME_S};
+    use std::f64::consts::TAU;
+
+    /// A 4 s travel at 1 kHz: the shaft speeds up to 6 rad/s and back,
+    /// `angle` its exact integral.
+    fn travel(direction: CarDirection) -> Recording {
+        let fs = 1000.0;
+        let n = 4000;
+        let sign = if direction == CarDirection::Up { 1.0 } else { -1.0 };
+        let speed: Vec<f64> = (0..n).map(|k| sign * 6.0 * (std::f64::consts::PI * k as f64 / n as f64).sin()).collect();
+        let angle: Vec<f64> = speed.iter().scan(0.3, |a, w| Some(std::mem::replace(a, *a + w / fs))).collect();
+        let acc: Vec<f64> = (0..n).map(|k| 0.01 * (k as f64 * 0.7).sin()).collect();
+        Recording {
+            meta: RecordingMeta {
+                kind: RecordingKind::Travel {
+                    m_car_kg: 70.5,
+                    m_cw_kg: 33.0,
+                    direction,
+                    lw_start_m: 1.0,
+                    lw_end_m: 2.0,
+                },
+                sample_rate_hz: fs,
+                description: None,
+            },
+            columns: vec![
+                Column::new(TIME_S, (0..n).map(|k| k as f64 / fs).collect()),
+                Column::new(ACC_CAR, acc),
+                Column::new(SPEED, speed),
+                Column::new(ANGLE, angle),
+            ],
+        }
+    }
+
+    fn values<'a>(r: &'a mut Recording, name: &str) -> &'a mut Vec<f64> {
+        &mut r.columns.iter_mut().find(|c| c.name == name).unwrap().values
+    }
+
+    fn error(r: &Recording) -> String {
+        check(r, Path::new("t.toml"), Path::new("t.csv")).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_consistent_travel_passes_either_way() {
+        for d in [CarDirection::Up, CarDirection::Down] {
+            check(&travel(d), Path::new("t.toml"), Path::new("t.csv")).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_wrapped_angle_is_refused_at_its_first_wrap() {
+        let mut r = travel(CarDirection::Up);
+        let angle = values(&mut r, ANGLE);
+        let first_wrap = angle.iter().position(|&a| a >= TAU).unwrap();
+        for a in angle.iter_mut() {
+            *a = a.rem_euclid(TAU);
+        }
+        let err = error(&r);
+        assert!(err.contains(&format!("line {}", first_wrap + 2)) && err.contains("wrap"), "{err}");
+        assert!(err.contains("t.csv") && err.contains("angle_rad"), "{err}");
+    }
+
+    #[test]
+    fn a_one_sample_angle_glitch_is_refused_with_its_line() {
+        let mut r = travel(CarDirection::Up);
+        values(&mut r, ANGLE)[1234] += 0.5;
+        let err = error(&r);
+        // Row 1234 is on line 1236 (the header is line 1).
+        assert!(err.contains("line 1236") && err.contains("glitch"), "{err}");
+    }
+
+    #[test]
+    fn a_constant_or_backward_angle_contradicts_the_speed() {
+        let mut r = travel(CarDirection::Up);
+        values(&mut r, ANGLE).iter_mut().for_each(|a| *a = 1.0);
+        assert!(error(&r).contains("integrates to"), "{}", error(&r));
+        let mut r = travel(CarDirection::Up);
+        values(&mut r, ANGLE).iter_mut().for_each(|a| *a = -*a);
+        assert!(error(&r).contains("integrates to"), "{}", error(&r));
+    }
+
+    #[test]
+    fn a_travel_against_its_metadata_direction_is_refused_naming_the_field() {
+        let mut r = travel(CarDirection::Up);
+        if let RecordingKind::Travel { direction, .. } = &mut r.meta.kind {
+            *direction = CarDirection::Down;
+        }
+        let err = error(&r);
+        assert!(err.contains("t.toml") && err.contains("direction = \"down\"") && err.contains("moved up"), "{err}");
+    }
+
+    #[test]
+    fn a_dead_accelerometer_is_refused() {
+        let mut r = travel(CarDirection::Down);
+        values(&mut r, ACC_CAR).iter_mut().for_each(|a| *a = 0.0);
+        let err = error(&r);
+        assert!(err.contains("acc_car_mps2") && err.contains("dead"), "{err}");
+    }
+}
