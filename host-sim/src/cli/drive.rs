@@ -89,6 +89,23 @@ pub fn request_line(words: &[String]) -> anyhow::Result<String> {
     Ok(line)
 }
 
+/// Refuses an answer that cannot be the drive's to `line`: the request
+/// itself (a line that echoes: a loopback, a terminal with echo on, not the
+/// drive), and to a `set` anything but `ok ...` or `error ...` (a setting
+/// must never be reported as confirmed unless the drive said so).
+pub fn check_answer(line: &str, answer: &str) -> anyhow::Result<()> {
+    if answer.trim() == line.trim() {
+        bail!(
+            "the answer to `{line}` is the request itself: the line echoes what it is sent (a loopback, a terminal \
+             with echo on, or not the drive's service port); expected the drive's answer"
+        );
+    }
+    if line.starts_with("set ") && !(answer.starts_with("ok ") || answer.starts_with("error")) {
+        bail!("the answer to `{line}` is `{answer}`: expected `ok ...` or `error ...` from the drive's service port");
+    }
+    Ok(())
+}
+
 /// Runs `host-sim drive`.
 pub fn run(_rig: &RigConfig, args: &DriveArgs) -> anyhow::Result<()> {
     let line = request_line(&args.request)?;
@@ -103,6 +120,7 @@ pub fn run(_rig: &RigConfig, args: &DriveArgs) -> anyhow::Result<()> {
             std::thread::sleep(Duration::from_millis(args.every_ms));
         }
         let answer = exchange(port.as_mut(), &line, timeout).with_context(|| format!("on {}", args.port))?;
+        check_answer(&line, &answer).with_context(|| format!("on {}", args.port))?;
         if answer.starts_with("error") {
             bail!("the drive refused `{line}`: {answer}");
         }
@@ -172,6 +190,33 @@ mod tests {
         assert_eq!(exchange(&mut host, "set strategy fast", t).unwrap(), "error unknown-strategy");
         let (state, _line) = double.join().unwrap();
         assert_eq!(state.m_car_kg, 58.0);
+    }
+
+    #[test]
+    fn a_line_that_echoes_is_not_taken_for_the_drive() {
+        let (mut host, mut echo) = TTYPort::pair().expect("a pseudo-terminal pair");
+        host.set_timeout(Duration::from_millis(20)).unwrap();
+        let echoing = std::thread::spawn(move || {
+            let mut line = Vec::new();
+            let mut byte = [0u8; 1];
+            loop {
+                if let Ok(1) = echo.read(&mut byte) {
+                    line.push(byte[0]);
+                    if byte[0] == b'\n' {
+                        echo.write_all(&line).unwrap();
+                        return echo;
+                    }
+                }
+            }
+        });
+        let answer = exchange(&mut host, "set mass 58", Duration::from_secs(2)).unwrap();
+        let _line = echoing.join().unwrap();
+        let e = check_answer("set mass 58", &answer).unwrap_err().to_string();
+        assert!(e.contains("echoes"), "{e}");
+        // A `set` answered by anything but ok/error is not a confirmation.
+        assert!(check_answer("set mass 58", "mass 70.5").is_err());
+        check_answer("set mass 58", "ok mass 58.0").unwrap();
+        check_answer("get mass", "mass 70.5").unwrap();
     }
 
     #[test]
