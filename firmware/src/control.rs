@@ -15,9 +15,10 @@
 //!    MOE from `pwm_enabled` and drives the brake from `brake_released`
 //!    (released only while the inverter is on), unless a firmware fault is
 //!    latched;
-//! 5. measures its own duration (DWT cycle counter) and latches an overrun
-//!    if it took longer than a PWM period or if the next sequence completed
-//!    before it finished;
+//! 5. latches an overrun if the compares were written after the valley that
+//!    follows the sample (TIM1 no longer counting down, or half a period
+//!    gone by the DWT cycle counter: `drive_core::pwm_timing`), or if the
+//!    next sequence completed before the step finished;
 //! 6. every [`RECORD_DECIMATION`]th step queues a telemetry record.
 //!
 //! Sharing: the interrupt owns the controller, inside a
@@ -43,6 +44,7 @@ use drive_core::alignment::AlignmentError;
 use drive_core::controller::Telemetry;
 use drive_core::current_offset::{CurrentOffsets, OffsetError};
 use drive_core::lift_drive::{self, ApplyError, ControllerCommand};
+use drive_core::pwm_timing::compares_in_time;
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::startup::{
     Startup, StartupCommand, StartupEvent, StartupFault, StartupOutput, StartupRefusal, StartupStep,
@@ -103,9 +105,10 @@ pub enum Refusal {
 /// A firmware-level fault, latched by the interrupt.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FirmwareFault {
-    /// A step took longer than one PWM period, CPU cycles.
+    /// A step wrote its compares after the valley that follows its sample
+    /// (they would take effect a period late).
     Overrun {
-        /// Duration of that step, CPU cycles (170 per microsecond).
+        /// Cycles from the step's start to its compare write, CPU cycles (170 per microsecond).
         cycles: u32,
     },
     /// The next conversion sequence completed before the step finished.
@@ -426,6 +429,10 @@ impl Drive {
         };
         let compare = if pwm_on { compare } else { [0; 3] };
         pwm::set_compares(compare);
+        // The real deadline: the compares must be in before the valley that
+        // follows the sample (`drive_core::pwm_timing`).
+        let write_cycles = DWT::cycle_count().wrapping_sub(entry_cycles);
+        let in_time = compares_in_time(pwm::counting_down(), write_cycles, pwm::HALF_PERIOD_CYCLES);
         pwm::set_outputs_enabled(pwm_on);
         // Fail-safe: the brake is released only while the inverter drives
         // the machine, whatever the controller asks.
@@ -433,8 +440,8 @@ impl Drive {
         self.brake.set_released(brake_released);
 
         let cycles = DWT::cycle_count().wrapping_sub(entry_cycles);
-        if cycles > pwm::PERIOD_CYCLES {
-            self.latch(cs, FirmwareFault::Overrun { cycles });
+        if !in_time {
+            self.latch(cs, FirmwareFault::Overrun { cycles: write_cycles });
         } else if adc::sequence_done() {
             self.latch(cs, FirmwareFault::TriggerOverrun);
         }

@@ -237,6 +237,13 @@ async fn main(spawner: Spawner) {
     let watchdog = watchdog::Watchdog::start(p.IWDG, control::steps());
     spawner.spawn(defmt::unwrap!(telemetry::run(watchdog)));
 
+    // The UART interrupts only move bytes: below the control interrupt (P0),
+    // the time driver (P1) and the observer's executor (P2).
+    {
+        use embassy_stm32::interrupt::{self, InterruptExt, Priority};
+        interrupt::UART5.set_priority(Priority::P3);
+        interrupt::LPUART1.set_priority(Priority::P3);
+    }
     let tx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 32] = [0; 32]));
     let rx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 64] = [0; 64]));
     let uart = match usart::BufferedUart::new_with_de(

@@ -4,22 +4,27 @@
 //! spreads the writes over [`STORE_PAGES`] flash pages (wear levelling) and
 //! survives a power loss during a write (the previous record stays).
 //!
-//! Where: the last 16 KiB of the 512 KiB flash (bank 2 in the factory
-//! dual-bank layout, so erasing and writing it does not stall code running
-//! from bank 1); `memory.x` gives the program only the first 496 KiB.
+//! Where: the last 16 KiB of the 512 KiB flash, eight 2 KiB pages of bank 2
+//! in the factory dual-bank layout (RM0440, embedded flash: 2 KiB pages in
+//! dual-bank mode; embassy-stm32's G474 flash data, erase size 2048), so
+//! erasing and writing it does not stall code running from bank 1
+//! (read-while-write); `memory.x` holds the program to bank 1, the first
+//! 256 KiB.
 //!
 //! A record that fails any check (magic, version, length, CRC, values) is
 //! refused whole: the drive runs with its defaults and the log says why.
 //!
-//! Writing (the service port's `save`): the G4's flash driver erases and
-//! programs inside a critical section, and a page erase takes tens of ms,
-//! so the service task writes only with the drive idle and the control
-//! interrupt paused (`control::pause_if_idle`, inverter off and brake
+//! Writing (the service port's `save`): the flash driver used here
+//! (`Flash::blocking_erase`/`blocking_write` of embassy-stm32) does not mask
+//! interrupts; the erase (22-40 ms a page on the G4) and the programming
+//! block the thread-mode executor, not the interrupts, which keep running
+//! from bank 1 (the UARTs keep receiving). The service task writes only
+//! with the drive idle or waiting for its alignment, with the control
+//! interrupt paused (`control::pause_if_idle`: inverter off and brake
 //! applied throughout), then resumes it without counting the pause as a
-//! missed deadline. Untested on the board: the pause must stay under the
-//! independent watchdog's ~100 ms (a page erase is 22-40 ms on the G4), and
-//! DCP bytes arriving during it may be lost (the master repeats after the
-//! error answer).
+//! missed deadline. Untested on the board: the blocked executor must hand
+//! back within the independent watchdog's ~100 ms (the telemetry task
+//! feeds it).
 
 use defmt::{info, warn};
 use drive_core::param_store::{DriveParameters, RecordError, MAX_RECORD};
@@ -35,8 +40,17 @@ use sequential_storage::map::{MapConfig, MapStorage};
 pub const STORE_START: u32 = 0x7_C000;
 /// End of the store (the end of the 512 KiB flash), bytes.
 pub const STORE_END: u32 = 0x8_0000;
-/// Flash pages of the store (4 KiB each).
-pub const STORE_PAGES: u32 = (STORE_END - STORE_START) / 4096;
+/// Flash page size in the dual-bank layout, bytes (RM0440: 2 KiB).
+pub const PAGE_BYTES: u32 = 2048;
+/// Flash pages of the store (2 KiB each): 8.
+pub const STORE_PAGES: u32 = (STORE_END - STORE_START) / PAGE_BYTES;
+
+// The store must lie in bank 2 (from 512 KiB / 2), whole pages, and match the
+// driver's erase size.
+const _: () = {
+    assert!(STORE_START >= 0x4_0000 && STORE_START % PAGE_BYTES == 0 && STORE_END % PAGE_BYTES == 0);
+    assert!(embassy_stm32::flash::FLASH_SIZE as u32 == STORE_END);
+};
 
 /// The map key of the parameter record.
 const KEY: u8 = 0;

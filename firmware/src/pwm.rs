@@ -61,6 +61,10 @@ pub const PERIOD_COUNTS: u16 = DRIVE_CONFIG.pwm_period_counts;
 /// One PWM period in CPU cycles (`2 * ARR`; the timer counts at SYSCLK).
 pub const PERIOD_CYCLES: u32 = 2 * PERIOD_COUNTS as u32;
 
+/// Half a PWM period in CPU cycles: from the sample at the counter peak to
+/// the valley where the compares load, the control step's deadline.
+pub const HALF_PERIOD_CYCLES: u32 = PERIOD_COUNTS as u32;
+
 /// How many timer ticks before the counter peak the ADC trigger (OC4REF)
 /// rises: 16 ticks = 94 ns, so that the ADC's 12.5-cycle (294 ns) sampling
 /// window, which opens a few ADC clocks after the trigger, lies around the
@@ -312,12 +316,30 @@ pub fn set_compares(compare: [u16; 3]) {
     }
 }
 
-/// Main output enable (BDTR.MOE), immediate: `false` is the safe state
-/// (every switch off). Setting it has no effect while the break input is
-/// active.
+/// Main output enable (BDTR.MOE): `false` clears it at once (the safe
+/// state, every switch off); `true` sets it only if it is off and no break
+/// has been flagged (BIF, cleared only by the reset command). MOE is
+/// written only on a change, never rewritten each period: a break that
+/// clears it between the step's read of the break flag and this call stays
+/// in force (with AOE = 0 only software sets MOE again).
 #[inline]
 pub fn set_outputs_enabled(enabled: bool) {
-    pac::TIM1.bdtr().modify(|w| w.set_moe(enabled));
+    let t = pac::TIM1;
+    let on = t.bdtr().read().moe();
+    if !enabled {
+        if on {
+            t.bdtr().modify(|w| w.set_moe(false));
+        }
+    } else if !on && !break_occurred() {
+        t.bdtr().modify(|w| w.set_moe(true));
+    }
+}
+
+/// Whether TIM1 counts down (between the counter peak, where the currents
+/// are sampled, and the valley, where the preloaded compares load).
+#[inline]
+pub fn counting_down() -> bool {
+    pac::TIM1.cr1().read().dir() == pac::timer::vals::Dir::DOWN
 }
 
 /// Whether a break (BKIN over-current) has occurred since the flag was last

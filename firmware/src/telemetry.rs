@@ -89,7 +89,7 @@ fn log_record(r: &Record, summary: bool) {
     if summary {
         info!(
             "t {=u32} ms: {=str}, pwm {=bool}, brake released {=bool}, iq {=f32} A (ref {=f32}), speed {=f32} rad/s \
-             (ref {=f32}), bus code {=u16}, longest step {=u32} cycles of {=u32}, dropped {=u32}; chain observer: \
+             (ref {=f32}), bus code {=u16}, longest step {=u32} cycles (deadline {=u32}), dropped {=u32}; chain observer: \
              {=u32} runs, longest {=u32} cycles, {=u32} missed deadlines",
             r.time_us / 1000,
             state_name(r.state),
@@ -101,7 +101,7 @@ fn log_record(r: &Record, summary: bool) {
             t.speed_ref_radps,
             r.dc_bus_code,
             control::max_cycles(),
-            pwm::PERIOD_CYCLES,
+            pwm::HALF_PERIOD_CYCLES,
             control::dropped(),
             crate::observer::runs(),
             crate::observer::max_cycles(),
@@ -139,9 +139,10 @@ fn log_fault(fault: FirmwareFault) {
     const SAFE: &str = "PWM off, brake applied, latched";
     match fault {
         FirmwareFault::Overrun { cycles } => error!(
-            "control step overran the PWM period: {=u32} cycles > {=u32}: {=str}",
+            "control step wrote its compares after the valley ({=u32} cycles after its start; the valley is {=u32} \
+             cycles after the sample): {=str}",
             cycles,
-            pwm::PERIOD_CYCLES,
+            pwm::HALF_PERIOD_CYCLES,
             SAFE
         ),
         FirmwareFault::TriggerOverrun => {

@@ -27,6 +27,7 @@ pub mod param_store;
 pub mod park_clarke;
 pub mod pi;
 pub mod profile;
+pub mod pwm_timing;
 pub mod ripple;
 pub mod service;
 pub mod speed_estimator;
