@@ -270,7 +270,7 @@ fn samples_beyond_the_physical_bound_of_their_channel_are_refused_naming_file_li
     // Metadata beyond any rig.
     let path = write_pair(tmp.path(), "rec", VALID_TOML.replace("m_car_kg = 70.5", "m_car_kg = 1e300"), VALID_CSV);
     let msg = read_recording(&path, 8.6).unwrap_err().to_string();
-    assert!(msg.contains("`m_car_kg` = 1000000") && msg.contains("at most 100000 kg"), "{msg}");
+    assert!(msg.contains("`m_car_kg` = 1e300 is out of range") && msg.contains("at most 100000 kg"), "{msg}");
     // The CLI says the same.
     let err = run_err(&[
         "ride-quality",
@@ -538,4 +538,43 @@ fn a_fault_after_the_end_of_the_travel_is_refused_not_reported_undetected() {
     let err = run_err(&["faults", "--quiet", "--direction", "up", "--fault", "current-stuck@300", "--out", s(&out)]);
     assert!(err.contains("current-stuck@300") && err.contains("never injected"), "{err}");
     assert!(!out.exists(), "a refused run wrote {out:?}");
+}
+
+#[test]
+fn the_rigs_car_is_simulated_as_given_and_an_absurd_one_is_refused_naming_its_source() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_config::EMBEDDED_RIG_TOML;
+    let with_cars = |cars: &str, name: &str| {
+        let path = tmp.path().join(name);
+        fs::write(&path, rig.replace(rig.lines().find(|l| l.starts_with("m_car_kg")).unwrap(), cars)).unwrap();
+        path
+    };
+    // Before: 33 kg (the counterweight) simulated for a rig whose only car is 20 kg.
+    let light = with_cars("m_car_kg = [20.0]", "light.toml");
+    let out = tmp.path().join("light");
+    run_ok(&["--config", s(&light), "travel", "--quiet", "--lw-start", "3", "--lw-end", "4", "--out", s(&out)]);
+    let toml =
+        fs::read_dir(&out).unwrap().map(|e| e.unwrap().path()).find(|p| p.extension().is_some_and(|e| e == "toml"));
+    let meta = fs::read_to_string(toml.unwrap()).unwrap();
+    assert!(meta.contains("m_car_kg = 20.0"), "{meta}");
+    // A car of the rig beyond the bound names the rig's field, not a flag nobody gave.
+    let heavy = with_cars("m_car_kg = [99999.9, 1e5]", "heavy.toml");
+    let err = run_err(&["--config", s(&heavy), "travel", "--quiet", "--out", s(&tmp.path().join("heavy"))]);
+    if !err.contains("heavy.toml") {
+        assert!(err.contains("[mechanics].m_car_kg") && !err.contains("--m-car ="), "{err}");
+    }
+    // A car of a nanogram would never finish: refused before the run, with readable numbers.
+    let err = run_err(&["travel", "--quiet", "--m-car", "1e-9", "--out", s(&tmp.path().join("nano"))]);
+    assert!(err.contains("--m-car = 1e-9 is out of range") && err.contains("at least 1 kg"), "{err}");
+}
+
+#[test]
+fn a_sample_rate_far_below_any_recording_and_a_file_given_as_the_dataset_are_refused_clearly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let toml = write_pair(tmp.path(), "slow", VALID_TOML.replace("1000.0", "1e-300"), VALID_CSV);
+    let err = run_err(&["identify", s(tmp.path()), "--out", s(&tmp.path().join("out"))]);
+    assert!(err.contains("slow.toml") && err.contains("sample_rate_hz"), "{err}");
+    assert!(!err.contains("0000000000"), "a number printed digit by digit: {err}");
+    let err = run_err(&["analyze", s(&toml), "--out", s(&tmp.path().join("out"))]);
+    assert!(err.contains("is a file; expected a dataset folder"), "{err}");
 }

@@ -15,7 +15,7 @@ use drive_core::config::Direction;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
-use super::{check_open_range, default_car_mass_kg, output_dir};
+use super::{car_mass_kg, check_open_range, output_dir};
 use closed_loop::faults::run::{default_matrix, profile_timing_s, run_case_with, FaultCase, FaultOutcome};
 use closed_loop::faults::{parse_fault, parse_fault_toml, FaultSpec};
 use closed_loop::TravelSpec;
@@ -70,8 +70,7 @@ pub struct FaultsArgs {
 
 /// The cases `args` ask for.
 pub fn cases(rig: &RigConfig, args: &FaultsArgs) -> anyhow::Result<Vec<FaultCase>> {
-    let m_car = args.m_car_kg.unwrap_or_else(|| default_car_mass_kg(rig));
-    check_open_range("--m-car", m_car, 0.0, 100_000.0)?;
+    let m_car = car_mass_kg(rig, args.m_car_kg)?;
     check_open_range("--after-trip", args.after_trip_s, 0.0, 60.0)?;
     let mut given: Vec<FaultSpec> =
         args.faults.iter().map(|text| parse_fault(text)).collect::<Result<_, _>>().map_err(anyhow::Error::from)?;

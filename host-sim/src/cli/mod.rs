@@ -177,7 +177,12 @@ pub fn check_open_range(flag: &str, value: f64, lo: f64, hi: f64) -> anyhow::Res
     if value.is_finite() && value > lo && value < hi {
         Ok(())
     } else {
-        anyhow::bail!("{flag} = {value} is out of range: expected a finite value in ({lo}, {hi})")
+        anyhow::bail!(
+            "{flag} = {} is out of range: expected a finite value in ({}, {})",
+            readable(value),
+            readable(lo),
+            readable(hi)
+        )
     }
 }
 
@@ -247,14 +252,79 @@ impl StrategyArg {
     }
 }
 
-/// The default car mass of `rig`: the heaviest car of `[mechanics].m_car_kg`.
+/// The default car mass of `rig`: the heaviest car of `[mechanics].m_car_kg`
+/// (a list the rig's check keeps non-empty).
 pub fn default_car_mass_kg(rig: &RigConfig) -> f64 {
-    rig.mechanics.m_car_kg.iter().copied().fold(rig.mechanics.m_cw_kg, f64::max)
+    rig.mechanics.m_car_kg.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Lightest car a simulation takes, kg: lighter, the car on its rope rings
+/// so fast (`sqrt(2EA / (l m))`) that the integrator's step shrinks without
+/// end; no lift car weighs less.
+pub const MIN_CAR_MASS_KG: f64 = 1.0;
+/// Bound on the car, kg (exclusive; the rig file's bound).
+pub const MAX_CAR_MASS_KG: f64 = 1.0e5;
+
+/// The car mass of a run: `--m-car` when given, else the rig's heaviest car
+/// ([`default_car_mass_kg`]); either checked against
+/// `[MIN_CAR_MASS_KG, MAX_CAR_MASS_KG)`, the error naming where the
+/// value came from (the flag, or the rig's field).
+pub fn car_mass_kg(rig: &RigConfig, given: Option<f64>) -> anyhow::Result<f64> {
+    let (m, source) = match given {
+        Some(m) => (m, "--m-car".to_string()),
+        None => (
+            default_car_mass_kg(rig),
+            "the rig's heaviest car ([mechanics].m_car_kg of --config, the default of --m-car)".to_string(),
+        ),
+    };
+    if m.is_finite() && (MIN_CAR_MASS_KG..MAX_CAR_MASS_KG).contains(&m) {
+        Ok(m)
+    } else {
+        anyhow::bail!(
+            "{source} = {} is out of range: expected a car mass of at least {} kg and below {} kg",
+            readable(m),
+            readable(MIN_CAR_MASS_KG),
+            readable(MAX_CAR_MASS_KG)
+        )
+    }
+}
+
+/// `x` as a reader wants it: plain decimals for everyday magnitudes,
+/// scientific notation for the very small and very large (never 300 zeros).
+pub fn readable(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() || (1e-4..1e9).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_in_messages_are_readable() {
+        assert_eq!(readable(0.15), "0.15");
+        assert_eq!(readable(100000.0), "100000");
+        assert_eq!(readable(-1e-300), "-1e-300");
+        assert_eq!(readable(1e300), "1e300");
+        let e = check_open_range("--acc-noise", 200.0, -1e-300, 100.0).unwrap_err().to_string();
+        assert_eq!(e, "--acc-noise = 200 is out of range: expected a finite value in (-1e-300, 100)");
+    }
+
+    #[test]
+    fn the_default_car_is_the_rigs_heaviest_and_its_errors_name_the_field() {
+        let mut rig = RigConfig::embedded_default().unwrap();
+        rig.mechanics.m_car_kg = vec![20.0];
+        // Not the counterweight's 33 kg.
+        assert_eq!(car_mass_kg(&rig, None).unwrap(), 20.0);
+        rig.mechanics.m_car_kg = vec![2.0e5];
+        let e = car_mass_kg(&rig, None).unwrap_err().to_string();
+        assert!(e.contains("[mechanics].m_car_kg") && !e.starts_with("--m-car"), "{e}");
+        let e = car_mass_kg(&rig, Some(1e-9)).unwrap_err().to_string();
+        assert!(e.starts_with("--m-car = 1e-9 is out of range"), "{e}");
+    }
 
     #[test]
     fn an_os_error_quoted_by_its_context_is_printed_once() {

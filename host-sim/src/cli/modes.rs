@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::{check_open_range, default_car_mass_kg, output_dir, sweep_points};
+use super::{car_mass_kg, check_open_range, output_dir, sweep_points};
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, COORDINATE_NAMES, DOF};
 use plots::{line_plot, stacked_plot, Band, Level, Panel, Series};
@@ -65,8 +65,7 @@ fn annotated(rig: &RigConfig, series: Vec<Series>, band_hz: f64) -> Panel {
 /// paper's Fig. 5); `modes.csv` holds every mode.
 pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     let total = rig.mechanics.rope_total_length_m;
-    let m_car = args.m_car_kg.unwrap_or_else(|| default_car_mass_kg(rig));
-    check_open_range("--m-car", m_car, 0.0, 1.0e5)?;
+    let m_car = car_mass_kg(rig, args.m_car_kg)?;
     let lw_from = args.lw_from_m.unwrap_or(0.1);
     let lw_to = args.lw_to_m.unwrap_or(total - 0.1);
     check_open_range("--lw-from", lw_from, 0.0, total)?;

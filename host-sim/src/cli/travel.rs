@@ -9,7 +9,7 @@ use drive_core::ripple::Strategy;
 use drive_core::Controller;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::{check_open_range, default_car_mass_kg, output_dir};
+use super::{car_mass_kg, check_open_range, output_dir};
 use closed_loop::compensation::{compensator, rig_ripple_table};
 use closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
 use dsp::{highpass_zero_phase, stft_spectrogram, Spectrogram};
@@ -93,8 +93,7 @@ pub enum CompensationArg {
 /// Runs `travel`.
 pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     let total = rig.mechanics.rope_total_length_m;
-    let m_car = args.m_car_kg.unwrap_or_else(|| default_car_mass_kg(rig));
-    check_open_range("--m-car", m_car, 0.0, 1.0e5)?;
+    let m_car = car_mass_kg(rig, args.m_car_kg)?;
     let direction = match args.direction {
         DirectionArg::Up => Direction::Up,
         DirectionArg::Down => Direction::Down,

@@ -88,6 +88,10 @@ pub fn column_bound(name: &str) -> Option<(f64, &'static str)> {
 /// Largest metadata values the reader accepts (the rig file's own bounds):
 /// sample rate, Hz.
 pub const MAX_SAMPLE_RATE_HZ: f64 = 1.0e7;
+/// Smallest sample rate the reader accepts, Hz: slower, a recording holds
+/// nothing of a lift's vibration (the format's accelerometers are not to be
+/// trusted below 0.5 Hz, which a 1 Hz rate cannot even resolve).
+pub const MIN_SAMPLE_RATE_HZ: f64 = 1.0;
 /// Largest mass (car, counterweight, free-decay mass), kg.
 pub const MAX_MASS_KG: f64 = 1.0e5;
 /// Largest free-decay rope length, m.

@@ -36,7 +36,7 @@ use std::path::{Path, PathBuf};
 use super::write::TIME_STEP_RELATIVE_TOLERANCE;
 use super::{
     column_bound, CarDirection, Column, Recording, RecordingKind, RecordingMeta, FORMAT, MAX_LINE_BYTES, MAX_MASS_KG,
-    MAX_META_BYTES, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ, TIME_S,
+    MAX_META_BYTES, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ, MIN_SAMPLE_RATE_HZ, TIME_S,
 };
 
 /// Error from reading a recording, a dataset or an EVIMP export. Every
@@ -63,6 +63,12 @@ pub enum ReadError {
     /// [`read_recording`] was given a path that does not end in `.toml`.
     #[error("`{}` is not a metadata file; expected a path ending in `.toml`{}", .path.display(), toml_hint(.path))]
     NotTomlPath {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// The dataset given is a file, not a folder.
+    #[error("`{}` is a file; expected a dataset folder holding `<stem>.toml` + `<stem>.csv` pairs (for one recording, give the folder it is in)", .path.display())]
+    DatasetIsFile {
         /// The path given.
         path: PathBuf,
     },
@@ -145,7 +151,7 @@ pub enum ReadError {
         found: String,
     },
     /// A metadata value is outside its physical range (or not finite).
-    #[error("`{}` line {line}: field `{field}` = {value} is out of range; expected {expected}", .path.display())]
+    #[error("`{}` line {line}: field `{field}` = {} is out of range; expected {expected}", .path.display(), readable(*.value))]
     OutOfRange {
         /// The metadata file.
         path: PathBuf,
@@ -295,7 +301,7 @@ pub enum ReadError {
         text: String,
     },
     /// `time_s` does not advance by `1 / sample_rate_hz`.
-    #[error("`{}` line {line}, column `time_s`: time steps by {step_s} s from the line before; expected {expected_s} s (1 / sample_rate_hz) within a relative tolerance of 1e-6", .path.display())]
+    #[error("`{}` line {line}, column `time_s`: time steps by {} s from the line before; expected {} s (1 / sample_rate_hz) within a relative tolerance of 1e-6", .path.display(), readable(*.step_s), readable(*.expected_s))]
     NonUniformTime {
         /// The samples file.
         path: PathBuf,
@@ -383,6 +389,16 @@ pub enum ReadError {
         /// The line's text (shortened if long), or `<end of file>`.
         found: String,
     },
+}
+
+/// `x` for a message: plain decimals for everyday magnitudes, scientific
+/// notation for the very small and very large (never 300 zeros).
+fn readable(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() || (1e-4..1e9).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
 }
 
 /// The hint of [`ReadError::NotTomlPath`]: the metadata file to give when
@@ -544,6 +560,9 @@ fn read_dataset_with(
     read: fn(&Path, f64) -> Result<Recording, ReadError>,
 ) -> Result<Vec<(String, Recording)>, ReadError> {
     let io_err = |source| ReadError::Io { path: dir.to_path_buf(), source };
+    if fs::metadata(dir).is_ok_and(|m| m.is_file()) {
+        return Err(ReadError::DatasetIsFile { path: dir.to_path_buf() });
+    }
     let mut stems = Vec::new();
     for entry in fs::read_dir(dir).map_err(io_err)? {
         let path = entry.map_err(io_err)?.path();
@@ -795,12 +814,14 @@ fn parse_meta(text: &str, path: &Path, rope_total_length_m: f64) -> Result<Recor
             return Err(ReadError::UnknownKind { path: path.to_path_buf(), line: kind_line, found: excerpt(other) })
         }
     };
-    let sample_rate_hz = file.positive(
-        "sample_rate_hz",
-        MAX_SAMPLE_RATE_HZ,
-        &format!("a finite sample rate > 0 Hz, at most {MAX_SAMPLE_RATE_HZ} Hz"),
-        "a number (Hz)",
-    )?;
+    let sample_rate_hz = file
+        .number(
+            "sample_rate_hz",
+            &format!("a finite sample rate of {MIN_SAMPLE_RATE_HZ} to {MAX_SAMPLE_RATE_HZ} Hz"),
+            |v| (MIN_SAMPLE_RATE_HZ..=MAX_SAMPLE_RATE_HZ).contains(&v),
+            "a number (Hz)",
+        )?
+        .0;
     let description = match file.table.get("description") {
         None => None,
         Some(spanned) => match spanned.get_ref() {
