@@ -19,7 +19,7 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
         (Err(error), _) => {
-            eprintln!("error: {}", error_message(&error));
+            eprintln!("error: {}", host_sim::output::public_paths(&error_message(&error)));
             ExitCode::FAILURE
         }
     }

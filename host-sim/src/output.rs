@@ -114,6 +114,7 @@ impl OutputDir {
             match fs::create_dir(&staging) {
                 Ok(()) => {
                     lock(&LIVE_STAGING).push(staging.clone());
+                    lock(&STAGED_AS).push((staging.clone(), dir.to_path_buf()));
                     return Ok(Self { dir: dir.to_path_buf(), staging, force, committed: false, created });
                 }
                 // A killed run of a process with the same id left it: take the next.
@@ -263,6 +264,21 @@ fn real_path(path: &Path) -> PathBuf {
 /// Staging directories of this process not yet committed or dropped: what
 /// an interrupt removes.
 static LIVE_STAGING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+/// Every staging directory of this process with the output directory it
+/// stands for: [`public_paths`] puts the latter in messages.
+static STAGED_AS: Mutex<Vec<(PathBuf, PathBuf)>> = Mutex::new(Vec::new());
+
+/// `message` with every staging directory of this process replaced by the
+/// output directory it stands for: an error names the file the user asked
+/// for (`out/gap.json`), never the hidden folder it was written in first.
+pub fn public_paths(message: &str) -> String {
+    let mut text = message.to_string();
+    for (staging, dir) in lock(&STAGED_AS).iter() {
+        text = text.replace(&staging.display().to_string(), &dir.display().to_string());
+    }
+    text
+}
+
 /// Held while a commit moves files; an interrupt waits for it.
 static COMMITTING: Mutex<()> = Mutex::new(());
 
@@ -465,6 +481,16 @@ mod tests {
         // A sibling folder is fine, and so is the dataset's parent.
         refuse_inside_inputs(&tmp.path().join("out"), &[&dataset]).unwrap();
         refuse_inside_inputs(tmp.path(), &[&dataset]).unwrap();
+    }
+
+    #[test]
+    fn messages_name_the_output_directory_not_the_staging_one() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = OutputDir::create(tmp.path(), false).unwrap();
+        let message = format!("cannot write {}: disk full", out.path("gap.json").display());
+        assert!(message.contains(STAGING_PREFIX));
+        let public = public_paths(&message);
+        assert_eq!(public, format!("cannot write {}: disk full", tmp.path().join("gap.json").display()));
     }
 
     #[test]
