@@ -297,8 +297,10 @@ fn a_dcp3_speed_mode_travel_on_the_emulated_chip_is_bit_identical_to_the_host() 
     assert!(run.states.iter().all(|s| !matches!(s, DriveState::Tripped(_))));
     // The cost of a speed travel's speed-loop tick (its ramp, and the check
     // that it can still stop before the shaft end) on the Cortex-M4F: within
-    // the PWM period of 170 MHz / 16 kHz = 10 625 cycles, counting one cycle
-    // per instruction (a lower bound of the cycles).
+    // the step's real deadline, the valley half a PWM period after the
+    // sample (`drive_core::pwm_timing`: 5 312 cycles at 170 MHz and ARR
+    // 5312), counting one cycle per instruction (a lower bound of the
+    // cycles) and leaving 255 cycles for the conversions before the step starts.
     let divider = rig.drive_config().speed_loop_divider() as u64;
     let offset = lift.steps() - run.steps;
     let in_travel = |tick: bool| -> Vec<f64> {
@@ -314,7 +316,11 @@ fn a_dcp3_speed_mode_travel_on_the_emulated_chip_is_bit_identical_to_the_host() 
         "instructions in Travel: speed-loop tick {ticks} steps mean {tick_mean:.0} max {tick_max:.0}; \
          current loop only {steps} steps mean {step_mean:.0} max {step_max:.0}"
     );
-    assert!(tick_max < 10_625.0, "a speed-loop tick of {tick_max} instructions");
+    let half_period_cycles = rig.pwm_period_counts() as u32;
+    assert!(
+        drive_core::pwm_timing::compares_in_time(true, 255 + tick_max as u32, half_period_cycles),
+        "a speed-loop tick of {tick_max} instructions misses the valley"
+    );
 }
 
 /// A DCP4 travel with the strategy `car-observer` (the chain observer's

@@ -24,7 +24,7 @@
 use defmt::{error, info, warn};
 use drive_core::dcp::slave::Refusal;
 use drive_core::dcp::FrameError;
-use drive_core::lift_drive::{drive_status, ControllerCommand, DcpPort, PortEvent};
+use drive_core::lift_drive::{output_status, ControllerCommand, DcpPort, PortEvent};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_time::{with_timeout, Duration, Instant};
 use embedded_io_async::{Read, Write};
@@ -58,22 +58,14 @@ fn now_us() -> u32 {
 }
 
 /// The drive's status for the lift controller, from the control interrupt's
-/// snapshot: the fault bit set by any latched fault (the firmware's, the
-/// start-up sequence's, the controller's), "brake open" and "travelling"
-/// from the outputs actually driven (brake output released, inverter on),
-/// not from the controller's state.
+/// snapshot (`drive_core::lift_drive::output_status`): the fault bit set by
+/// any latched fault (the firmware's, the start-up sequence's, the
+/// controller's), "brake open" and "travelling" from the outputs actually
+/// driven (brake output released, inverter on), not from the controller's
+/// state.
 fn status() -> drive_core::dcp::DriveStatus {
     let s = control::snapshot();
-    let mut status = match s.state {
-        Some(state) => drive_status(state, s.speed_radps, s.ready_gate, &DRIVE_CONFIG),
-        // Calibrating, waiting for the alignment command or aligning: not ready.
-        None => drive_core::dcp::DriveStatus::default(),
-    };
-    status.fault |= s.fault;
-    status.ready &= !s.fault;
-    status.brake_open = s.brake_released;
-    status.travelling = s.pwm_on || s.brake_released;
-    status
+    output_status(s.state, s.speed_radps, s.ready_gate, s.fault, s.pwm_on, s.brake_released, &DRIVE_CONFIG)
 }
 
 /// The DCP task: owns the USART and the port until the chip stops.

@@ -203,6 +203,33 @@ pub fn drive_status(state: DriveState, speed_radps: f32, ready_gate: bool, confi
     }
 }
 
+/// The status a drive reports from what it does rather than what its
+/// controller intends: [`drive_status`] of the controller's `state` (none
+/// before the controller runs: calibrating, waiting for the alignment,
+/// aligning), with the fault bit set by any latched `fault` (the
+/// controller's, the start-up sequence's, the firmware's own), ready only
+/// without one, and "brake open" and "travelling" from the outputs driven
+/// (`pwm_on`, `brake_released`). The firmware's DCP status.
+pub fn output_status(
+    state: Option<DriveState>,
+    speed_radps: f32,
+    ready_gate: bool,
+    fault: bool,
+    pwm_on: bool,
+    brake_released: bool,
+    config: &DriveConfig,
+) -> DriveStatus {
+    let mut status = match state {
+        Some(state) => drive_status(state, speed_radps, ready_gate, config),
+        None => DriveStatus::default(),
+    };
+    status.fault |= fault;
+    status.ready &= !status.fault;
+    status.brake_open = brake_released;
+    status.travelling = pwm_on || brake_released;
+    status
+}
+
 /// What one call of [`DcpPort`] produced.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PortEvent {
@@ -632,6 +659,26 @@ mod tests {
         }
         *t += FRAME_GAP_US;
         port.poll(*t, drive)
+    }
+
+    #[test]
+    fn the_output_status_reports_every_fault_and_the_brake_as_driven() {
+        let rig = reference_rig();
+        // Idle controller, a firmware fault latched: fault bit, not ready.
+        let s = output_status(Some(DriveState::Idle), 0.0, true, true, false, false, &rig);
+        assert!(s.fault && !s.ready && !s.brake_open && !s.travelling);
+        // Before the controller runs (start-up), a start-up fault still shows.
+        let s = output_status(None, 0.0, false, true, false, false, &rig);
+        assert!(s.fault && !s.ready);
+        // The controller in Travel but the outputs cut (a break): brake applied, not travelling.
+        let s = output_status(Some(DriveState::Travel), 1.0, true, true, false, false, &rig);
+        assert!(s.fault && !s.brake_open && !s.travelling);
+        // The alignment drives the outputs with the brake open.
+        let s = output_status(None, 0.0, false, false, true, true, &rig);
+        assert!(!s.fault && s.brake_open && s.travelling && !s.ready);
+        // Nothing latched, idle, ready.
+        let s = output_status(Some(DriveState::Idle), 0.0, true, false, false, false, &rig);
+        assert!(s.ready && !s.fault);
     }
 
     #[test]
