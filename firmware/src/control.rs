@@ -24,9 +24,10 @@
 //! Sharing: the interrupt owns the controller, inside a
 //! `critical_section::Mutex`; the telemetry task never touches it. The chain
 //! observer's task (`observer.rs`, a lower-priority interrupt executor)
-//! takes the observer's input from it and hands the output back, each in a
-//! critical section that copies a few words; the interrupt wakes that task
-//! when the controller has published an input. The task and the
+//! gets each input the controller publishes through an Embassy `Signal`
+//! and signals its output back, which the interrupt delivers to the
+//! controller at the start of a step (the observer module does not call
+//! into this one). The task and the
 //! interrupt exchange commands, events and records through `heapless`
 //! queues behind critical sections, each held for one push or pop (a few
 //! hundred cycles at most, the longest the task can delay the interrupt).
@@ -57,7 +58,7 @@ use heapless::Deque;
 
 use crate::adc::{self, Incomplete, Samples};
 use crate::encoder::{self, Extender};
-use crate::{board, pwm, timebase, DRIVE_CONFIG};
+use crate::{board, observer, pwm, timebase, DRIVE_CONFIG};
 
 /// Every how many steps the interrupt queues a telemetry record (16: 1 kHz).
 pub const RECORD_DECIMATION: u32 = 16;
@@ -199,21 +200,6 @@ pub struct Snapshot {
     pub pwm_on: bool,
     /// Brake released after the latest step (also during the alignment).
     pub brake_released: bool,
-}
-
-/// The observer's task takes the input the controller published (short
-/// critical section: a copy of a few words).
-pub fn take_observer_input() -> Option<drive_core::observer::ObserverInput> {
-    critical_section::with(|cs| DRIVE.borrow_ref_mut(cs).as_mut().and_then(|d| d.controller.take_observer_input()))
-}
-
-/// The observer's task hands back the output of an input (short critical section).
-pub fn deliver_observer_output(output: drive_core::observer::ObserverOutput) {
-    critical_section::with(|cs| {
-        if let Some(drive) = DRIVE.borrow_ref_mut(cs).as_mut() {
-            drive.controller.deliver_observer_output(output);
-        }
-    });
 }
 
 /// The harmonic table to keep in the parameter record
@@ -407,6 +393,9 @@ impl Drive {
         if let Some(command) = COMMANDS.borrow_ref_mut(cs).pop_front() {
             self.apply(cs, command);
         }
+        if let Some(output) = observer::OUTPUT.try_take() {
+            self.controller.deliver_observer_output(output);
+        }
 
         let (output, injected, codes, dc_bus_code) = match samples {
             Ok(samples) => {
@@ -504,8 +493,11 @@ impl Drive {
                     time_us,
                 };
                 let output = self.controller.step(&frame);
-                if self.controller.observer_input_waiting() {
-                    crate::observer::input_published();
+                // The observer's task gets the input through its signal; the
+                // output it signals back is delivered at the start of a
+                // later step, before the next speed-loop tick uses it.
+                if let Some(input) = self.controller.take_observer_input() {
+                    observer::INPUT.signal(input);
                 }
                 (Some(output), None, codes)
             }

@@ -5,10 +5,12 @@
 //! to about 35 000 instructions) does not fit the 62.5 us control
 //! interrupt. With a strategy that uses it (`car-observer`), the controller
 //! publishes the observer's input at each speed-loop tick (2 kHz, every 8th
-//! PWM period) and the control interrupt wakes this task; the task takes
-//! the input, runs the observer with interrupts enabled (the control
-//! interrupt preempts it every PWM period) and hands the output back, and
-//! the controller uses it at the next speed-loop tick: the schedule of
+//! PWM period) and the control interrupt signals it to this task
+//! ([`INPUT`]); the task runs the observer with interrupts enabled (the
+//! control interrupt preempts it every PWM period) and signals the output
+//! back ([`OUTPUT`]), which the control interrupt hands to the controller
+//! at the start of its next step, and the controller uses it at the next
+//! speed-loop tick: the schedule of
 //! `drive_core::observer::task`, the same as in the processor-in-the-loop
 //! target and the host closed loop, so the three agree bit for bit. The
 //! task has one speed-loop period (85 000 CPU cycles) per input; if it is
@@ -24,14 +26,12 @@
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::DWT;
-use drive_core::observer::ObserverTask;
+use drive_core::observer::{ObserverInput, ObserverOutput, ObserverTask};
 use embassy_executor::InterruptExecutor;
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
-
-use crate::control;
 
 /// Priority of the observer's executor: below the control interrupt (P0)
 /// and the time driver (P1), above the thread-mode tasks.
@@ -40,8 +40,13 @@ pub const PRIORITY: Priority = Priority::P2;
 /// The executor of the observer's task, run by the `UART4` interrupt.
 static EXECUTOR: InterruptExecutor = InterruptExecutor::new();
 
-/// Set by the control interrupt when the controller published an input.
-static INPUT: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The input the controller published at a speed-loop tick, signalled by
+/// the control interrupt (a newer input replaces one not yet taken).
+pub static INPUT: Signal<CriticalSectionRawMutex, ObserverInput> = Signal::new();
+
+/// The output of an input, signalled by the task; the control interrupt
+/// takes it at the start of its next step and hands it to the controller.
+pub static OUTPUT: Signal<CriticalSectionRawMutex, ObserverOutput> = Signal::new();
 
 /// Longest observer run since start, CPU cycles (preemption by the control
 /// interrupt included).
@@ -66,11 +71,6 @@ pub fn start(task: ObserverTask) {
     spawner.spawn(defmt::unwrap!(run(task)));
 }
 
-/// The control interrupt: the controller has published an input.
-pub fn input_published() {
-    INPUT.signal(());
-}
-
 /// Longest observer run since start, CPU cycles.
 pub fn max_cycles() -> u32 {
     MAX_CYCLES.load(Ordering::Relaxed)
@@ -85,13 +85,9 @@ pub fn runs() -> u32 {
 #[embassy_executor::task]
 async fn run(mut task: ObserverTask) {
     loop {
-        INPUT.wait().await;
-        let Some(input) = control::take_observer_input() else {
-            continue;
-        };
+        let input = INPUT.wait().await;
         let start = DWT::cycle_count();
-        let output = task.run(&input);
-        control::deliver_observer_output(output);
+        OUTPUT.signal(task.run(&input));
         MAX_CYCLES.fetch_max(DWT::cycle_count().wrapping_sub(start), Ordering::Relaxed);
         RUNS.fetch_add(1, Ordering::Relaxed);
     }
