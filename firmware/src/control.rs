@@ -196,6 +196,8 @@ pub struct Snapshot {
     /// A fault is latched: the firmware's, the start-up sequence's or the
     /// controller's (the DCP status's fault bit).
     pub fault: bool,
+    /// The drive waits in its safe state for the alignment command.
+    pub awaiting_alignment: bool,
     /// Inverter outputs on after the latest step (also during the alignment).
     pub pwm_on: bool,
     /// Brake released after the latest step (also during the alignment).
@@ -243,6 +245,7 @@ static SNAPSHOT: Mutex<Cell<Snapshot>> = Mutex::new(Cell::new(Snapshot {
     speed_radps: 0.0,
     ready_gate: false,
     fault: false,
+    awaiting_alignment: false,
     pwm_on: false,
     brake_released: false,
 }));
@@ -440,6 +443,7 @@ impl Drive {
             speed_radps: output.map_or(0.0, |o| o.telemetry.speed_radps),
             ready_gate: self.fault.is_none() && self.startup.is_running(),
             fault: self.fault.is_some() || output.is_some_and(|o| matches!(o.state, DriveState::Tripped(_))),
+            awaiting_alignment: self.startup.is_waiting_for_alignment(),
             pwm_on,
             brake_released,
         });

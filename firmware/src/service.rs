@@ -19,7 +19,8 @@
 //! start-up `save` is answered `error busy`. `reset` clears latched faults
 //! (`error nothing-to-reset` when none is latched) and `align` commands
 //! the rotor alignment (accepted only in the safe state after the
-//! calibration): both go to the control interrupt's command queue.
+//! calibration with nothing latched, else `error busy`): both go to the
+//! control interrupt's command queue.
 
 use core::cell::RefCell;
 
@@ -114,6 +115,7 @@ pub async fn run(mut uart: BufferedUart<'static>, mut store: ParamStore, encoder
             match request {
                 Some(Request::Reset) if !snapshot.fault => text = b"error nothing-to-reset",
                 Some(Request::Reset) if control::submit(control::Command::Reset).is_err() => text = b"error busy",
+                Some(Request::Align) if !snapshot.awaiting_alignment || snapshot.fault => text = b"error busy",
                 Some(Request::Align) if control::submit(control::Command::Align).is_err() => text = b"error busy",
                 _ => {}
             }
