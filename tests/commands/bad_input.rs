@@ -578,3 +578,40 @@ fn a_sample_rate_far_below_any_recording_and_a_file_given_as_the_dataset_are_ref
     let err = run_err(&["analyze", s(&toml), "--out", s(&tmp.path().join("out"))]);
     assert!(err.contains("is a file; expected a dataset folder"), "{err}");
 }
+
+/// Runs `host-sim args`, killed after `limit`; returns stderr, or panics if
+/// it had to be killed (a hang) or succeeded.
+#[cfg(unix)]
+fn run_err_within(args: &[&str], limit: std::time::Duration) -> String {
+    let mut child = host_sim().args(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let started = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > limit {
+            child.kill().unwrap();
+            panic!("{args:?} still running after {limit:?}: a hang");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(!out.status.success(), "{args:?} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[cfg(unix)]
+#[test]
+fn an_input_that_is_a_named_pipe_is_refused_at_open_not_waited_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    fs::create_dir(&data).unwrap();
+    fs::write(data.join("rec.toml"), VALID_TOML).unwrap();
+    let fifo = data.join("rec.csv");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let limit = std::time::Duration::from_secs(30);
+    for args in [
+        vec!["analyze", s(&data), "--out", s(&tmp.path().join("a"))],
+        vec!["ride-quality", s(&fifo), "--out", s(&tmp.path().join("r"))],
+    ] {
+        let err = run_err_within(&args, limit);
+        assert!(err.contains("rec.csv` is a named pipe; expected a regular file"), "{args:?}: {err}");
+    }
+}

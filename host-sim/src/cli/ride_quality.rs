@@ -78,6 +78,7 @@ struct Run {
 /// The start of the first line of `path` (at most 64 bytes, lossy UTF-8,
 /// trimmed): `EVIMP1` for an EVIMP export.
 fn first_line(path: &Path) -> anyhow::Result<String> {
+    recording::read::refuse_special_file(path)?;
     let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
     let mut head = Vec::new();
     file.take(64).read_to_end(&mut head).with_context(|| format!("cannot read {}", path.display()))?;

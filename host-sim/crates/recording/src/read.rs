@@ -66,6 +66,15 @@ pub enum ReadError {
         /// The path given.
         path: PathBuf,
     },
+    /// An input is not a regular file (a named pipe, a device, a socket,
+    /// a folder).
+    #[error("`{}` is {kind}; expected a regular file", .path.display())]
+    NotRegularFile {
+        /// The path given.
+        path: PathBuf,
+        /// What it is instead.
+        kind: &'static str,
+    },
     /// The dataset given is a file, not a folder.
     #[error("`{}` is a file; expected a dataset folder holding `<stem>.toml` + `<stem>.csv` pairs (for one recording, give the folder it is in)", .path.display())]
     DatasetIsFile {
@@ -480,9 +489,43 @@ impl LineReader {
     }
 }
 
-/// Opens `path` for reading.
+/// Opens `path` for reading: a regular file only (a named pipe would block
+/// the open for ever, a device never end).
 pub(super) fn open(path: &Path) -> Result<File, ReadError> {
+    refuse_special_file(path)?;
     File::open(path).map_err(|source| ReadError::Io { path: path.to_path_buf(), source })
+}
+
+/// Refuses `path` when it exists and is not a regular file (after symbolic
+/// links): a folder, a named pipe, a device or a socket. A missing file is
+/// left to the open, whose error says so.
+pub fn refuse_special_file(path: &Path) -> Result<(), ReadError> {
+    let Ok(meta) = fs::metadata(path) else { return Ok(()) };
+    if meta.is_file() {
+        return Ok(());
+    }
+    let kind = if meta.is_dir() { "a folder" } else { special_kind(&meta) };
+    Err(ReadError::NotRegularFile { path: path.to_path_buf(), kind })
+}
+
+#[cfg(unix)]
+fn special_kind(meta: &fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    let t = meta.file_type();
+    if t.is_fifo() {
+        "a named pipe"
+    } else if t.is_char_device() || t.is_block_device() {
+        "a device"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    }
+}
+
+#[cfg(not(unix))]
+fn special_kind(_meta: &fs::Metadata) -> &'static str {
+    "not a regular file"
 }
 
 /// Reads one recording: the metadata `toml_path` (`<stem>.toml`) and the
@@ -518,6 +561,7 @@ pub fn parse_recording(toml_path: &Path, rope_total_length_m: f64) -> Result<Rec
         return Err(ReadError::NotTomlPath { path: toml_path.to_path_buf() });
     }
     let csv_path = toml_path.with_extension("csv");
+    refuse_special_file(&csv_path)?;
     let csv_file = File::open(&csv_path).map_err(|source| {
         if source.kind() == io::ErrorKind::NotFound {
             ReadError::MissingCsv { toml_path: toml_path.to_path_buf(), csv_path: csv_path.clone() }
