@@ -59,6 +59,11 @@
 //! IHM08M1's solder bridges and jumpers for three shunts (J5/J6) and for
 //! BKIN on PA6, that PB4, PB6, PB7, PC8, PC12 and PD2 are free on the
 //! shield, the brake driver's pull-down, the sign of the encoder count.
+//! The RM0440 facts used here and in `pwm.rs` (a debug-halted advanced
+//! timer disables its outputs as if MOE were 0; OISx/OISxN are pin levels;
+//! the TIM1 LOCK levels) are quoted from the manual as remembered, not
+//! re-read against it: check them with a scope on the first power-up,
+//! bridge supply off.
 //!
 //! - TIM4 is a 16-bit timer: `encoder.rs` extends its count to the `u32` of
 //!   `drive_core::SensorFrame` in software.

@@ -192,8 +192,9 @@ pub fn init(
     // Gate polarities from the board description: the L6398's HIN active
     // high, its LIN active low (datasheet truth table). The idle levels
     // (OISx, OISxN) are pin levels (RM0440, output control bits of the
-    // complementary channels): each the inactive level of its input, so
-    // MOE = 0 turns every switch off.
+    // complementary channels, as remembered: not re-read, check on the
+    // first power-up): each the inactive level of its input, so MOE = 0
+    // turns every switch off.
     t.ccer().modify(|w| {
         for channel in 0..3 {
             w.set_ccp(channel, HIGH_ACTIVE_LOW);
