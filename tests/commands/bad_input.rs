@@ -615,3 +615,28 @@ fn an_input_that_is_a_named_pipe_is_refused_at_open_not_waited_on() {
         assert!(err.contains("rec.csv` is a named pipe; expected a regular file"), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn metadata_that_contradict_the_samples_are_refused_with_both_sides_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    simulate_travel(&data, "up", "up", "3", "4");
+    let toml = data.join("up.toml");
+    let original = fs::read_to_string(&toml).unwrap();
+    // The samples of a 1 m travel under metadata of 6.6 m.
+    fs::write(
+        &toml,
+        original.replace("lw_start_m = 3.0", "lw_start_m = 1.0").replace("lw_end_m = 4.0", "lw_end_m = 7.6"),
+    )
+    .unwrap();
+    let err = run_err(&["analyze", s(&data), "--out", s(&tmp.path().join("a"))]);
+    assert!(err.contains("up.toml") && err.contains("6.600 m") && err.contains("m of rope"), "{err}");
+    // An up travel whose metadata say down.
+    fs::write(
+        &toml,
+        original.replace("direction = \"up\"", "direction = \"down\"").replace("lw_start_m = 3.0", "lw_start_m = 4.5"),
+    )
+    .unwrap();
+    let err = run_err(&["analyze", s(&data), "--out", s(&tmp.path().join("a"))]);
+    assert!(err.contains("up.toml") && err.contains("direction = \"down\"") && err.contains("moved up"), "{err}");
+}

@@ -19,7 +19,7 @@ use dsp::{burg_spectrogram, highpass_zero_phase, stft_spectrogram, welch_psd, Ps
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, DOF};
 use plots::{spectrogram_plot_with_top_axis, stacked_plot, Band, Mark, Panel, Series, TopAxis};
-use recording::{read_dataset, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
+use recording::{Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
 use rig_config::RigConfig;
 
 /// Options of `analyze`.
@@ -133,7 +133,7 @@ pub fn run(rig: &RigConfig, args: &AnalyzeArgs) -> anyhow::Result<()> {
     check_open_range("--burg-window", args.burg_window_s, 0.0, MAX_WINDOW_S)?;
     check_count("--burg-order", args.burg_order, 1, MAX_BURG_ORDER)?;
     check_open_range("--stft-window", args.stft_window_s, 0.0, MAX_WINDOW_S)?;
-    let dataset = read_dataset(&args.dataset, rig.mechanics.rope_total_length_m)?;
+    let dataset = super::read_dataset_on(rig, &args.dataset)?;
     let out = output_dir_reading(&args.out, args.force, &[&args.dataset])?;
     let travels = dataset.iter().filter(|(_, r)| matches!(r.meta.kind, RecordingKind::Travel { .. }));
     out.refuse_existing(

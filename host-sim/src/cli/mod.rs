@@ -214,6 +214,19 @@ pub fn output_dir_reading(dir: &Path, force: bool, inputs: &[&Path]) -> anyhow::
     output_dir(dir, force)
 }
 
+/// Reads the dataset `dir` ([`recording::read_dataset`]: the format and each
+/// recording against itself) and checks each travel's metadata against the
+/// distance its shaft turned on `rig`'s sheave
+/// ([`recording::consistency::check_travel_distance`]).
+pub fn read_dataset_on(rig: &RigConfig, dir: &Path) -> anyhow::Result<Vec<(String, Recording)>> {
+    let dataset = recording::read_dataset(dir, rig.mechanics.rope_total_length_m)?;
+    for (stem, recording) in &dataset {
+        let toml_path = dir.join(format!("{stem}.toml"));
+        recording::consistency::check_travel_distance(recording, &toml_path, rig.mechanics.sheave_radius_m)?;
+    }
+    Ok(dataset)
+}
+
 /// Checks a count on the command line: inside `[lo, hi]`.
 pub fn check_count(flag: &str, value: usize, lo: usize, hi: usize) -> anyhow::Result<()> {
     if (lo..=hi).contains(&value) {

@@ -16,7 +16,10 @@
 //!   sense (a constant angle, an angle that runs backwards);
 //! * a **travel that moves the other way** than its metadata's `direction`:
 //!   `speed_radps` is positive when the car moves up (the format), so a
-//!   travel up integrates to a positive shaft angle.
+//!   travel up integrates to a positive shaft angle;
+//! * a **travel whose metadata describe another distance** than its shaft
+//!   turned on the rig's sheave ([`check_travel_distance`], which needs the
+//!   rig's sheave radius and so is called by the commands that have it).
 //!
 //! Each error names the file, the line of the first offending sample where
 //! there is one, the column or field, what the data show and what is
@@ -175,6 +178,47 @@ fn check_direction(direction: CarDirection, speed: &[f64], dt: f64, toml_path: &
     ))
 }
 
+/// The travel's rope-length change in its metadata agrees with the
+/// distance its shaft turned (1:1 roping: the car moves `r` times the shaft
+/// angle, `r` the rig's sheave radius; the angle column where there is one,
+/// else the integrated speed) within this fraction ...
+pub const DISTANCE_AGREEMENT: f64 = 0.1;
+/// ... plus this many m (rope creep and stretch, a levelling correction).
+pub const DISTANCE_SLACK_M: f64 = 0.05;
+
+/// Checks a travel's `lw_start_m`..`lw_end_m` against the distance its
+/// shaft turned on a sheave of radius `sheave_radius_m` (m, the rig's):
+/// metadata that describe another travel than the samples (a travel cut
+/// short, a speed in other units, another rig) are refused with both sides
+/// named. A free decay passes.
+///
+/// # Errors
+/// [`ReadError::Inconsistent`] naming the metadata file and its fields.
+pub fn check_travel_distance(recording: &Recording, toml_path: &Path, sheave_radius_m: f64) -> Result<(), ReadError> {
+    let RecordingKind::Travel { lw_start_m, lw_end_m, .. } = recording.meta.kind else { return Ok(()) };
+    let dt = 1.0 / recording.meta.sample_rate_hz;
+    let (turned, from) = match (recording.column(ANGLE), recording.column(SPEED)) {
+        (Some(a), _) if a.values.len() > 1 => (a.values[a.values.len() - 1] - a.values[0], ANGLE),
+        (_, Some(w)) => (integral(&w.values, dt), SPEED),
+        _ => return Ok(()),
+    };
+    let moved_m = (turned * sheave_radius_m).abs();
+    let said_m = (lw_end_m - lw_start_m).abs();
+    if (moved_m - said_m).abs() <= DISTANCE_AGREEMENT * said_m.max(moved_m) + DISTANCE_SLACK_M {
+        return Ok(());
+    }
+    Err(inconsistent(
+        toml_path,
+        None,
+        "lw_start_m, lw_end_m",
+        format!(
+            "the metadata say the rope length changes by {said_m:.3} m ({lw_start_m} -> {lw_end_m}), but `{from}` \
+             turns the shaft by {turned:.2} rad, {moved_m:.3} m of rope on the rig's {sheave_radius_m} m sheave"
+        ),
+        "metadata of the travel the samples record, the samples of a whole travel, and the rig it ran on (--config)",
+    ))
+}
+
 /// The integral of `signal` sampled every `dt` (rectangle rule), in its unit times s.
 fn integral(signal: &[f64], dt: f64) -> f64 {
     signal.iter().sum::<f64>() * dt
@@ -271,6 +315,23 @@ mod tests {
         }
         let err = error(&r);
         assert!(err.contains("t.toml") && err.contains("direction = \"down\"") && err.contains("moved up"), "{err}");
+    }
+
+    #[test]
+    fn a_travel_whose_metadata_describe_another_distance_is_refused() {
+        // The test travel turns the shaft by 6 * 4 s * 2 / pi = 15.28 rad.
+        let r = travel(CarDirection::Up);
+        let turned = values(&mut r.clone(), ANGLE).last().unwrap() - 0.3;
+        let path = Path::new("t.toml");
+        // A sheave on which that is the metadata's 1 m: accepted.
+        check_travel_distance(&r, path, 1.0 / turned).unwrap();
+        // Twice the radius: twice the distance.
+        let err = check_travel_distance(&r, path, 2.0 / turned).unwrap_err().to_string();
+        assert!(err.contains("t.toml") && err.contains("lw_start_m") && err.contains("2.000 m of rope"), "{err}");
+        // Without the angle, the integrated speed tells the same.
+        let mut no_angle = r.clone();
+        no_angle.columns.retain(|c| c.name != ANGLE);
+        assert!(check_travel_distance(&no_angle, path, 2.0 / turned).unwrap_err().to_string().contains(SPEED));
     }
 
     #[test]
