@@ -3,7 +3,10 @@
 //! rig config (`--config`), a recording's metadata (the `<stem>.toml`
 //! sidecar) and the `EVIMP1` export. Each must return an error or a value
 //! that satisfies every documented bound; none may panic.
-//! `tests/commands/recording_read.rs` fuzzes the samples reader.
+//! `tests/commands/recording_read.rs` fuzzes the samples reader. Recordings
+//! that contradict themselves or their metadata are generated here by class
+//! (wrapped or glitched angle, dead accelerometer, direction or distance
+//! against the samples) and must be refused naming the column or field.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -258,5 +261,149 @@ proptest! {
     fn evimp_of_random_rows_is_valid_or_refused(text in evimp_text(), edits in prop::collection::vec(edit(), 0..3)) {
         check_evimp(&scratch("ride.txt", text.as_bytes()));
         check_evimp(&scratch("ride_mutated.txt", &apply(text.into_bytes(), &edits)));
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Recordings that contradict themselves or their metadata: each class of
+// defect generated on a consistent travel, written to disk and read back.
+
+/// Sheave radius of the reference rig, m.
+const SHEAVE_RADIUS_M: f64 = 0.065;
+
+/// A consistent travel: `fs` Hz, the shaft up to `peak` rad/s and back over
+/// `seconds` (a sine-shaped speed), `up` or down, the angle its exact
+/// integral from `angle0`, a live accelerometer, metadata whose rope-length
+/// change is the distance turned.
+fn consistent_travel(fs: f64, peak: f64, seconds: f64, up: bool, angle0: f64) -> recording::Recording {
+    use recording::{CarDirection, Column, Recording, RecordingMeta, ACC_CAR, ANGLE, I_A, I_B, I_C, SPEED, TIME_S};
+    let n = (fs * seconds) as usize;
+    let sign = if up { 1.0 } else { -1.0 };
+    let speed: Vec<f64> = (0..n).map(|k| sign * peak * (std::f64::consts::PI * k as f64 / n as f64).sin()).collect();
+    let angle: Vec<f64> = speed.iter().scan(angle0, |a, w| Some(std::mem::replace(a, *a + w / fs))).collect();
+    let distance = (angle[n - 1] - angle[0]).abs() * SHEAVE_RADIUS_M;
+    let (lw_start_m, lw_end_m) = if up { (1.0, 1.0 + distance) } else { (1.0 + distance, 1.0) };
+    let zeros = vec![0.0; n];
+    Recording {
+        meta: RecordingMeta {
+            kind: RecordingKind::Travel {
+                m_car_kg: 45.5,
+                m_cw_kg: 33.0,
+                direction: if up { CarDirection::Up } else { CarDirection::Down },
+                lw_start_m,
+                lw_end_m,
+            },
+            sample_rate_hz: fs,
+            description: None,
+        },
+        columns: vec![
+            Column::new(TIME_S, (0..n).map(|k| k as f64 / fs).collect()),
+            Column::new(ACC_CAR, (0..n).map(|k| 0.02 * (0.37 * k as f64).sin()).collect()),
+            Column::new(I_A, zeros.clone()),
+            Column::new(I_B, zeros.clone()),
+            Column::new(I_C, zeros),
+            Column::new(SPEED, speed),
+            Column::new(ANGLE, angle),
+        ],
+    }
+}
+
+/// A defect of one class, with where it is applied.
+#[derive(Debug, Clone)]
+enum Defect {
+    None,
+    WrappedAngle,
+    AngleGlitch { at: prop::sample::Index, rad: f64 },
+    DeadAccelerometer { value: f64 },
+    DirectionFlipped,
+    DistanceScaled { factor: f64 },
+}
+
+fn defect() -> impl Strategy<Value = Defect> {
+    prop_oneof![
+        Just(Defect::None),
+        Just(Defect::WrappedAngle),
+        (any::<prop::sample::Index>(), 0.2..3.0f64, any::<bool>())
+            .prop_map(|(at, rad, neg)| Defect::AngleGlitch { at, rad: if neg { -rad } else { rad } }),
+        (-1.0..1.0f64).prop_map(|value| Defect::DeadAccelerometer { value }),
+        Just(Defect::DirectionFlipped),
+        prop_oneof![1.5..50.0f64, 0.05..0.6f64].prop_map(|factor| Defect::DistanceScaled { factor }),
+    ]
+}
+
+fn apply_defect(r: &mut recording::Recording, defect: &Defect) {
+    use recording::{CarDirection, ACC_CAR, ANGLE};
+    let take = |r: &mut recording::Recording, name: &str, f: &dyn Fn(&mut Vec<f64>)| {
+        let c = r.columns.iter_mut().find(|c| c.name == name).unwrap();
+        f(&mut c.values);
+    };
+    match defect {
+        Defect::None => {}
+        Defect::WrappedAngle => {
+            take(r, ANGLE, &|v| v.iter_mut().for_each(|a| *a = a.rem_euclid(std::f64::consts::TAU)))
+        }
+        Defect::AngleGlitch { at, rad } => take(r, ANGLE, &|v| {
+            let i = 1 + at.index(v.len() - 2);
+            v[i] += rad;
+        }),
+        Defect::DeadAccelerometer { value } => take(r, ACC_CAR, &|v| v.iter_mut().for_each(|a| *a = *value)),
+        Defect::DirectionFlipped => {
+            if let RecordingKind::Travel { direction, lw_start_m, lw_end_m, .. } = &mut r.meta.kind {
+                *direction = if *direction == CarDirection::Up { CarDirection::Down } else { CarDirection::Up };
+                std::mem::swap(lw_start_m, lw_end_m);
+            }
+        }
+        Defect::DistanceScaled { factor } => {
+            if let RecordingKind::Travel { lw_start_m, lw_end_m, .. } = &mut r.meta.kind {
+                let (lo, hi) = (lw_start_m.min(*lw_end_m), lw_start_m.max(*lw_end_m));
+                let scaled = lo + (hi - lo) * factor;
+                if *lw_end_m > *lw_start_m {
+                    *lw_end_m = scaled;
+                } else {
+                    *lw_start_m = scaled;
+                }
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 96, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn a_recording_that_contradicts_itself_or_its_metadata_is_refused_naming_the_column(
+        fs in 200.0..4096.0f64,
+        // At least 9.5 rad turned: every travel crosses a whole revolution (a wrap).
+        peak in 5.0..15.0f64,
+        seconds in 3.0..8.0f64,
+        up in any::<bool>(),
+        angle0 in -100.0..100.0f64,
+        defect in defect(),
+    ) {
+        let mut r = consistent_travel(fs.round(), peak, seconds, up, angle0);
+        // Rope lengths inside the reference rig's 8.6 m.
+        if let RecordingKind::Travel { lw_start_m, lw_end_m, .. } = r.meta.kind {
+            prop_assume!(lw_start_m.max(lw_end_m) < 8.0);
+        }
+        apply_defect(&mut r, &defect);
+        if let RecordingKind::Travel { lw_start_m, lw_end_m, .. } = r.meta.kind {
+            prop_assume!(lw_start_m.max(lw_end_m) < ROPE_TOTAL_M && lw_start_m.min(lw_end_m) > 0.0);
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let (toml, _) = recording::write_recording(dir.path(), "travel", &r).unwrap();
+        let read = recording::read_recording(&toml, ROPE_TOTAL_M)
+            .and_then(|rec| recording::consistency::check_travel_distance(&rec, &toml, SHEAVE_RADIUS_M).map(|()| rec));
+        let needle = match &defect {
+            Defect::None => {
+                prop_assert!(read.is_ok(), "a consistent travel refused: {}", read.unwrap_err());
+                return Ok(());
+            }
+            Defect::WrappedAngle | Defect::AngleGlitch { .. } => "column `angle_rad`",
+            Defect::DeadAccelerometer { .. } => "column `acc_car_mps2`",
+            Defect::DirectionFlipped => "column `direction`",
+            Defect::DistanceScaled { .. } => "column `lw_start_m, lw_end_m`",
+        };
+        let err = read.expect_err("a contradiction was accepted").to_string();
+        prop_assert!(err.contains(needle), "{defect:?}: {err}");
     }
 }
