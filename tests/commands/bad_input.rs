@@ -640,3 +640,19 @@ fn metadata_that_contradict_the_samples_are_refused_with_both_sides_named() {
     let err = run_err(&["analyze", s(&data), "--out", s(&tmp.path().join("a"))]);
     assert!(err.contains("up.toml") && err.contains("direction = \"down\"") && err.contains("moved up"), "{err}");
 }
+
+#[test]
+fn a_sample_rate_whose_recording_would_not_fit_in_memory_is_refused_before_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Before: 4.7-7.4 GB allocated, then an allocation abort (exit 134).
+    let out = tmp.path().join("dataset");
+    let err = run_err(&["dataset", "--sample-rate", "999999", "--out", s(&out)]);
+    assert!(err.contains("GB of samples") && err.contains("a sample rate of at most"), "{err}");
+    assert!(!out.exists(), "a refused run left {out:?}");
+    let rig = rig_config::EMBEDDED_RIG_TOML;
+    let line = rig.lines().find(|l| l.starts_with("sample_rate_hz")).unwrap();
+    let path = tmp.path().join("fast.toml");
+    fs::write(&path, rig.replace(line, "sample_rate_hz = 1e7")).unwrap();
+    let err = run_err(&["--config", s(&path), "travel", "--quiet", "--out", s(&tmp.path().join("travel"))]);
+    assert!(err.contains("GB of samples"), "{err}");
+}

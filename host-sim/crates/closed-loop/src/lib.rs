@@ -129,7 +129,30 @@ pub enum SimError {
     /// The link to a controller outside this process failed.
     #[error("controller link: {0}")]
     Link(String),
+    /// The recording of the travel would not fit in memory.
+    #[error(
+        "a travel of about {duration_s:.0} s sampled at {sample_rate_hz} Hz would hold {:.1} GB of samples; \
+         expected at most {:.1} GB: a sample rate of at most {:.0} Hz",
+        bytes / 1e9,
+        MAX_RUN_BYTES / 1e9,
+        sample_rate_hz * MAX_RUN_BYTES / bytes
+    )]
+    TooLarge {
+        /// Sample rate asked for, Hz.
+        sample_rate_hz: f64,
+        /// Expected duration of the travel, s.
+        duration_s: f64,
+        /// Memory its samples would take, bytes.
+        bytes: f64,
+    },
 }
+
+/// Largest memory the samples of one simulated travel may take, bytes
+/// (1 GiB: a 20 s travel at about 400 kHz; a dataset runs several at once).
+pub const MAX_RUN_BYTES: f64 = (1u64 << 30) as f64;
+
+/// Signals a [`TravelRun`] records per sample (each an `f64`).
+const RUN_SIGNALS: f64 = 12.0;
 
 /// A drive controller the closed loop can run: the drive core in this
 /// process, or the same code on another processor behind a link.
@@ -356,6 +379,10 @@ pub fn simulate_travel_faulted(
     // Generous bound: the profile plus the sequence plus the tail, doubled.
     let time_limit = 2.0 * (distance / rig.travel.rated_speed_mps + 10.0 + options.tail_s);
     let expected_steps = (time_limit / 2.0 / ts) as u64;
+    let bytes = time_limit / 2.0 * options.sample_rate_hz * RUN_SIGNALS * 8.0;
+    if bytes > MAX_RUN_BYTES {
+        return Err(SimError::TooLarge { sample_rate_hz: options.sample_rate_hz, duration_s: time_limit / 2.0, bytes });
+    }
     if let Some(bar) = progress {
         bar.set_length(expected_steps);
     }
