@@ -10,4 +10,5 @@ mod input_fuzz;
 mod outputs;
 mod recording_read;
 mod ride_quality;
+mod rig_dev;
 mod rig_sample;

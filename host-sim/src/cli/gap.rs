@@ -186,13 +186,20 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     if let Some(note) = report.once_per_revolution_note() {
         outln!("once per revolution: {note}");
     }
+    if let Some(note) = report.no_effect_helps_note() {
+        outln!("{note}");
+    }
+    for r in report.ranking.iter().filter_map(|c| c.refit.as_ref()) {
+        outln!("{}", diagnosis::report::refit_text(r));
+    }
     for c in report.ranking.iter().take(5) {
         outln!(
-            "  {:<48} held-out {:.2} -> {:.2} dB ({:+.0} %)",
+            "  {:<48} held-out {:.2} -> {:.2} dB ({:+.0} %){}",
             c.name,
             c.held_out_gap_before_db,
             c.held_out_gap_after_db,
-            -100.0 * c.held_out_shrink
+            -100.0 * c.held_out_shrink,
+            if c.naming.named { "" } else { " (not named)" }
         );
     }
     outln!("{} simulations in {:.1} s", report.simulations, report.runtime_s);

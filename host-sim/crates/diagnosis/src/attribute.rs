@@ -28,6 +28,7 @@ use std::f64::consts::TAU;
 
 use rayon::prelude::*;
 
+use super::hypotheses::Refit;
 use super::measure::{gap, Tolerances};
 use super::screen;
 use super::signals::Channel;
@@ -84,12 +85,16 @@ pub struct Lab<'a> {
     pub bands: &'a Bands,
     /// `tension_stiffening`'s reference tension from the calibration, N.
     pub reference_tension_n: Option<f64>,
+    /// The calibration re-done under the hypotheses of the effects it can
+    /// absorb ([`super::hypotheses`]): such an effect is fitted on its
+    /// re-calibrated rig, over the grid its calibration gave.
+    pub refits: &'a [Refit],
     /// Called after every batch of runs with (runs done, runs planned).
     pub progress: &'a (dyn Fn(usize, usize) + Sync),
 }
 
 /// One fitted parameter with its spread across the folds.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct FittedParameter {
     /// Effect.
     pub effect: &'static str,
@@ -104,7 +109,7 @@ pub struct FittedParameter {
 }
 
 /// An effect (or a pair) after fitting and cross-validation.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct Candidate {
     /// Effect name, or `a + b` for a pair.
     pub name: String,
@@ -124,6 +129,18 @@ pub struct Candidate {
     pub held_out_shrink: f64,
     /// Ranking score: held-out gap after times `1 + penalty * parameters`, dB.
     pub score_db: f64,
+    /// Per held-out recording, the excess gap the fit on the other
+    /// recordings removes there (before - after), dB.
+    pub held_out_improvements_db: Vec<f64>,
+    /// The fitted parameters (`effect.parameter`) that sit at the edge of
+    /// their search on the side where the effect vanishes
+    /// ([`super::naming::Neutral`]).
+    pub search_edge: Vec<String>,
+    /// Whether the candidate may be named ([`super::naming`]).
+    pub naming: super::naming::Naming,
+    /// The calibration under the candidate's hypothesis, when it was
+    /// re-done ([`super::hypotheses`]): the effect is fitted on that rig.
+    pub refit: Option<Refit>,
     /// The model with the effect(s) as fitted on all recordings.
     #[serde(skip)]
     pub effects: Effects,
@@ -309,6 +326,11 @@ impl Lab<'_> {
     /// Runs the model with each of `models` on the recordings `set`, in
     /// parallel: per model, per recording of `set` (in its order).
     fn run_on(&self, models: &[Effects], set: &[usize]) -> Vec<Runs> {
+        self.run_on_rig(self.rig, models, set)
+    }
+
+    /// [`Self::run_on`] on `rig` instead of the calibrated rig.
+    fn run_on_rig(&self, rig: &RigConfig, models: &[Effects], set: &[usize]) -> Vec<Runs> {
         let jobs: Vec<(usize, usize)> = (0..models.len()).flat_map(|m| set.iter().map(move |&t| (m, t))).collect();
         let results: Vec<Option<ChainSpectra>> = jobs
             .par_iter()
@@ -316,7 +338,7 @@ impl Lab<'_> {
                 let target = &self.targets[t];
                 target
                     .counterpart
-                    .simulate(self.rig, &models[m], &target.recording, &target.stem)
+                    .simulate(rig, &models[m], &target.recording, &target.stem)
                     .ok()
                     .map(|signals| ChainSpectra::compute(&signals, &target.segmentation, self.bands))
             })
@@ -429,6 +451,9 @@ struct Family {
     linear: Vec<LinearEffect>,
     /// Per base, per recording: cross powers of [base, nominal, probes...].
     cross: Vec<Vec<Option<CrossPowers>>>,
+    /// The calibration under the family's hypothesis, whose rig its runs
+    /// use (`None`: the calibrated rig).
+    refit: Option<Refit>,
 }
 
 impl Family {
@@ -544,6 +569,56 @@ impl Family {
 
     fn fitted_parameters(&self) -> usize {
         self.kinds.iter().map(|k| fitted_count(*k)).sum()
+    }
+
+    /// The fitted grid parameters (`effect.parameter`) of base `b` that
+    /// sit at the end of their searched line (the bases equal to `b` but
+    /// in that parameter) on the side where the effect vanishes, with
+    /// values the effect accepts left between that end and the neutral
+    /// value: the fit could have gone on towards no effect.
+    fn search_edge(&self, b: usize) -> Vec<String> {
+        use super::naming::{neutral, Neutral};
+        let mut out = Vec::new();
+        let best = &self.bases[b].point;
+        for (e, (kind, values)) in best.iter().enumerate() {
+            for (j, spec) in kind.parameters().iter().enumerate() {
+                if !spec.fitted {
+                    continue;
+                }
+                let line: Vec<f64> = self
+                    .bases
+                    .iter()
+                    .filter(|base| {
+                        base.point.len() == best.len()
+                            && base.point.iter().zip(best).enumerate().all(|(f, ((k, v), (kb, vb)))| {
+                                k == kb
+                                    && v.iter().zip(vb).enumerate().all(|(i, (x, y))| {
+                                        (f == e && i == j) || (x - y).abs() <= 1e-12 * y.abs().max(1e-300)
+                                    })
+                            })
+                    })
+                    .map(|base| base.point[e].1[j])
+                    .collect();
+                if line.len() < 2 {
+                    continue;
+                }
+                let v = values[j];
+                let lo = line.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = line.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let open_towards_neutral = match neutral(kind.name(), spec.name) {
+                    Neutral::At(v0) if v0 < v => {
+                        v <= lo && if spec.scale == ParamScale::Integer { v - 1.0 > v0 } else { v > spec.min }
+                    }
+                    Neutral::At(v0) if v0 > v => v >= hi && v < spec.max,
+                    Neutral::AboveRange => v >= hi && v < spec.max,
+                    _ => false,
+                };
+                if open_towards_neutral {
+                    out.push(format!("{}.{}", kind.name(), spec.name));
+                }
+            }
+        }
+        out
     }
 }
 
@@ -713,6 +788,10 @@ fn evaluate(lab: &Lab, family: &Family, nominal: &[f64]) -> Candidate {
     };
     let fitted = family.fitted_parameters();
     Candidate {
+        held_out_improvements_db: held.iter().map(|&t| nominal[t] - held_after[t]).collect(),
+        search_edge: family.search_edge(fit_all.base),
+        naming: Default::default(),
+        refit: family.refit.clone(),
         name: family.kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join(" + "),
         parameters,
         fitted_parameters: fitted,
@@ -788,6 +867,7 @@ fn family_of(planned: &PlannedEffect, runs: &[Runs], nominal_runs: &Runs) -> Fam
                 .collect(),
             linear: Vec::new(),
             cross: Vec::new(),
+            refit: None,
         },
         Search::Linear { .. } => Family {
             kinds: vec![kind],
@@ -798,6 +878,7 @@ fn family_of(planned: &PlannedEffect, runs: &[Runs], nominal_runs: &Runs) -> Fam
                 probes: planned.models.iter().map(|&m| runs[m].clone()).collect(),
             }],
             cross: Vec::new(),
+            refit: None,
         },
     }
 }
@@ -860,10 +941,38 @@ fn refine_grids(lab: &Lab, families: &mut [Family], nominal_mean: f64, count: &m
             break;
         }
         count.planned = count.planned.max(count.done + models.len());
-        let runs = lab.run_all(&models, count);
+        // Each point on its family's rig (a re-calibrated one under its
+        // hypothesis), the points of one rig in one batch.
+        let rig_of = |p: &RefinementPoint| families[p.family].refit.as_ref().map(|r| &r.rig);
+        let mut runs: Vec<Option<Runs>> = vec![None; models.len()];
+        let mut groups: Vec<Option<&RigConfig>> = Vec::new();
+        for p in &points {
+            if !groups.contains(&rig_of(p)) {
+                groups.push(rig_of(p));
+            }
+        }
+        for g in groups {
+            let idx: Vec<usize> = (0..points.len()).filter(|&i| rig_of(&points[i]) == g).collect();
+            let batch: Vec<Effects> = idx.iter().map(|&i| models[i]).collect();
+            let out = lab.run_on_rig(g.unwrap_or(lab.rig), &batch, &lab.all());
+            for (i, r) in idx.into_iter().zip(out) {
+                runs[i] = Some(r);
+            }
+        }
+        count.done += models.len();
+        (lab.progress)(count.done, count.planned);
+        let runs: Vec<Runs> = runs.into_iter().map(Option::unwrap_or_default).collect();
         for f in add_refinement(families, points, runs) {
             families[f].prepare(lab);
         }
+    }
+}
+
+impl Candidate {
+    /// The rig the candidate's effects were fitted on: the re-calibrated
+    /// one under its hypothesis, otherwise `calibrated`.
+    pub fn rig<'a>(&'a self, calibrated: &'a RigConfig) -> &'a RigConfig {
+        self.refit.as_ref().map_or(calibrated, |r| &r.rig)
     }
 }
 
@@ -877,14 +986,23 @@ fn rank(candidates: &mut [Candidate]) {
 pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
     let nominal = lab.nominal_excess();
     let mut count = RunCount { done: 0, planned: 0 };
-    let screened = lab.screen(kinds, &nominal, &mut count);
-    let plan = plan_first_stage(kinds, lab.reference_tension_n, &screened);
-    count.planned += plan.models.len();
+    let refit_of = |k: EffectKind| lab.refits.iter().find(|r| r.effect == k.name());
+    let (refitted, kinds): (Vec<EffectKind>, Vec<EffectKind>) = kinds.iter().partition(|&&k| refit_of(k).is_some());
+    let screened = lab.screen(&kinds, &nominal, &mut count);
+    let plan = plan_first_stage(&kinds, lab.reference_tension_n, &screened);
+    count.planned +=
+        plan.models.len() + refitted.iter().filter_map(|&k| refit_of(k)).map(|r| r.grid.len()).sum::<usize>();
     let runs = lab.run_all(&plan.models, &mut count);
     let nominal_runs: Runs = lab.targets.iter().map(|t| Some(t.nominal.clone())).collect();
     let mut families: Vec<Family> = Vec::new();
     for planned in &plan.effects {
         let mut f = family_of(planned, &runs, &nominal_runs);
+        f.prepare(lab);
+        families.push(f);
+    }
+    for kind in refitted {
+        let Some(refit) = refit_of(kind) else { continue };
+        let mut f = refit_family(lab, kind, refit, &mut count);
         f.prepare(lab);
         families.push(f);
     }
@@ -900,6 +1018,23 @@ pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
     candidates
 }
 
+/// Step: the family of `kind` under its hypothesis: its grid from the
+/// re-done calibration `refit`, run on the re-calibrated rig.
+fn refit_family(lab: &Lab, kind: EffectKind, refit: &Refit, count: &mut RunCount) -> Family {
+    let models: Vec<Effects> =
+        refit.grid.iter().map(|p| effects_of(&[(kind, p.clone())]).unwrap_or(Effects::none())).collect();
+    let runs = lab.run_on_rig(&refit.rig, &models, &lab.all());
+    count.done += models.len();
+    (lab.progress)(count.done, count.planned);
+    Family {
+        kinds: vec![kind],
+        bases: refit.grid.iter().zip(runs).map(|(p, runs)| Base { point: vec![(kind, p.clone())], runs }).collect(),
+        linear: Vec::new(),
+        cross: Vec::new(),
+        refit: Some(refit.clone()),
+    }
+}
+
 /// Whether pairs are tried: the best single effect shrinks the held-out gap
 /// by less than [`PAIR_TRIGGER_SHRINK`], and there are two effects at least.
 fn wants_pairs(candidates: &[Candidate]) -> bool {
@@ -913,6 +1048,8 @@ fn top_singles(candidates: &[Candidate], families: &[Family]) -> Vec<usize> {
         .iter()
         .take(3)
         .filter_map(|c| families.iter().position(|f| f.kinds.len() == 1 && f.kinds[0].name() == c.name))
+        // A family on its own re-calibrated rig pairs with no other.
+        .filter(|&i| families[i].refit.is_none())
         .collect()
 }
 
@@ -1007,6 +1144,7 @@ fn pair_family(a: &Family, b: &Family, grid: Option<GridPair>, pair_runs: &[Runs
                 .collect(),
             linear: Vec::new(),
             cross: Vec::new(),
+            refit: None,
         },
         None => {
             let (grid_f, lin): (Option<&Family>, Vec<&Family>) = match (a.linear.is_empty(), b.linear.is_empty()) {
@@ -1020,6 +1158,7 @@ fn pair_family(a: &Family, b: &Family, grid: Option<GridPair>, pair_runs: &[Runs
                     .map_or_else(|| vec![Base { point: Vec::new(), runs: nominal_runs.clone() }], |g| g.bases.clone()),
                 linear: lin.iter().flat_map(|f| f.linear.clone()).collect(),
                 cross: Vec::new(),
+                refit: None,
             }
         }
     }
@@ -1089,6 +1228,7 @@ mod tests {
                 .collect(),
             linear: Vec::new(),
             cross: Vec::new(),
+            refit: None,
         }
     }
 
@@ -1102,6 +1242,7 @@ mod tests {
                 probes: (0..probes).map(|p| runs(20 + p)).collect(),
             }],
             cross: Vec::new(),
+            refit: None,
         }
     }
 
@@ -1117,6 +1258,7 @@ mod tests {
             held_out_shrink: shrink,
             score_db: after_db,
             effects: Effects::none(),
+            ..Candidate::default()
         }
     }
 

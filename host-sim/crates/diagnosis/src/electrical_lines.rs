@@ -404,6 +404,14 @@ fn candidate(model: Model, travels: &[TravelLines], threshold_a: f64, before: f6
         held_out_shrink: if before > 0.0 { 1.0 - held_out_after / before } else { 0.0 },
         score_db: held_out_after * (1.0 + PARAMETER_PENALTY * model.unknowns() as f64),
         effects,
+        held_out_improvements_db: travels
+            .iter()
+            .zip(&held_out)
+            .map(|(t, after)| excess_db(t, None, threshold_a) - after)
+            .collect(),
+        search_edge: Vec::new(),
+        naming: Default::default(),
+        refit: None,
     })
 }
 

@@ -134,6 +134,20 @@ pub fn identify_free_decay(
     })
 }
 
+/// The positive peaks (m/s^2, one a cycle) of a free decay's first mode at
+/// `f1_hz`, band-limited as [`identify_free_decay`] does, from the second
+/// cycle after the largest while above 5 % of it and three times the noise:
+/// the envelope that a model of the damping other than viscous is fitted to.
+///
+/// # Errors
+/// A signal without a release.
+pub fn first_mode_peaks(acceleration_mps2: &[f64], sample_rate_hz: f64, f1_hz: f64) -> Result<Vec<f64>, AnalysisError> {
+    let release = release_index(acceleration_mps2)?;
+    let (mode, quiet) = first_mode_signal(acceleration_mps2, release, sample_rate_hz, f1_hz)?;
+    let noise_rms = quiet.map(|q| (q.iter().map(|v| v * v).sum::<f64>() / q.len() as f64).sqrt());
+    Ok(decaying_peaks(&mode[release..], noise_rms.unwrap_or(0.0)))
+}
+
 /// The release of a free decay: the first sample whose magnitude reaches
 /// [`RELEASE_FRACTION`] of the largest.
 ///

@@ -8,8 +8,13 @@
 //!    the mechanics) of every recording with the calibrated nominal model.
 //! 3. [`measure`]: the gap in cells of channel x travel phase x band,
 //!    located along the signal chain, in time and in frequency ([`locate`]).
-//! 4. [`attribute`]: every effect fitted and cross-validated.
-//! 5. The verdict: `nominal`, `explained` or `unexplained` ([`report`]).
+//! 4. [`attribute`]: every effect fitted and cross-validated; an effect
+//!    that the calibration can absorb on the calibration re-done under its
+//!    hypothesis ([`hypotheses`]).
+//! 5. [`naming`]: a candidate is named only when it shrinks the held-out
+//!    gap beyond its scatter and its fitted strength leaves no effect by
+//!    more than its uncertainty.
+//! 6. The verdict: `nominal`, `explained` or `unexplained` ([`report`]).
 //!
 //! The paper's identification, which the calibration uses and `host-sim
 //! identify` reports, is here too, because it needs the plant model:
@@ -32,10 +37,12 @@ pub mod drive_law;
 pub mod driven;
 pub mod electrical_lines;
 pub mod error;
+pub mod hypotheses;
 pub mod identify;
 pub mod identify_dataset;
 pub mod locate;
 pub mod measure;
+pub mod naming;
 pub mod replay;
 pub mod report;
 pub mod screen;
@@ -290,6 +297,20 @@ impl GapReport {
         })
     }
 
+    /// When the nominal model misses the data and no candidate of the
+    /// ranking may be named ([`naming`]): that no effect of the library
+    /// helps, with why the best is not named.
+    pub fn no_effect_helps_note(&self) -> Option<String> {
+        if self.verdict == Verdict::Nominal || self.ranking.iter().any(|c| c.naming.named) {
+            return None;
+        }
+        let first = self.ranking.first()?;
+        Some(format!(
+            "No effect of the library helps: the best fit, `{}`, is not named because {}",
+            first.name, first.naming.reason
+        ))
+    }
+
     /// The travels that begin with the rig already moving and what the
     /// diagnosis does about them, in words; `None` when there are none.
     pub fn begins_in_motion_note(&self) -> Option<String> {
@@ -335,7 +356,7 @@ fn car_acceleration_views(
     model: &RigConfig,
     c: &Compared,
     recordings: &[RecordingGap],
-    explaining: Option<&Effects>,
+    explaining: Option<(&RigConfig, &Effects)>,
 ) -> Option<CarAccelerationViews> {
     let worst = (0..recordings.len())
         .max_by(|&a, &b| recordings[a].nominal_excess_db.total_cmp(&recordings[b].nominal_excess_db))?;
@@ -343,10 +364,10 @@ fn car_acceleration_views(
     let car = |s: &ChainSignals| s.channel(signals::Channel::CarAcceleration).map(<[f64]>::to_vec);
     let mut series = vec![("data".to_string(), car(measured)?)];
     let nominal = Effects::none();
-    for (label, effects) in [("nominal model", Some(&nominal)), ("explaining model", explaining)] {
-        let Some(effects) = effects else { continue };
+    for (label, view) in [("nominal model", Some((model, &nominal))), ("explaining model", explaining)] {
+        let Some((rig, effects)) = view else { continue };
         if let Some(values) =
-            target.counterpart.simulate(model, effects, &target.recording, &target.stem).ok().as_ref().and_then(car)
+            target.counterpart.simulate(rig, effects, &target.recording, &target.stem).ok().as_ref().and_then(car)
         {
             series.push((label.to_string(), values));
         }
@@ -1029,7 +1050,8 @@ fn verdict_of(
     electrical: Option<&electrical_lines::ElectricalLines>,
     options: &GapOptions,
 ) -> Verdict {
-    let explains = |c: Option<&Candidate>| c.is_some_and(|b| b.held_out_shrink >= options.explained_shrink);
+    let explains =
+        |c: Option<&Candidate>| c.is_some_and(|b| b.naming.named && b.held_out_shrink >= options.explained_shrink);
     if is_nominal && electrical.is_none() {
         Verdict::Nominal
     } else if (is_nominal || explains(best)) && electrical.is_none_or(|e| explains(e.ranking.first())) {
@@ -1087,13 +1109,6 @@ pub fn diagnose(
         planned.store(total, std::sync::atomic::Ordering::Relaxed);
         progress("fitting effects", done, total);
     };
-    let lab = Lab {
-        rig: &model,
-        targets: &compared.targets,
-        bands: &compared.bands,
-        reference_tension_n: calibration.reference_tension_n,
-        progress: &report_progress,
-    };
     let persistent_cell = persistent_cell(&nominal_cells, &compared.bands);
     let is_nominal = nominal_excess_db <= options.nominal_excess_db
         && persistent_cell.as_ref().is_none_or(|p| p.rms_beyond_db <= options.persistent_cell_db);
@@ -1111,30 +1126,50 @@ pub fn diagnose(
             names.join(", ")
         )
     });
-    let mechanical_ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
+    // The calibration re-done under the hypotheses of the effects it can
+    // absorb (step 4a).
+    let refits: Vec<hypotheses::Refit> =
+        kinds.iter().filter_map(|&k| hypotheses::refit(k, &model, &calibration, dataset)).collect();
+    let lab = Lab {
+        refits: &refits,
+        rig: &model,
+        targets: &compared.targets,
+        bands: &compared.bands,
+        reference_tension_n: calibration.reference_tension_n,
+        progress: &report_progress,
+    };
+    let mut mechanical_ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
+    naming::name_candidates(&mut mechanical_ranking);
     // Under another drive, its transducer and inverter errors show in the
     // direct-axis current, not in the torque-driven mechanics.
     let electrical_lines = (drive.drive == DriveModel::Foreign).then(|| {
         let (measured, not_measured) = std::mem::take(&mut compared.direct_axis);
-        electrical_lines::explain(measured, not_measured, &options.effects)
+        let mut lines = electrical_lines::explain(measured, not_measured, &options.effects);
+        naming::name_candidates(&mut lines.ranking);
+        lines
     });
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
-    let best = if is_nominal { None } else { mechanical_ranking.first() };
+    let best = if is_nominal { None } else { mechanical_ranking.first().filter(|c| c.naming.named) };
     let mut simulations =
         compared.simulations + planned.load(std::sync::atomic::Ordering::Relaxed) * compared.targets.len();
     let explained_by = (verdict == Verdict::Explained).then(|| {
-        let names: Vec<&str> =
-            electrical.and_then(|e| e.ranking.first()).into_iter().chain(best).map(|c| c.name.as_str()).collect();
+        let names: Vec<&str> = electrical
+            .and_then(|e| e.ranking.first())
+            .filter(|c| c.naming.named)
+            .into_iter()
+            .chain(best)
+            .map(|c| c.name.as_str())
+            .collect();
         names.join(" + ")
     });
     let mut map_after = Vec::new();
     if let (Verdict::Explained, Some(best)) = (verdict, best) {
         progress(&format!("checking {}", best.effects.summary()), 0, compared.targets.len());
-        map_after = gap_after(&model, &best.effects, &compared, &mut recordings);
+        map_after = gap_after(best.rig(&model), &best.effects, &compared, &mut recordings);
         simulations += compared.targets.len();
     }
-    let explaining = (verdict == Verdict::Explained).then(|| best.map(|b| &b.effects)).flatten();
+    let explaining = (verdict == Verdict::Explained).then(|| best.map(|b| (b.rig(&model), &b.effects))).flatten();
     let car_acceleration_views = car_acceleration_views(&model, &compared, &recordings, explaining);
     simulations += car_acceleration_views.as_ref().map_or(0, |v| v.series.len().saturating_sub(1));
     let map_before = nominal_cells.into_iter().flatten().collect();
@@ -1182,6 +1217,8 @@ mod tests {
             held_out_shrink: shrink,
             score_db: 1.0 - shrink,
             effects: Effects::none(),
+            naming: naming::Naming { named: true, reason: String::new() },
+            ..Candidate::default()
         }
     }
 
@@ -1207,6 +1244,8 @@ mod tests {
         assert_eq!(verdict_of(false, Some(&poor), Some(&lines_good), &o), Verdict::Unexplained);
         assert_eq!(verdict_of(false, Some(&good), None, &o), Verdict::Explained);
         assert_eq!(verdict_of(false, None, None, &o), Verdict::Unexplained);
+        let not_named = Candidate { naming: naming::Naming::default(), ..candidate(0.9) };
+        assert_eq!(verdict_of(false, Some(&not_named), None, &o), Verdict::Unexplained);
     }
 
     /// A travel's speed channel: a ramp to `top` rad/s, held, a ramp down.

@@ -68,7 +68,13 @@ fn mean_map(
 /// on a colour scale centred on zero (white: the model meets the data
 /// within noise and tolerance; red: the data holds more power than the
 /// model; blue: less), grey where a channel has no cell.
-pub fn gap_map_plot(path: &Path, title: &str, cells: &[CellGap], bands_hz: &[(f64, f64)]) -> Result<()> {
+pub fn gap_map_plot(
+    path: &Path,
+    title: &str,
+    cells: &[CellGap],
+    bands_hz: &[(f64, f64)],
+    limit_db: Option<f64>,
+) -> Result<()> {
     let map = mean_map(cells, bands_hz.len(), cell_excess_db);
     if map.is_empty() || bands_hz.is_empty() {
         return Ok(());
@@ -96,15 +102,23 @@ pub fn gap_map_plot(path: &Path, title: &str, cells: &[CellGap], bands_hz: &[(f6
         x_label: "travel phase".to_string(),
         y_label: "third-octave band centre [Hz]".to_string(),
         colour_label: "excess gap [dB]".to_string(),
-        limit: Some(GAP_MAP_LIMIT_DB),
+        limit: limit_db.filter(|l| *l > 0.0),
         panels,
     };
     heat_map_plot(path, &heat).with_context(|| format!("drawing {}", path.display()))
 }
 
-/// The gap maps' colour scale spans +-this many dB (larger excesses take
-/// the end colours).
-pub const GAP_MAP_LIMIT_DB: f64 = 20.0;
+/// The colour scale of a gap map of `cells`, dB: the largest magnitude of
+/// its mean cell excess ([`cell_excess_db`]), so that a map is read at the
+/// gap's own size (a 0.2 dB gap is not white on a scale made for 20 dB);
+/// `None` when every cell is within noise and tolerance.
+pub fn gap_map_limit_db(cells: &[CellGap], bands: usize) -> Option<f64> {
+    let largest = mean_map(cells, bands, cell_excess_db)
+        .iter()
+        .flat_map(|(.., row)| row.iter().flatten())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    (largest > 0.0).then_some(largest)
+}
 
 /// A band centre for an axis: three significant figures.
 fn format_hz(f: f64) -> String {
@@ -189,7 +203,9 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
         "{}: excess gap of the calibrated nominal model (d beyond noise and tolerance; white: none)",
         report.dataset
     );
-    gap_map_plot(&p, &title, &report.map_before, &report.bands_hz)?;
+    // Before and after on the same scale, the gap's own (before).
+    let limit = gap_map_limit_db(&report.map_before, bands);
+    gap_map_plot(&p, &title, &report.map_before, &report.bands_hz, limit)?;
     plots.push(("gap map before (nominal model)".to_string(), "gap_map_before.png".to_string()));
     written.push(p);
     if !after.is_empty() {
@@ -199,7 +215,7 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
             report.dataset,
             report.explained_by.as_deref().unwrap_or("the explaining model")
         );
-        gap_map_plot(&p, &title, &report.map_after, &report.bands_hz)?;
+        gap_map_plot(&p, &title, &report.map_after, &report.bands_hz, limit)?;
         plots.push(("gap map after (explaining model)".to_string(), "gap_map_after.png".to_string()));
         written.push(p);
     }
@@ -302,6 +318,9 @@ fn overview(s: &mut String, r: &GapReport) {
     let _ = writeln!(s, "# Sim-to-real gap: {}\n", r.dataset);
     let verdict = verdict_text(r.verdict, r.explained_by.as_deref(), r.ranking.is_empty());
     let _ = writeln!(s, "Verdict: {verdict}.\n");
+    if let Some(note) = r.no_effect_helps_note() {
+        let _ = writeln!(s, "{note}.\n");
+    }
     let _ = writeln!(s, "The rig's drive: {}; {}.\n", drive_text(r.drive.drive), r.drive.reason);
     speed_loops(s, &r.rig_speed_loops);
     if let Some(note) = &r.attribution_note {
@@ -350,7 +369,19 @@ fn explaining_effect(s: &mut String, r: &GapReport) {
             let _ = writeln!(s, "- `{}.{}` = {:.4e} +- {:.1e} {}", p.effect, p.name, p.value, p.uncertainty, p.unit);
         }
         s.push('\n');
+        if let Some(r) = &best.refit {
+            let _ = writeln!(s, "{}\n", refit_text(r));
+        }
     }
+}
+
+/// The calibration under an effect's hypothesis in words.
+pub fn refit_text(r: &crate::hypotheses::Refit) -> String {
+    format!(
+        "Calibration re-done under the hypothesis of `{}`: EA {:.4e} N, guide damping {:.1} kg/s, sheave damping \
+         {:.3} N m s/rad ({})",
+        r.effect, r.rope_ea_n, r.guide_damping_kg_per_s, r.sheave_damping_nms_per_rad, r.note
+    )
 }
 
 /// Section `Where the gap lies`: the subsystem, the tables per channel and
@@ -419,14 +450,14 @@ fn ranking_section(s: &mut String, ranking: &[Candidate]) {
     let _ = writeln!(s, "## Ranking (step 4)\n");
     let _ = writeln!(
         s,
-        "| rank | effect | parameters | training before/after (dB) | held-out before/after (dB) | shrink | score (dB) |\n|---|---|---|---|---|---|---|"
+        "| rank | effect | parameters | training before/after (dB) | held-out before/after (dB) | shrink | score (dB) | named |\n|---|---|---|---|---|---|---|---|"
     );
     for (i, c) in ranking.iter().enumerate() {
         let params: Vec<String> =
             c.parameters.iter().map(|p| format!("{}={:.3e}+-{:.1e}", p.name, p.value, p.uncertainty)).collect();
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.2}/{:.2} | {:.2}/{:.2} | {:.0} % | {:.2} |",
+            "| {} | {} | {} | {:.2}/{:.2} | {:.2}/{:.2} | {:.0} % | {:.2} | {} |",
             i + 1,
             c.name,
             params.join(", "),
@@ -435,7 +466,8 @@ fn ranking_section(s: &mut String, ranking: &[Candidate]) {
             c.held_out_gap_before_db,
             c.held_out_gap_after_db,
             100.0 * c.held_out_shrink,
-            c.score_db
+            c.score_db,
+            if c.naming.named { "yes".to_string() } else { format!("no: {}", c.naming.reason) }
         );
     }
 }
@@ -567,12 +599,17 @@ mod tests {
             held_out_shrink: 0.75,
             score_db: 0.336,
             effects: Effects::none(),
+            naming: crate::naming::Naming { named: true, reason: String::new() },
+            ..Candidate::default()
         };
         let mut s = String::new();
         ranking_section(&mut s, &[c.clone(), c]);
         let rows: Vec<&str> = s.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| rank")).collect();
         assert_eq!(rows.len(), 2);
-        assert_eq!(rows[0], "| 1 | a + b | p=1.250e-3+-2.5e-4, q=4.000e1+-NaN | 1.00/0.50 | 1.20/0.30 | 75 % | 0.34 |");
+        assert_eq!(
+            rows[0],
+            "| 1 | a + b | p=1.250e-3+-2.5e-4, q=4.000e1+-NaN | 1.00/0.50 | 1.20/0.30 | 75 % | 0.34 | yes |"
+        );
         assert!(rows[1].starts_with("| 2 | a + b |"));
     }
 

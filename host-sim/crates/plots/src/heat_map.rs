@@ -42,7 +42,8 @@ pub struct HeatMap {
     pub colour_label: String,
     /// The colour scale spans `-limit..limit` (colour-bar units, > 0);
     /// values beyond are drawn in the end colours. `None` takes the largest
-    /// magnitude of the cells (at least 1).
+    /// magnitude of the cells, so that the map is read at its own size (1
+    /// when every cell is zero).
     pub limit: Option<f64>,
     /// The panels (at least one), laid out left to right, at most
     /// [`HEAT_PANELS_PER_ROW`] to a row (four as two by two).
@@ -123,7 +124,8 @@ fn check_heat_map(map: &HeatMap) -> Result<f64, PlotError> {
     match map.limit {
         Some(l) if !(l.is_finite() && l > 0.0) => Err(PlotError::InvalidDbRange { lo: -l, hi: l }),
         Some(l) => Ok(l),
-        None => Ok(largest.max(1.0)),
+        None if largest > 0.0 => Ok(largest),
+        None => Ok(1.0),
     }
 }
 
@@ -146,12 +148,21 @@ pub fn heat_map_plot(path: &Path, map: &HeatMap) -> Result<(), PlotError> {
     let limit = check_heat_map(map)?;
     let per_row = panels_per_row(map.panels.len());
     let panel_rows = map.panels.len().div_ceil(per_row);
-    let (title_px, x_label_px) = (56, 34);
     let width = 40 + per_row as u32 * PANEL_W_PX + BAR_W_PX;
+    let title_lines = wrap_words(&map.title, title_chars_per_line(width));
+    let x_label_px = 34;
+    let title_px = TITLE_MARGIN_PX + title_lines.len() as u32 * TITLE_LINE_PX;
     let height = title_px + panel_rows as u32 * PANEL_H_PX + x_label_px;
     render_sized(path, width, height, |root| {
         let (head, rest) = root.split_vertically(title_px);
-        head.titled(&map.title, (FONT_FAMILY, 22)).map_err(draw_err)?;
+        for (i, line) in title_lines.iter().enumerate() {
+            head.draw(&Text::new(
+                line.clone(),
+                (width as i32 / 2, (TITLE_MARGIN_PX / 2 + i as u32 * TITLE_LINE_PX) as i32),
+                (FONT_FAMILY, TITLE_FONT_PX).into_font().color(&BLACK).pos(Pos::new(HPos::Center, VPos::Top)),
+            ))
+            .map_err(draw_err)?;
+        }
         let (body, foot) = rest.split_vertically(panel_rows as u32 * PANEL_H_PX);
         foot.draw(&Text::new(
             map.x_label.clone(),
@@ -180,6 +191,65 @@ pub fn heat_map_plot(path: &Path, map: &HeatMap) -> Result<(), PlotError> {
         }
         draw_diverging_bar(&bar_column, cell_rows, limit, &map.colour_label)
     })
+}
+
+/// Title font size, pixels.
+const TITLE_FONT_PX: u32 = 22;
+/// Height of one title line, pixels.
+const TITLE_LINE_PX: u32 = 28;
+/// Space above and below the title, pixels together.
+const TITLE_MARGIN_PX: u32 = 24;
+
+/// Characters of the title font that fit on one line of a figure `width`
+/// pixels wide, with a margin: a glyph of the sans-serif font is at most
+/// about 0.6 of the font size wide on average over a line of text.
+fn title_chars_per_line(width: u32) -> usize {
+    ((width.saturating_sub(40)) as f64 / (0.6 * TITLE_FONT_PX as f64)).floor().max(10.0) as usize
+}
+
+/// `text` broken into lines of at most `max` characters, at spaces where
+/// it can be, inside a word (a long path) where it cannot.
+pub fn wrap_words(text: &str, max: usize) -> Vec<String> {
+    let max = max.max(1);
+    let mut lines: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        let mut word: Vec<char> = word.chars().collect();
+        loop {
+            let used = line.chars().count();
+            let room = if used == 0 { max } else { max.saturating_sub(used + 1) };
+            if word.len() <= room {
+                if used > 0 {
+                    line.push(' ');
+                }
+                line.extend(word.iter());
+                break;
+            }
+            if used > 0 && word.len() <= max {
+                lines.push(std::mem::take(&mut line));
+                continue;
+            }
+            // A word longer than the room: as much as fits, the rest on.
+            let take = if room == 0 {
+                lines.push(std::mem::take(&mut line));
+                max
+            } else {
+                room
+            };
+            if !line.is_empty() {
+                line.push(' ');
+            }
+            line.extend(word.drain(..take.min(word.len())));
+            lines.push(std::mem::take(&mut line));
+            if word.is_empty() {
+                break;
+            }
+        }
+    }
+    if !line.is_empty() || lines.is_empty() {
+        lines.push(line);
+    }
+    lines
 }
 
 /// Panels in a row for `n` panels: all of up to [`HEAT_PANELS_PER_ROW`] in
@@ -340,7 +410,7 @@ mod tests {
         heat_map_plot(&path, &map(4)).unwrap();
         let (w, h, rgb) = read_rgb(&path);
         assert_eq!(w, 40 + 2 * PANEL_W_PX + BAR_W_PX);
-        assert_eq!(h, 56 + 2 * PANEL_H_PX + 34);
+        assert_eq!(h, TITLE_MARGIN_PX + TITLE_LINE_PX + 2 * PANEL_H_PX + 34);
         assert_eq!((panels_per_row(1), panels_per_row(3), panels_per_row(5)), (1, 3, 3));
         let count = |c: RGBColor| rgb.chunks(3).filter(|p| p == &[c.0, c.1, c.2]).count();
         // Four panels of one red, one blue and one grey column, each a
@@ -348,6 +418,35 @@ mod tests {
         let (red, blue, grey) = (count(diverging(1.0)), count(diverging(-1.0)), count(NO_DATA));
         assert!(red > 4 * 5000 && blue > 4 * 5000 && grey > 4 * 5000, "{red} {blue} {grey}");
         assert!((red as f64 / blue as f64 - 1.0).abs() < 0.1, "{red} {blue}");
+    }
+
+    #[test]
+    fn long_titles_wrap_to_the_figure_and_every_character_stays() {
+        let title = "/work/shared/rig-dev/a_rather_long_dataset_name_that_goes_on_and_on: excess gap of the \
+                     calibrated nominal model (d beyond noise and tolerance; white: none)";
+        for max in [12, 30, 64] {
+            let lines = wrap_words(title, max);
+            assert!(lines.len() > 1);
+            assert!(lines.iter().all(|l| l.chars().count() <= max), "{max}: {lines:?}");
+            let joined: String = lines.concat().chars().filter(|c| !c.is_whitespace()).collect();
+            let expected: String = title.chars().filter(|c| !c.is_whitespace()).collect();
+            assert_eq!(joined, expected);
+        }
+        assert_eq!(wrap_words("short title", 64), ["short title"]);
+        assert_eq!(wrap_words("", 64), [""]);
+        // One panel's figure holds the report's title on a few lines.
+        let w = 40 + PANEL_W_PX + BAR_W_PX;
+        assert!(wrap_words(title, title_chars_per_line(w)).len() <= 4);
+    }
+
+    #[test]
+    fn the_automatic_scale_is_the_largest_magnitude() {
+        let mut m = map(1);
+        m.limit = None;
+        m.panels[0].values = vec![vec![Some(0.2); 4], vec![Some(-0.05); 4], vec![None; 4]];
+        assert_eq!(check_heat_map(&m).unwrap(), 0.2);
+        m.panels[0].values = vec![vec![Some(0.0); 4], vec![Some(0.0); 4], vec![None; 4]];
+        assert_eq!(check_heat_map(&m).unwrap(), 1.0);
     }
 
     #[test]
