@@ -11,6 +11,7 @@
 mod closed_loop;
 mod commands;
 mod compensation;
+mod docs_layout;
 mod effects;
 mod faults;
 mod fixed_point;
