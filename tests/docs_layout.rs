@@ -112,7 +112,8 @@ fn layout_page_names_every_source_file_and_no_missing_one() {
                 problems.push(format!("{dir}src/{file} is not named in the section of {wanted}"));
             }
         }
-        for span in spans.iter().filter(|s| s.ends_with(".rs") && !s.contains(char::is_whitespace) && !s.contains('$')) {
+        for span in spans.iter().filter(|s| s.ends_with(".rs") && !s.contains(char::is_whitespace) && !s.contains('$'))
+        {
             let exists = [src.join(span), root.join(&dir).join(span), root.join(span)].iter().any(|p| p.is_file());
             if !exists {
                 problems.push(format!("the section of {wanted} names `{span}`, which is not in the tree"));
