@@ -656,3 +656,25 @@ fn a_sample_rate_whose_recording_would_not_fit_in_memory_is_refused_before_the_r
     let err = run_err(&["--config", s(&path), "travel", "--quiet", "--out", s(&tmp.path().join("travel"))]);
     assert!(err.contains("GB of samples"), "{err}");
 }
+
+#[test]
+fn a_one_sample_glitch_in_a_current_or_the_speed_is_named_with_its_line_and_column() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    simulate_travel(&data, "up", "up", "3", "4");
+    let csv = data.join("up.csv");
+    let original = fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = original.lines().next().unwrap().split(',').collect();
+    for (column, glitch) in [("i_b_A", 80.0), ("speed_radps", 40.0)] {
+        let index = header.iter().position(|h| *h == column).unwrap();
+        let mut lines: Vec<String> = original.lines().map(String::from).collect();
+        // Line 1001 of the file (the header is line 1).
+        let mut fields: Vec<String> = lines[1000].split(',').map(String::from).collect();
+        fields[index] = format!("{}", fields[index].parse::<f64>().unwrap() + glitch);
+        lines[1000] = fields.join(",");
+        fs::write(&csv, lines.join("\n") + "\n").unwrap();
+        // Before: "torque neither follows nor opposes the motion", no line, no column.
+        let err = run_err(&["analyze", s(&data), "--out", s(&tmp.path().join("a"))]);
+        assert!(err.contains("up.csv` line 1001") && err.contains(column) && err.contains("glitch"), "{err}");
+    }
+}

@@ -6,7 +6,7 @@
 //! `tests/commands/recording_read.rs` fuzzes the samples reader. Recordings
 //! that contradict themselves or their metadata are generated here by class
 //! (wrapped or glitched angle, dead accelerometer, direction or distance
-//! against the samples) and must be refused naming the column or field.
+//! against the samples, a spike in a current or the speed) and must be refused naming the column or field.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -313,11 +313,33 @@ fn consistent_travel(fs: f64, peak: f64, seconds: f64, up: bool, angle0: f64) ->
 enum Defect {
     None,
     WrappedAngle,
-    AngleGlitch { at: prop::sample::Index, rad: f64 },
-    DeadAccelerometer { value: f64 },
+    AngleGlitch {
+        at: prop::sample::Index,
+        rad: f64,
+    },
+    DeadAccelerometer {
+        value: f64,
+    },
     DirectionFlipped,
-    DistanceScaled { factor: f64 },
+    DistanceScaled {
+        factor: f64,
+    },
+    /// A one-sample spike of `times` the step [`LIMITS`] allows, in a
+    /// current or the speed.
+    Spike {
+        at: prop::sample::Index,
+        times: f64,
+        speed: bool,
+    },
 }
+
+/// The slew limits of the generated travels.
+const LIMITS: recording::consistency::SlewLimits = recording::consistency::SlewLimits {
+    current_a_per_s: 1.0e4,
+    current_slack_a: 0.5,
+    shaft_rad_per_s2: 1.0e3,
+    speed_slack_radps: 0.5,
+};
 
 fn defect() -> impl Strategy<Value = Defect> {
     prop_oneof![
@@ -328,6 +350,8 @@ fn defect() -> impl Strategy<Value = Defect> {
         (-1.0..1.0f64).prop_map(|value| Defect::DeadAccelerometer { value }),
         Just(Defect::DirectionFlipped),
         prop_oneof![1.5..50.0f64, 0.05..0.6f64].prop_map(|factor| Defect::DistanceScaled { factor }),
+        (any::<prop::sample::Index>(), prop_oneof![-10.0..-1.5f64, 1.5..10.0f64], any::<bool>())
+            .prop_map(|(at, times, speed)| Defect::Spike { at, times, speed }),
     ]
 }
 
@@ -352,6 +376,18 @@ fn apply_defect(r: &mut recording::Recording, defect: &Defect) {
                 *direction = if *direction == CarDirection::Up { CarDirection::Down } else { CarDirection::Up };
                 std::mem::swap(lw_start_m, lw_end_m);
             }
+        }
+        Defect::Spike { at, times, speed } => {
+            let fs = r.meta.sample_rate_hz;
+            let (name, limit) = if *speed {
+                (recording::SPEED, 2.0 * LIMITS.shaft_rad_per_s2 / fs + LIMITS.speed_slack_radps)
+            } else {
+                (recording::I_B, 2.0 * LIMITS.current_a_per_s / fs + LIMITS.current_slack_a)
+            };
+            take(r, name, &|v| {
+                let i = 1 + at.index(v.len() - 2);
+                v[i] += times * limit;
+            });
         }
         Defect::DistanceScaled { factor } => {
             if let RecordingKind::Travel { lw_start_m, lw_end_m, .. } = &mut r.meta.kind {
@@ -392,7 +428,8 @@ proptest! {
         let dir = tempfile::tempdir().unwrap();
         let (toml, _) = recording::write_recording(dir.path(), "travel", &r).unwrap();
         let read = recording::read_recording(&toml, ROPE_TOTAL_M)
-            .and_then(|rec| recording::consistency::check_travel_distance(&rec, &toml, SHEAVE_RADIUS_M).map(|()| rec));
+            .and_then(|rec| recording::consistency::check_travel_distance(&rec, &toml, SHEAVE_RADIUS_M).map(|()| rec))
+            .and_then(|rec| recording::consistency::check_slew(&rec, &toml.with_extension("csv"), &LIMITS).map(|()| rec));
         let needle = match &defect {
             Defect::None => {
                 prop_assert!(read.is_ok(), "a consistent travel refused: {}", read.unwrap_err());
@@ -402,6 +439,8 @@ proptest! {
             Defect::DeadAccelerometer { .. } => "column `acc_car_mps2`",
             Defect::DirectionFlipped => "column `direction`",
             Defect::DistanceScaled { .. } => "column `lw_start_m, lw_end_m`",
+            Defect::Spike { speed: true, .. } => "column `speed_radps`",
+            Defect::Spike { speed: false, .. } => "column `i_b_A`",
         };
         let err = read.expect_err("a contradiction was accepted").to_string();
         prop_assert!(err.contains(needle), "{defect:?}: {err}");

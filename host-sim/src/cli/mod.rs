@@ -220,11 +220,35 @@ pub fn output_dir_reading(dir: &Path, force: bool, inputs: &[&Path]) -> anyhow::
 /// ([`recording::consistency::check_travel_distance`]).
 pub fn read_dataset_on(rig: &RigConfig, dir: &Path) -> anyhow::Result<Vec<(String, Recording)>> {
     let dataset = recording::read_dataset(dir, rig.mechanics.rope_total_length_m)?;
+    let limits = slew_limits(rig);
     for (stem, recording) in &dataset {
         let toml_path = dir.join(format!("{stem}.toml"));
         recording::consistency::check_travel_distance(recording, &toml_path, rig.mechanics.sheave_radius_m)?;
+        recording::consistency::check_slew(recording, &toml_path.with_extension("csv"), &limits)?;
     }
     Ok(dataset)
+}
+
+/// How fast `rig`'s recorded signals can change
+/// ([`recording::consistency::SlewLimits`]): a phase current by the whole
+/// bus plus the back-EMF at twice the rated speed across the smallest
+/// winding inductance, with an ADC quantum plus 2 % of the current range
+/// as slack; the shaft by the largest measurable current's torque plus
+/// twice the ropes' static pull on the machine and sheave inertia, with one
+/// encoder line per sample period of a 1 kHz estimator as slack.
+pub fn slew_limits(rig: &RigConfig) -> recording::consistency::SlewLimits {
+    let (m, motor, inv) = (&rig.mechanics, &rig.motor, &rig.inverter);
+    let heaviest = m.m_car_kg.iter().copied().fold(m.m_cw_kg, f64::max);
+    let omega_max = 2.0 * rig.travel.rated_speed_mps / m.sheave_radius_m;
+    let emf_v = f64::from(motor.pole_pairs) * motor.flux_linkage_wb * omega_max;
+    let full_scale = inv.current_sense_full_scale_a;
+    let rope_torque = 2.0 * m.gravity_mps2 * (heaviest + m.m_cw_kg) * m.sheave_radius_m;
+    recording::consistency::SlewLimits {
+        current_a_per_s: (inv.dc_bus_v + emf_v) / motor.ld_h.min(motor.lq_h),
+        current_slack_a: 2.0 * full_scale / f64::from(1u32 << inv.adc_bits.min(24)) + 0.02 * full_scale,
+        shaft_rad_per_s2: (motor.torque_constant_nm_per_a() * full_scale + rope_torque) / m.sheave_inertia_kg_m2,
+        speed_slack_radps: std::f64::consts::TAU / f64::from(inv.encoder_counts_per_rev.max(1)) * 1000.0,
+    }
 }
 
 /// Checks a count on the command line: inside `[lo, hi]`.

@@ -19,7 +19,11 @@
 //!   travel up integrates to a positive shaft angle;
 //! * a **travel whose metadata describe another distance** than its shaft
 //!   turned on the rig's sheave ([`check_travel_distance`], which needs the
-//!   rig's sheave radius and so is called by the commands that have it).
+//!   rig's sheave radius and so is called by the commands that have it);
+//! * a **one-sample glitch** in a phase current or the speed: a sample
+//!   that leaves both neighbours by more than the rig's physics can move
+//!   the signal in a sample period, and comes back
+//!   ([`check_slew`], with limits the commands compute from the rig).
 //!
 //! Each error names the file, the line of the first offending sample where
 //! there is one, the column or field, what the data show and what is
@@ -219,6 +223,71 @@ pub fn check_travel_distance(recording: &Recording, toml_path: &Path, sheave_rad
     ))
 }
 
+/// How fast the recorded signals of a rig can change, from the rig's
+/// physics (the commands compute it from `--config`): a step between two
+/// samples beyond it is a glitch of the acquisition, not the machine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlewLimits {
+    /// Largest rate of change of a phase current, A/s (the whole bus and
+    /// the back-EMF across the smallest winding inductance).
+    pub current_a_per_s: f64,
+    /// Smallest change of a current the acquisition shows, A (quantum and
+    /// noise): added to every step allowed.
+    pub current_slack_a: f64,
+    /// Largest shaft acceleration, rad/s^2 (the largest measurable torque
+    /// and the ropes' pull on the machine's inertia).
+    pub shaft_rad_per_s2: f64,
+    /// Smallest change of the speed estimate, rad/s (an encoder line per
+    /// sample period): added to every step allowed.
+    pub speed_slack_radps: f64,
+}
+
+/// A step between two samples is a glitch when larger than this many times
+/// the rig's fastest physical change over one sample period, plus the slack.
+pub const SLEW_FACTOR: f64 = 2.0;
+
+/// Refuses a one-sample glitch in a phase current or the speed of a travel
+/// (a sample that leaves both neighbours by more than [`SlewLimits`] allows
+/// and comes back), naming the samples file, the line and the column.
+///
+/// # Errors
+/// [`ReadError::Inconsistent`].
+pub fn check_slew(recording: &Recording, csv_path: &Path, limits: &SlewLimits) -> Result<(), ReadError> {
+    let dt = 1.0 / recording.meta.sample_rate_hz;
+    let current = SLEW_FACTOR * limits.current_a_per_s * dt + limits.current_slack_a;
+    let speed = SLEW_FACTOR * limits.shaft_rad_per_s2 * dt + limits.speed_slack_radps;
+    for (name, limit, unit, why) in [
+        (crate::I_A, current, "A", "the bus across the winding"),
+        (crate::I_B, current, "A", "the bus across the winding"),
+        (crate::I_C, current, "A", "the bus across the winding"),
+        (SPEED, speed, "rad/s", "the largest torque on the machine's inertia"),
+    ] {
+        let Some(column) = recording.column(name) else { continue };
+        let Some(k) = column.values.windows(3).position(|w| is_spike(w, limit)) else { continue };
+        let step = column.values[k + 1] - column.values[k];
+        return Err(inconsistent(
+            csv_path,
+            Some(line_of(k + 1)),
+            name,
+            format!("the signal steps by {step:.4} {unit} from the line before and back on the next: a glitch"),
+            &format!(
+                "a step of at most {limit:.4} {unit} per sample on this rig ({why}, twice over, plus the \
+                 acquisition's resolution)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Whether the middle of three samples `w` is a one-sample spike: it leaves
+/// both neighbours by more than `limit` in the same sense while they agree
+/// within `limit`. A step that stays (an ideal current loop, a drive that
+/// drops its current at a trip) is no glitch.
+fn is_spike(w: &[f64], limit: f64) -> bool {
+    let (out, back) = (w[1] - w[0], w[1] - w[2]);
+    out.signum() == back.signum() && out.abs().min(back.abs()) > limit && (w[2] - w[0]).abs() <= limit
+}
+
 /// The integral of `signal` sampled every `dt` (rectangle rule), in its unit times s.
 fn integral(signal: &[f64], dt: f64) -> f64 {
     signal.iter().sum::<f64>() * dt
@@ -332,6 +401,28 @@ mod tests {
         let mut no_angle = r.clone();
         no_angle.columns.retain(|c| c.name != ANGLE);
         assert!(check_travel_distance(&no_angle, path, 2.0 / turned).unwrap_err().to_string().contains(SPEED));
+    }
+
+    #[test]
+    fn a_one_sample_glitch_in_a_current_or_the_speed_is_refused_with_its_line() {
+        let limits = SlewLimits {
+            current_a_per_s: 2.0e4,
+            current_slack_a: 0.5,
+            shaft_rad_per_s2: 500.0,
+            speed_slack_radps: 0.5,
+        };
+        let mut r = travel(CarDirection::Up);
+        r.columns.push(Column::new(crate::I_A, (0..4000).map(|k| 10.0 * (0.01 * k as f64).sin()).collect()));
+        let path = Path::new("t.csv");
+        check_slew(&r, path, &limits).unwrap();
+        // At 1 kHz the rig allows 2 x 20 A + 0.5 A a sample.
+        values(&mut r, crate::I_A)[700] += 100.0;
+        let err = check_slew(&r, path, &limits).unwrap_err().to_string();
+        assert!(err.contains("line 702") && err.contains("i_a_A") && err.contains("glitch"), "{err}");
+        let mut r = travel(CarDirection::Up);
+        values(&mut r, SPEED)[99] = 60.0;
+        let err = check_slew(&r, path, &limits).unwrap_err().to_string();
+        assert!(err.contains("line 101") && err.contains("speed_radps"), "{err}");
     }
 
     #[test]
