@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use drive_core::dcp::channel::position_message;
 use drive_core::dcp::command::{command_byte, Kind, Mode, Speed};
-use drive_core::dcp::slave::S7_MESSAGE_ERROR;
+use drive_core::dcp::slave::{S1_TRAVEL, S5_ACCEPTED, S7_MESSAGE_ERROR};
 use drive_core::dcp::{MasterFrame, SlaveFrame};
 use drive_core::lift_drive::LiftDrive;
 use drive_core::service::ParamsStatus;
@@ -127,6 +127,81 @@ fn dcp4_travels_between_landings_on_the_emulated_chip_are_bit_identical_to_the_h
     assert_eq!(run.shadow.port().slave().position_mm(), Some(1300));
     let travelled = run.states.iter().filter(|s| **s == DriveState::Travel).count();
     assert!(travelled > 16_000, "{travelled} steps in Travel");
+}
+
+#[test]
+fn a_dcp4_travel_follows_a_remaining_distance_changed_by_rope_slip_bit_identical_to_the_host() {
+    let rig = rig();
+    let (geometry, _) = geometry(&rig);
+    // From 1000 mm up to 2200 mm, then down to 1300 mm. The lift controller
+    // measures the car on its own shaft encoder: 1 s into the first travel
+    // the ropes slip 30 mm (the car ahead of the sheave: the remaining
+    // distance shortens), 1 s into the second 50 mm more (the car above
+    // the sheave's count going down: the remaining distance lengthens).
+    let lw_start = geometry.lw_lowest_landing_m as f64 + 1.0;
+    let master = std::cell::RefCell::new(master(Mode::Dcp4, &[2200, 1300]));
+    // (Travels begun, steps in the latest travel.)
+    let travel = std::cell::Cell::new((0u32, 0u64));
+    // The car's position on the lift controller's encoder less the plant's, mm.
+    let slip_mm = std::cell::Cell::new(0.0f64);
+    let run = run_loop(
+        &mut |k, position| master.borrow_mut().bytes(k, position + slip_mm.get()),
+        &mut |replies| master.borrow_mut().receive(replies).unwrap(),
+        &mut |_, state| {
+            let (begun, steps) = travel.get();
+            travel.set(match (*state == DriveState::Travel, steps) {
+                (true, 0) => (begun + 1, 1),
+                (true, n) => (begun, n + 1),
+                (false, _) => (begun, 0),
+            });
+            // 1 s into each travel, the slip of that travel.
+            match travel.get() {
+                (1, 16_000) => slip_mm.set(30.0),
+                (2, 16_000) => slip_mm.set(80.0),
+                _ => {}
+            }
+            master.borrow().phase() == Phase::Done
+        },
+        250_000,
+        lw_start,
+    );
+    let master = master.into_inner();
+    assert_eq!(master.phase(), Phase::Done, "the sequence did not finish in {} steps", run.steps);
+    assert_eq!(master.arrivals.len(), 2);
+    let (begun, last_steps) = travel.get();
+    assert_eq!(begun, 2);
+    assert_eq!(last_steps, 0);
+    assert_eq!(slip_mm.get(), 80.0, "both slips happened");
+    let travelled = run.states.iter().filter(|s| **s == DriveState::Travel).count();
+    assert!(travelled > 2 * 16_000, "{travelled} steps in Travel");
+    // Within 5 mm (half the +-10 mm stopping accuracy of EN 81-20): the
+    // plan made at the slip takes the ropes' stretch of that instant along.
+    for (arrival, target) in master.arrivals.iter().zip([2200.0, 1300.0]) {
+        let position = arrival.position_mm;
+        println!("landed at {position:.2} mm on the lift controller's encoder, target {target} mm");
+        assert!((position - target).abs() < 5.0, "landed at {position:.1} mm, target {target} mm");
+    }
+    assert!(master.replies.iter().all(|r| r.status & S7_MESSAGE_ERROR == 0), "a good message got the error bit");
+    assert!(
+        master.replies.iter().all(|r| r.status & S1_TRAVEL == 0 || r.status & S5_ACCEPTED != 0),
+        "a remaining distance refused"
+    );
+    assert_within_limits(&run.ref_speed_mps, &rig);
+}
+
+/// Acceleration and jerk of the speed reference within the rig's limits
+/// (differences over 4 ms of steps).
+fn assert_within_limits(ref_speed_mps: &[f32], rig: &RigConfig) {
+    let drive = rig.drive_config();
+    let n = 64;
+    let dt = n as f64 / drive.current_loop_hz as f64;
+    let v: Vec<f64> = ref_speed_mps.iter().map(|&v| v as f64).collect();
+    let a: Vec<f64> = (n..v.len()).map(|i| (v[i] - v[i - n]) / dt).collect();
+    for i in n..a.len() {
+        assert!(a[i].abs() <= drive.max_accel_mps2 as f64 * 1.001, "acceleration {} at step {i}", a[i]);
+        let jerk = (a[i] - a[i - n]) / dt;
+        assert!(jerk.abs() <= drive.max_jerk_mps3 as f64 * 1.02, "jerk {jerk} at step {i}");
+    }
 }
 
 #[test]

@@ -37,7 +37,7 @@
 //! `reset`); after a failed calibration the reset calibrates again.
 
 use core::cell::{Cell, RefCell};
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 
 use cortex_m::peripheral::DWT;
 use critical_section::{CriticalSection, Mutex};
@@ -250,6 +250,22 @@ static SNAPSHOT: Mutex<Cell<Snapshot>> = Mutex::new(Cell::new(Snapshot {
     brake_released: false,
 }));
 static STEPS: AtomicU32 = AtomicU32::new(0);
+/// What the controller made of the latest DCP remaining distance: 0 not
+/// yet read, [`REMAINING_TAKEN`] or [`REMAINING_REFUSED`].
+static REMAINING: AtomicU8 = AtomicU8::new(0);
+const REMAINING_TAKEN: u8 = 1;
+const REMAINING_REFUSED: u8 = 2;
+
+/// Whether the controller refused (`Some(false)`) or took (`Some(true)`)
+/// the latest remaining distance of a DCP4 travel since the previous call;
+/// the DCP task tells its slave (S5 in the replies).
+pub fn take_remaining_outcome() -> Option<bool> {
+    match REMAINING.swap(0, Ordering::Relaxed) {
+        REMAINING_TAKEN => Some(true),
+        REMAINING_REFUSED => Some(false),
+        _ => None,
+    }
+}
 static MAX_CYCLES: AtomicU32 = AtomicU32::new(0);
 static DROPPED: AtomicU32 = AtomicU32::new(0);
 
@@ -546,6 +562,14 @@ impl Drive {
                 }
             }
         };
+        if let Command::Drive(ControllerCommand::RemainingDistance { .. }) = command {
+            let outcome = if result.is_ok() { REMAINING_TAKEN } else { REMAINING_REFUSED };
+            REMAINING.store(outcome, Ordering::Relaxed);
+            // The lift controller repeats it every message: only refusals are logged.
+            if result.is_ok() {
+                return;
+            }
+        }
         push_event(
             cs,
             match result {

@@ -106,6 +106,11 @@ pub async fn run(mut uart: BufferedUart<'static>, mut port: DcpPort) {
         handle(&mut uart, &event, &mut pending).await;
         let event = port.poll(now_us(), &status());
         handle(&mut uart, &event, &mut pending).await;
+        match control::take_remaining_outcome() {
+            Some(true) => port.take_remaining(),
+            Some(false) => port.refuse_remaining(),
+            None => {}
+        }
         if let Some(command) = pending.take() {
             if let Err(command) = control::submit(command) {
                 pending = Some(command);

@@ -9,7 +9,7 @@
 
 use defmt::{debug, error, info, warn};
 use drive_core::alignment::AlignmentError;
-use drive_core::controller::{CommandError, SpeedCommandError};
+use drive_core::controller::{CommandError, RetargetError, SpeedCommandError};
 use drive_core::current_offset::OffsetError;
 use drive_core::lift_drive::{ApplyError, ControllerCommand};
 use drive_core::supervisor::Fault;
@@ -214,6 +214,7 @@ fn command_name(command: &Command) -> &'static str {
     match command {
         Command::Drive(ControllerCommand::Travel(_)) => "distance travel",
         Command::Drive(ControllerCommand::SpeedTravel(_)) => "speed travel",
+        Command::Drive(ControllerCommand::RemainingDistance { .. }) => "remaining distance",
         Command::Drive(ControllerCommand::Speed(_)) => "speed change",
         Command::Drive(ControllerCommand::Stop) => "stop",
         Command::Drive(ControllerCommand::SafeStop(_)) => "safe stop",
@@ -231,6 +232,11 @@ fn refusal_name(refusal: Refusal) -> &'static str {
         }
         Refusal::Controller(ApplyError::Speed(SpeedCommandError::NoSpeedTravel)) => "no speed travel running",
         Refusal::Controller(ApplyError::Speed(SpeedCommandError::OutOfRange)) => "speed out of range",
+        Refusal::Controller(ApplyError::Remaining(RetargetError::NoDistanceTravel)) => "no distance travel running",
+        Refusal::Controller(ApplyError::Remaining(RetargetError::CannotStop)) => {
+            "remaining distance shorter than the car can stop in"
+        }
+        Refusal::Controller(ApplyError::Remaining(RetargetError::OutOfRange)) => "remaining distance out of range",
         Refusal::NotReady => "drive not calibrated or not aligned, or a fault is latched",
         Refusal::Busy => "the start-up sequence is not waiting for it",
         Refusal::NothingToReset => "no fault latched",

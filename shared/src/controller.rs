@@ -26,7 +26,7 @@ use crate::current_loop::{current_from_code, CurrentLoop, CurrentLoopParams};
 use crate::fixed::{mul_int, q16, Q16};
 use crate::observer::{ChainModel, ObserverEstimate, ObserverInput, ObserverLink, ObserverOutput, ObserverRequest};
 use crate::park_clarke::Abc;
-use crate::profile::{ProfileError, ProfilePoint, SCurve, SpeedRamp};
+use crate::profile::{Approach, ApproachError, ProfileError, ProfilePoint, SCurve, SpeedRamp};
 use crate::ripple::harmonics::HarmonicTable;
 use crate::ripple::{LearningInput, RippleCompensator, Strategy};
 use crate::speed_estimator::SpeedEstimator;
@@ -220,6 +220,29 @@ pub enum SpeedCommandError {
     OutOfRange,
 }
 
+/// Why a new remaining distance of a distance travel was refused (the
+/// travel goes on to the target it had).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RetargetError {
+    /// No distance travel runs before its end (idle, tripped, a speed
+    /// travel, or the car already holding at its target).
+    NoDistanceTravel,
+    /// The car cannot stop within that distance from its reference now
+    /// with the acceleration and jerk limits: it would pass the target.
+    CannotStop,
+    /// The distance is not finite and non-negative, or the target is
+    /// outside the rope lengths `(0, l_t)`.
+    OutOfRange,
+}
+
+/// A changed remaining distance closer than this to the target planned,
+/// m (5 mm), leaves the plan as it is: a lift controller repeats the
+/// remaining distance in every message, measured on the car, whose ropes
+/// stretch and spring back during the travel by 1-3 mm against the
+/// sheave's count on the reference rig (the plan would chase them and
+/// land by that much off); rope slip beyond it is followed.
+pub const RETARGET_DEADBAND_M: f32 = 0.005;
+
 /// The reference of a speed travel: the ramp running and where it may go.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct SpeedReference {
@@ -245,6 +268,9 @@ impl SpeedReference {
 enum Reference {
     /// An S-curve to the target.
     Distance(SCurve),
+    /// A distance travel whose target changed during the profile: the
+    /// approach from the reference of that instant (`start_s`, s in `Travel`).
+    Retarget { approach: Approach, start_s: f32 },
     /// A commanded speed.
     Speed(SpeedReference),
 }
@@ -545,6 +571,88 @@ impl Controller {
         }
     }
 
+    /// Changes the running distance travel's target to `remaining_m` (m, not
+    /// negative) ahead of the car's position `age_s` seconds ago (the
+    /// remaining distance the lift controller measured when it started its
+    /// message, e.g. after rope slip; `age_s` in `[0, 1)`: the car's
+    /// measured position now less the reference speed times `age_s`). Before
+    /// the profile starts, the S-curve is planned again to the new total
+    /// distance; during it, the rest of the travel is planned again from
+    /// the reference now ([`Approach`]: acceleration and jerk within the
+    /// limits, at most the rated speed, at rest on the target, never past
+    /// it). `Ok(true)`: planned again; `Ok(false)`: the new target is
+    /// within [`RETARGET_DEADBAND_M`] of the planned one, nothing changed.
+    /// A target closer than the shortest stop is refused
+    /// ([`RetargetError::CannotStop`]) and the travel keeps its target.
+    pub fn command_remaining_distance(&mut self, remaining_m: f32, age_s: f32) -> Result<bool, RetargetError> {
+        if !(remaining_m >= 0.0 && remaining_m.is_finite() && (0.0..1.0).contains(&age_s)) {
+            return Err(RetargetError::OutOfRange);
+        }
+        let state = self.state;
+        let t = self.state_time_s();
+        let c = self.config;
+        let moved_counts = self.estimator.position_counts();
+        let Some(travel) = self.travel.as_mut() else {
+            return Err(RetargetError::NoDistanceTravel);
+        };
+        let sign = travel.command.direction.sign();
+        let moved_m = moved_counts.saturating_sub(travel.start_counts) as f32 * core::f32::consts::TAU
+            / c.encoder_counts_per_rev as f32
+            * c.sheave_radius_m;
+        // The reference speed now (m/s, in the travel direction): the car
+        // moved about `v age_s` since the master measured the distance.
+        let speed_mps = match (state, travel.reference) {
+            (DriveState::Travel, Reference::Distance(profile)) => profile.at(t).speed_mps,
+            (DriveState::Travel, Reference::Retarget { approach, start_s }) => approach.at(t - start_s).speed_mps,
+            _ => 0.0,
+        };
+        // The new target in the travel coordinate (m from the start, positive in its direction).
+        let target_m = sign * moved_m + remaining_m - speed_mps * age_s;
+        let planned_m = match travel.reference {
+            Reference::Distance(profile) => profile.distance_m(),
+            Reference::Retarget { approach, .. } => approach.target_m(),
+            Reference::Speed(_) => return Err(RetargetError::NoDistanceTravel),
+        };
+        // The target it has (also while holding there at the end).
+        let change = target_m - planned_m;
+        if (if change < 0.0 { -change } else { change }) < RETARGET_DEADBAND_M {
+            return Ok(false);
+        }
+        if !matches!(state, DriveState::PreTorque | DriveState::BrakeLift | DriveState::Travel) {
+            return Err(RetargetError::NoDistanceTravel);
+        }
+        let lw_end = travel.command.lw_start_m + sign * target_m;
+        if !(target_m > 0.0 && lw_end > 0.0 && lw_end < c.rope_total_length_m) {
+            return Err(RetargetError::OutOfRange);
+        }
+        let (v, a, j) = (c.rated_speed_mps, c.max_accel_mps2, c.max_jerk_mps3);
+        travel.reference = match (state, travel.reference) {
+            (DriveState::Travel, Reference::Distance(profile)) => {
+                let approach = Approach::plan(profile.at(t), target_m, v, a, j).map_err(retarget_error)?;
+                Reference::Retarget { approach, start_s: t }
+            }
+            (DriveState::Travel, Reference::Retarget { approach, start_s }) => {
+                let approach = Approach::plan(approach.at(t - start_s), target_m, v, a, j).map_err(retarget_error)?;
+                Reference::Retarget { approach, start_s: t }
+            }
+            // Before the profile runs: the whole S-curve to the new distance.
+            _ => Reference::Distance(SCurve::plan(target_m, v, a, j).map_err(|_| RetargetError::OutOfRange)?),
+        };
+        travel.command.distance_m = target_m;
+        Ok(true)
+    }
+
+    /// The distance travel's target, m from its start in its direction
+    /// (changed by [`Controller::command_remaining_distance`]); `None`
+    /// without a distance travel.
+    pub fn distance_target_m(&self) -> Option<f32> {
+        match self.travel.map(|t| t.reference) {
+            Some(Reference::Distance(profile)) => Some(profile.distance_m()),
+            Some(Reference::Retarget { approach, .. }) => Some(approach.target_m()),
+            _ => None,
+        }
+    }
+
     /// A new ramp to `speed_mps` (0: stop) from the reference of the latest speed-loop tick.
     fn replan_speed(&mut self, speed_mps: f32) -> Result<(), SpeedCommandError> {
         let running = matches!(self.state, DriveState::PreTorque | DriveState::BrakeLift | DriveState::Travel);
@@ -657,6 +765,7 @@ impl Controller {
     fn reference_ended(&self, t_s: f32) -> bool {
         match self.travel.map(|t| t.reference) {
             Some(Reference::Distance(profile)) => t_s >= profile.duration_s(),
+            Some(Reference::Retarget { approach, start_s }) => t_s - start_s >= approach.duration_s(),
             Some(Reference::Speed(s)) => s.stopping && t_s - s.ramp_start_s >= s.ramp.duration_s(),
             None => true,
         }
@@ -789,6 +898,7 @@ impl Controller {
             DriveState::Travel => {
                 let p = match travel.reference {
                     Reference::Distance(profile) => profile.at(t),
+                    Reference::Retarget { approach, start_s } => approach.at(t - start_s),
                     Reference::Speed(s) => self.speed_reference_at(s, t),
                 };
                 (sign * p.position_m, sign * p.speed_mps, sign * p.accel_mps2)
@@ -796,6 +906,7 @@ impl Controller {
             DriveState::Hold | DriveState::BrakeSet => {
                 let end = match travel.reference {
                     Reference::Distance(profile) => profile.distance_m(),
+                    Reference::Retarget { approach, .. } => approach.at(approach.duration_s()).position_m,
                     Reference::Speed(s) => s.ramp.end().position_m,
                 };
                 (sign * end, 0.0, 0.0)
@@ -876,6 +987,13 @@ impl Controller {
             }
             DriveState::Idle | DriveState::Tripped(_) => self.iq_ref = Q16::ZERO,
         }
+    }
+}
+
+fn retarget_error(e: ApproachError) -> RetargetError {
+    match e {
+        ApproachError::CannotStop => RetargetError::CannotStop,
+        ApproachError::NonPositiveLimit => RetargetError::OutOfRange,
     }
 }
 

@@ -22,11 +22,11 @@
 
 use crate::config::{Direction, DriveConfig};
 use crate::controller::{
-    CommandError, ControlOutput, Controller, DriveState, SensorFrame, SpeedCommandError, SpeedTravelCommand,
-    TravelCommand,
+    CommandError, ControlOutput, Controller, DriveState, RetargetError, SensorFrame, SpeedCommandError,
+    SpeedTravelCommand, TravelCommand,
 };
 use crate::dcp::command::{Mode, Speed};
-use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, FRAME_LEN};
+use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, CHARACTER_US, FRAME_LEN};
 use crate::dcp::slave::{DriveStatus, Outcome, Refusal, Request, Slave, SlaveConfig, StopReason, Travel};
 use crate::observer::{ChainModel, ObserverTask};
 use crate::param_store::DriveParameters;
@@ -75,6 +75,14 @@ pub enum ControllerCommand {
     Travel(TravelCommand),
     /// Start a speed travel.
     SpeedTravel(SpeedTravelCommand),
+    /// The running distance travel's remaining distance, m, measured by the
+    /// master `age_s` seconds before ([`Controller::command_remaining_distance`]).
+    RemainingDistance {
+        /// Remaining distance, m.
+        remaining_m: f32,
+        /// Time since the master started the message that carried it, s.
+        age_s: f32,
+    },
     /// Change the running speed travel's speed, m/s (the crawl at the deceleration point).
     Speed(f32),
     /// Stop the running speed travel (ramp to rest, then the brake).
@@ -90,6 +98,8 @@ pub enum ApplyError {
     Travel(CommandError),
     /// A speed change or stop refused.
     Speed(SpeedCommandError),
+    /// A changed remaining distance refused (the travel keeps its target).
+    Remaining(RetargetError),
 }
 
 fn direction(travel: Travel) -> Direction {
@@ -124,6 +134,10 @@ pub fn controller_command(request: Request, geometry: &LiftGeometry, m_car_kg: f
                 },
             })
         }
+        // The age is the port's to give (`DcpPort`); none known here.
+        Request::Remaining { remaining_mm } => {
+            ControllerCommand::RemainingDistance { remaining_m: remaining_mm as f32 / 1000.0, age_s: 0.0 }
+        }
         Request::Crawl { speed_mps } => ControllerCommand::Speed(speed_mps),
         Request::Stop => ControllerCommand::Stop,
         Request::SafeStop(reason) => ControllerCommand::SafeStop(reason),
@@ -136,6 +150,9 @@ pub fn apply(command: ControllerCommand, controller: &mut Controller) -> Result<
     match command {
         ControllerCommand::Travel(travel) => controller.command_travel(travel).map_err(ApplyError::Travel),
         ControllerCommand::SpeedTravel(travel) => controller.command_speed_travel(travel).map_err(ApplyError::Travel),
+        ControllerCommand::RemainingDistance { remaining_m, age_s } => {
+            controller.command_remaining_distance(remaining_m, age_s).map(|_| ()).map_err(ApplyError::Remaining)
+        }
         ControllerCommand::Speed(speed_mps) => controller.command_speed(speed_mps).map_err(ApplyError::Speed),
         ControllerCommand::Stop => controller.command_stop().map_err(ApplyError::Speed),
         ControllerCommand::SafeStop(_) => {
@@ -245,6 +262,8 @@ pub struct PortEvent {
 #[derive(Clone, Copy, Debug)]
 pub struct DcpPort {
     receiver: FrameReceiver,
+    /// When the first byte of the message being received came, us.
+    message_start_us: u32,
     slave: Slave,
     geometry: LiftGeometry,
     m_car_kg: f32,
@@ -254,12 +273,23 @@ impl DcpPort {
     /// A port for a slave configured by `config`, the landings of
     /// `geometry` and a car mass from the load weighing of `m_car_kg` kg.
     pub fn new(config: SlaveConfig, geometry: LiftGeometry, m_car_kg: f32) -> Self {
-        Self { receiver: FrameReceiver::default(), slave: Slave::new(config), geometry, m_car_kg }
+        Self { receiver: FrameReceiver::default(), message_start_us: 0, slave: Slave::new(config), geometry, m_car_kg }
     }
 
     /// The slave (state, position).
     pub fn slave(&self) -> &Slave {
         &self.slave
+    }
+
+    /// The drive refused the remaining distance passed on
+    /// ([`ApplyError::Remaining`]): the replies say so (S5 clear).
+    pub fn refuse_remaining(&mut self) {
+        self.slave.refuse_remaining();
+    }
+
+    /// The drive took the remaining distance passed on: the replies say so (S5 set).
+    pub fn take_remaining(&mut self) {
+        self.slave.take_remaining();
     }
 
     /// Sets the car mass of the load weighing, kg (used from the next travel).
@@ -281,8 +311,13 @@ impl DcpPort {
 
     /// One byte received at `now_us`, with the drive's status now.
     pub fn byte(&mut self, byte: u8, now_us: u32, drive: &DriveStatus) -> PortEvent {
+        let receiving = self.receiver.is_receiving();
         let finished = self.receiver.push(byte, now_us);
-        self.finish(finished, now_us, drive)
+        let event = self.finish(finished, now_us, drive);
+        if finished.is_some() || !receiving {
+            self.message_start_us = now_us;
+        }
+        event
     }
 
     /// A UART error (framing, noise, overrun) at `now_us`.
@@ -297,7 +332,7 @@ impl DcpPort {
         let mut event = self.finish(finished, now_us, drive);
         if event.command.is_none() {
             if let Some(request) = self.slave.poll(now_us, drive) {
-                self.map(request, &mut event);
+                self.map(request, &mut event, now_us);
             }
         }
         event
@@ -315,14 +350,21 @@ impl DcpPort {
             event.reply = Some(reply.encode());
             event.refused = refused;
             if let Some(request) = request {
-                self.map(request, &mut event);
+                self.map(request, &mut event, now_us);
             }
         }
         event
     }
 
-    fn map(&self, request: Request, event: &mut PortEvent) {
-        event.command = Some(controller_command(request, &self.geometry, self.m_car_kg));
+    fn map(&self, request: Request, event: &mut PortEvent, now_us: u32) {
+        let mut command = controller_command(request, &self.geometry, self.m_car_kg);
+        if let ControllerCommand::RemainingDistance { age_s, .. } = &mut command {
+            // From the start of the message's first byte (one character
+            // before it came) to now.
+            let age_us = now_us.wrapping_sub(self.message_start_us).saturating_add(CHARACTER_US);
+            *age_s = age_us.min(999_999) as f32 / 1.0e6;
+        }
+        event.command = Some(command);
     }
 }
 
@@ -623,6 +665,11 @@ impl LiftDrive {
         }
         if let Some(command) = event.command {
             let result = apply(command, &mut self.controller);
+            match (command, result) {
+                (_, Err(ApplyError::Remaining(_))) => self.port.refuse_remaining(),
+                (ControllerCommand::RemainingDistance { .. }, Ok(())) => self.port.take_remaining(),
+                _ => {}
+            }
             if result.is_ok() {
                 // The next status already shows a started travel or a stop.
                 self.state = self.controller.state();
@@ -801,5 +848,126 @@ mod tests {
         let tripped = drive_status(DriveState::Tripped(crate::supervisor::Fault::OverCurrent), 0.0, true, &rig);
         assert!(tripped.fault && !tripped.ready && !tripped.travelling);
         assert!(!drive_status(DriveState::Idle, 0.0, false, &rig).ready, "not calibrated or aligned");
+    }
+
+    /// A DCP4 travel up 2000 mm from 1000 mm under a lift controller that
+    /// measures the car on its own shaft encoder and sends the remaining
+    /// distance every 15 ms; at 3 s the ropes slip by `slip_mm` (the car
+    /// `slip_mm` ahead of the sheave's count). The car follows the speed
+    /// reference exactly (as `controller`'s ideal car). Returns where the
+    /// car stops in the master's coordinate (mm), whether any reply had S5
+    /// clear during the travel, and the speed references of the speed-loop ticks (m/s).
+    fn slipping_travel(slip_mm: f64) -> (f64, bool, std::vec::Vec<f32>) {
+        extern crate std;
+        let rig = reference_rig();
+        let mut p = port();
+        let mut c = Controller::new(&rig);
+        let mut t = 0u32;
+        let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
+        give_position(&mut p, &mut t, 1000, &idle);
+        let counts_per_m = rig.encoder_counts_per_rev as f64 / (rig.sheave_radius_m as f64 * core::f64::consts::TAU);
+        let (mut sheave_m, mut slip_m, mut speed_radps) = (0.0f64, 0.0f64, 0.0f32);
+        let mut refused = false;
+        let mut refs = std::vec::Vec::new();
+        let mut started = false;
+        let dt = 1.0 / rig.current_loop_hz as f64;
+        for k in 0..(20.0 * rig.current_loop_hz) as u32 {
+            let now_us = (k as f64 * dt * 1e6) as u32 + 1_000_000;
+            if k as f64 * dt >= 3.0 {
+                slip_m = slip_mm / 1000.0;
+            }
+            let car_mm = 1000.0 + (sheave_m + slip_m) * 1000.0;
+            let status = drive_status(c.state(), speed_radps, true, &rig);
+            if k % 240 == 0 && now_us > t {
+                t = now_us;
+                // The message's bytes and gap (2.48 ms) pass at once here,
+                // the car standing still: the master measured it that long
+                // before the drive takes it.
+                let age_m = speed_radps as f64 * rig.sheave_radius_m as f64 * 2.48e-3;
+                let remaining = (3000.0 - (car_mm - age_m * 1000.0)).round().max(0.0) as u16;
+                let frame = if !started || status.travelling {
+                    MasterFrame {
+                        command: command_byte(Kind::Decelerate, false),
+                        data: remaining.to_be_bytes(),
+                        comm: [0; 2],
+                    }
+                } else {
+                    MasterFrame { command: command_byte(Kind::Stop, false), data: [0, 0], comm: [0; 2] }
+                };
+                let event = send(&mut p, &mut t, frame, &status);
+                if let Some(command) = event.command {
+                    match (command, apply(command, &mut c)) {
+                        (_, Err(ApplyError::Remaining(_))) => p.refuse_remaining(),
+                        (ControllerCommand::RemainingDistance { .. }, Ok(())) => p.take_remaining(),
+                        _ => {}
+                    }
+                    started = true;
+                }
+                if status.travelling && event.reply.unwrap()[0] & crate::dcp::slave::S5_ACCEPTED == 0 {
+                    refused = true;
+                }
+            }
+            let f = SensorFrame {
+                phase_current_codes: [2048; 3],
+                encoder_count: (sheave_m * counts_per_m).round() as i64 as u32,
+                dc_bus_code: 2048,
+                time_us: k * 62 + k / 2,
+            };
+            let out = c.step(&f);
+            speed_radps = out.telemetry.speed_ref_radps;
+            if out.brake_released {
+                sheave_m += out.telemetry.speed_ref_radps as f64 * rig.sheave_radius_m as f64 * dt;
+            }
+            if k % rig.speed_loop_divider() == 0 && out.state == DriveState::Travel {
+                refs.push(out.telemetry.ref_speed_mps);
+            }
+            if started && out.state == DriveState::Idle && k as f64 * dt > 5.0 {
+                break;
+            }
+        }
+        assert_eq!(c.state(), DriveState::Idle, "the travel ended");
+        (1000.0 + (sheave_m + slip_m) * 1000.0, refused, refs)
+    }
+
+    /// Acceleration and jerk of speed references 0.5 ms apart, over 4 ms.
+    fn assert_within_limits(refs: &[f32]) {
+        let rig = reference_rig();
+        let n = 8;
+        let dt = n as f32 / rig.speed_loop_hz;
+        let a: std::vec::Vec<f32> = (n..refs.len()).map(|i| (refs[i] - refs[i - n]) / dt).collect();
+        for i in n..a.len() {
+            assert!(a[i].abs() <= rig.max_accel_mps2 * 1.001, "acceleration {} at tick {i}", a[i]);
+            let jerk = (a[i] - a[i - n]) / dt;
+            assert!(jerk.abs() <= rig.max_jerk_mps3 * 1.02, "jerk {jerk} at tick {i}");
+        }
+        assert!(
+            refs.iter().all(|&v| (-1e-4..=rig.rated_speed_mps * 1.0001).contains(&v)),
+            "no reversal, at most rated"
+        );
+    }
+
+    extern crate std;
+
+    #[test]
+    fn a_dcp4_travel_follows_a_remaining_distance_shortened_or_lengthened_by_rope_slip() {
+        // Without slip, and with the car 40 mm ahead of (shorter) or 60 mm
+        // behind (longer) the sheave's count from 3 s on, at rated speed.
+        for slip_mm in [0.0, 40.0, -60.0] {
+            let (stop_mm, refused, refs) = slipping_travel(slip_mm);
+            assert!((stop_mm - 3000.0).abs() <= 3.0, "slip {slip_mm} mm: the car stops at {stop_mm} mm, not 3000");
+            assert!(!refused, "slip {slip_mm} mm: a remaining distance refused");
+            assert_within_limits(&refs);
+        }
+    }
+
+    #[test]
+    fn a_remaining_distance_shorter_than_the_stop_is_refused_and_the_travel_keeps_its_target() {
+        // 400 mm ahead at rated speed (the stop takes 261 mm): the master's
+        // remaining distance drops below the braking distance.
+        let (stop_mm, refused, refs) = slipping_travel(1600.0);
+        assert!(refused, "S5 cleared while the distance is refused");
+        assert_within_limits(&refs);
+        // The car went on to the first target (the sheave's 2000 mm) plus the slip.
+        assert!((stop_mm - 4600.0).abs() <= 3.0, "{stop_mm}");
     }
 }

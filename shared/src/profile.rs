@@ -219,6 +219,116 @@ impl SpeedRamp {
     }
 }
 
+/// Why an [`Approach`] cannot be planned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ApproachError {
+    /// A limit is not positive and finite, or the start point or the target is not finite.
+    NonPositiveLimit,
+    /// The target lies closer than the shortest jerk-limited stop from the
+    /// start point: the car would pass it.
+    CannotStop,
+}
+
+/// A jerk-limited way to rest at a new target from a point of a running
+/// reference (a distance travel whose remaining distance changed): a
+/// [`SpeedRamp`] from the point to a cruise speed, the cruise, and a
+/// [`SpeedRamp`] from that speed to rest, ending at the target. The cruise
+/// speed is the highest within the speed limit whose two ramps fit in the
+/// distance, so a longer distance is run at speed and a shorter one is
+/// approached more slowly; a target closer than the shortest stop from the
+/// point is refused. Positions count from the start of the travel (the
+/// point's own coordinate). Closed form like [`SCurve`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Approach {
+    first: SpeedRamp,
+    cruise_s: f32,
+    last: SpeedRamp,
+    target_m: f32,
+}
+
+impl Approach {
+    /// Largest distance by which the target may lie inside the shortest
+    /// stop and still be taken (the stop then ends there), m: 0.1 mm, the
+    /// rounding of the planning.
+    pub const SLACK_M: f32 = 1.0e-4;
+
+    /// Plans from `from` (position, m; speed, m/s, >= 0 in the travel
+    /// direction; acceleration, m/s^2) to rest at `target_m` (m, same
+    /// coordinate) with speed, acceleration and jerk limits `v_max` (m/s),
+    /// `a_max` (m/s^2) and `j_max` (m/s^3).
+    pub fn plan(from: ProfilePoint, target_m: f32, v_max: f32, a_max: f32, j_max: f32) -> Result<Self, ApproachError> {
+        let valid = |x: f32| x > 0.0 && x.is_finite();
+        if !(valid(v_max) && valid(a_max) && valid(j_max) && target_m.is_finite()) {
+            return Err(ApproachError::NonPositiveLimit);
+        }
+        // The two ramps through cruise speed `v` (no cruise between them).
+        let ramps = |v: f32| -> Result<(SpeedRamp, SpeedRamp), ApproachError> {
+            let first = SpeedRamp::plan(from, v, a_max, j_max).map_err(|_| ApproachError::NonPositiveLimit)?;
+            let last = SpeedRamp::plan(first.end(), 0.0, a_max, j_max).map_err(|_| ApproachError::NonPositiveLimit)?;
+            Ok((first, last))
+        };
+        let (stop, rest) = ramps(0.0)?;
+        if rest.end().position_m > target_m + Self::SLACK_M {
+            return Err(ApproachError::CannotStop);
+        }
+        // Bisection on the cruise speed: the two ramps' distance grows with it.
+        let (mut lo, mut hi) = (0.0f32, v_max.max(from.speed_mps));
+        if ramps(hi)?.1.end().position_m <= target_m {
+            lo = hi;
+        } else {
+            for _ in 0..40 {
+                let mid = 0.5 * (lo + hi);
+                if ramps(mid)?.1.end().position_m <= target_m {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+        }
+        if lo <= 0.0 {
+            // Only the shortest stop fits: it ends within the slack of the target.
+            return Ok(Self { first: stop, cruise_s: 0.0, last: rest, target_m });
+        }
+        let (first, last_guess) = ramps(lo)?;
+        let cruise_s = ((target_m - last_guess.end().position_m) / lo).max(0.0);
+        let cruise_end =
+            ProfilePoint { position_m: first.end().position_m + lo * cruise_s, speed_mps: lo, accel_mps2: 0.0 };
+        let last = SpeedRamp::plan(cruise_end, 0.0, a_max, j_max).map_err(|_| ApproachError::NonPositiveLimit)?;
+        Ok(Self { first, cruise_s, last, target_m })
+    }
+
+    /// Duration from the start point to rest, s.
+    pub fn duration_s(&self) -> f32 {
+        self.first.duration_s() + self.cruise_s + self.last.duration_s()
+    }
+
+    /// The target, m.
+    pub fn target_m(&self) -> f32 {
+        self.target_m
+    }
+
+    /// The cruise speed, m/s (0: the shortest stop).
+    pub fn cruise_speed_mps(&self) -> f32 {
+        self.first.end().speed_mps
+    }
+
+    /// The reference at `t_s` seconds after the start point; at rest at the
+    /// end of the last ramp afterwards.
+    pub fn at(&self, t_s: f32) -> ProfilePoint {
+        let cruise_end = self.first.duration_s() + self.cruise_s;
+        if t_s < cruise_end {
+            self.first.at(t_s)
+        } else {
+            let p = self.last.at(t_s - cruise_end);
+            if t_s - cruise_end >= self.last.duration_s() {
+                ProfilePoint { position_m: self.last.end().position_m, speed_mps: 0.0, accel_mps2: 0.0 }
+            } else {
+                p
+            }
+        }
+    }
+}
+
 /// State after `dt` seconds of constant jerk `j` from `p`.
 fn evolve(p: ProfilePoint, j: f32, dt: f32) -> ProfilePoint {
     ProfilePoint {
@@ -351,5 +461,41 @@ mod tests {
         for x in [1e-6f32, 0.25, 2.0, 1.0e4] {
             assert!((sqrt_newton(x) - x.sqrt()).abs() <= 2.0 * f32::EPSILON * x.sqrt());
         }
+    }
+
+    #[test]
+    fn an_approach_from_a_running_curve_rests_on_the_new_target_within_the_limits() {
+        let curve = SCurve::plan(3.0, 0.4, 0.5, 1.0).unwrap();
+        for (t0, target) in [(4.0f32, 2.5f32), (4.0, 3.05), (4.0, 2.2), (0.8, 0.6), (0.8, 1.5), (7.5, 3.2), (8.0, 3.1)]
+        {
+            let from = curve.at(t0);
+            let a = Approach::plan(from, target, 0.4, 0.5, 1.0).unwrap();
+            let end = a.at(a.duration_s() + 1.0);
+            assert!((end.position_m - target).abs() < 2e-4, "{t0} {target}: {end:?}");
+            // Limits, continuity at the start, no overshoot, no reversal.
+            let dt = 1.0e-3f32;
+            let mut previous = from;
+            let mut t = 0.0f32;
+            while t < a.duration_s() + 0.05 {
+                t += dt;
+                let p = a.at(t);
+                assert!(p.speed_mps <= 0.4 * 1.0001 && p.speed_mps >= -1e-4, "{t0} {target}: speed {p:?} at {t}");
+                assert!(p.accel_mps2.abs() <= 0.5 * 1.0001, "{t0} {target}: accel {p:?} at {t}");
+                let jerk = (p.accel_mps2 - previous.accel_mps2) / dt;
+                assert!(jerk.abs() <= 1.0 * 1.01, "{t0} {target}: jerk {jerk} at {t}");
+                assert!(p.position_m <= target + 2e-4, "{t0} {target}: past the target {p:?} at {t}");
+                previous = p;
+            }
+        }
+    }
+
+    #[test]
+    fn an_approach_closer_than_the_shortest_stop_is_refused() {
+        let curve = SCurve::plan(3.0, 0.4, 0.5, 1.0).unwrap();
+        let from = curve.at(4.0); // cruising at 0.4 m/s: 0.26 m to stop
+        let shortest = from.position_m + 0.26;
+        assert_eq!(Approach::plan(from, shortest - 0.01, 0.4, 0.5, 1.0), Err(ApproachError::CannotStop));
+        let a = Approach::plan(from, shortest + 0.001, 0.4, 0.5, 1.0).unwrap();
+        assert!((a.at(100.0).position_m - (shortest + 0.001)).abs() < 2e-4);
     }
 }

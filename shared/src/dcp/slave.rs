@@ -31,9 +31,21 @@
 //! - DCP4 distance travel: the master sends the remaining distance
 //!   (`0101`, mm, 15 bits) with the stop switch B2 on from the start; the
 //!   drive plans its own profile and stops with the brake applied at 0 mm;
-//!   then the master clears B2 (`0001`) and B0 (`0000`). The drive plans the
-//!   travel once, from the first remaining distance: later remaining
-//!   distances are checked (range) but do not re-plan the profile.
+//!   then the master clears B2 (`0001`) and B0 (`0000`). Later remaining
+//!   distances (the master repeats it in every message, measured on its own
+//!   shaft encoder: after rope slip it differs from the drive's plan) are
+//!   passed on ([`Request::Remaining`]): the drive plans the rest of the
+//!   travel again when the target moved (within its acceleration and jerk
+//!   limits, never past the new target). A remaining distance the car
+//!   cannot stop within from its reference is refused by the drive, which
+//!   tells the slave ([`Slave::refuse_remaining`]): the travel goes on to
+//!   the target it had, and S5 ("accepted") is clear in the replies from
+//!   the next one on until a remaining distance is taken again (the reply
+//!   to the refused message itself is sent before the drive has judged it). The drive's position after the travel is the target of the first
+//!   remaining distance: after rope slip the master's later distances lead
+//!   to that same floor in its own coordinate; a master that changes the
+//!   destination sends the position message after the stop, as after every
+//!   stop.
 //! - DCP3 speed travel: speed mode (`1001`, the speed bit), travel (`0111`),
 //!   at the deceleration point B1 cleared (`0101`: slow down to V0 crawl), at
 //!   the floor B2 cleared (`0001`: stop), then B0 cleared. Re-levelling
@@ -171,6 +183,12 @@ pub enum Request {
         /// The car speed to go on at, m/s.
         speed_mps: f32,
     },
+    /// The running distance travel's remaining distance, as the master
+    /// measures it, mm from the car to the target (DCP4 `0101` during the travel).
+    Remaining {
+        /// Remaining distance, mm.
+        remaining_mm: u16,
+    },
     /// Stop at the floor from crawl, brake applied (DCP3 stop).
     Stop,
     /// Stop now: inverter off, brake applied.
@@ -222,6 +240,8 @@ pub struct Slave {
     phase: Phase,
     selected: Option<Speed>,
     accepted: bool,
+    /// The drive refused the latest remaining distance passed on.
+    remaining_refused: bool,
     position_mm: Option<i32>,
     last_valid_us: u32,
     channel_rx: ChannelReceiver,
@@ -237,6 +257,7 @@ impl Slave {
             phase: Phase::Disabled,
             selected: None,
             accepted: false,
+            remaining_refused: false,
             position_mm: None,
             last_valid_us: 0,
             channel_rx: ChannelReceiver::default(),
@@ -431,9 +452,10 @@ impl Slave {
                 if running != direction {
                     return Ok(Some(self.halt(StopReason::Inconsistent, drive)));
                 }
-                // Range-checked above; the profile is not re-planned. A
-                // remaining distance beyond the planned target is out of range.
-                let remaining = distance.unwrap_or(0) as i32;
+                // Range-checked above. A remaining distance that puts the
+                // car outside the shaft (seen from the target) is out of range.
+                let remaining_mm = distance.unwrap_or(0);
+                let remaining = remaining_mm as i32;
                 let beyond = match direction {
                     Travel::Up => target_mm - remaining < 0,
                     Travel::Down => target_mm + remaining > self.config.shaft_travel_mm as i32,
@@ -441,7 +463,11 @@ impl Slave {
                 if beyond {
                     return Err(CommandError::DistanceOutOfRange);
                 }
-                Ok(None)
+                // Whether the car can stop within it, the drive decides
+                // ([`Slave::refuse_remaining`] when it cannot): until it
+                // takes one again, S5 stays as it said.
+                self.accepted = !self.remaining_refused;
+                Ok(Some(Request::Remaining { remaining_mm }))
             }
             (Kind::Stop, Phase::Distance { started, .. }) => {
                 if drive.travelling || !started {
@@ -468,6 +494,23 @@ impl Slave {
                 self.accepted = false;
                 Ok(None)
             }
+        }
+    }
+
+    /// The drive refused the latest remaining distance passed on (it cannot
+    /// stop within it): S5 clear in the replies until
+    /// [`Slave::take_remaining`] says it took one again.
+    pub fn refuse_remaining(&mut self) {
+        if matches!(self.phase, Phase::Distance { .. }) {
+            self.accepted = false;
+            self.remaining_refused = true;
+        }
+    }
+
+    /// The drive took the latest remaining distance passed on: S5 set again.
+    pub fn take_remaining(&mut self) {
+        if matches!(self.phase, Phase::Distance { .. }) {
+            self.remaining_refused = false;
         }
     }
 
@@ -508,6 +551,7 @@ impl Slave {
         }
         self.accepted = true;
         self.phase = Phase::Distance { direction, target_mm: target, started: false };
+        self.remaining_refused = false;
         Ok(Some(Request::Distance { direction, distance_mm, start_position_mm: start }))
     }
 

@@ -85,7 +85,7 @@ fn with_position(slave: &mut Slave, master: &mut Master, position_mm: i32) {
 }
 
 #[test]
-fn a_dcp4_travel_runs_once_to_the_remaining_distance_and_moves_the_position() {
+fn a_dcp4_travel_passes_its_remaining_distances_on_and_moves_the_position() {
     let mut s = slave(Mode::Dcp4);
     let mut m = Master::new();
     with_position(&mut s, &mut m, 1000);
@@ -97,13 +97,23 @@ fn a_dcp4_travel_runs_once_to_the_remaining_distance_and_moves_the_position() {
         out.request,
         Some(Request::Distance { direction: Travel::Up, distance_mm: 2500, start_position_mm: 1000 })
     );
-    // Running: the remaining distance counts down, no further request.
+    // Running: each remaining distance goes to the drive, accepted; once the
+    // drive refuses one (it cannot stop within it), S5 is clear until it
+    // takes one again.
     for remaining in (0..2500u16).rev().step_by(100) {
         let out = m.send(&mut s, frame(Kind::Decelerate, false, remaining.to_be_bytes()), &moving_drive());
-        assert_eq!(out.request, None);
         assert_eq!(out.reply.status & (S1_TRAVEL | S6_BRAKE_OPEN | S7_MESSAGE_ERROR), S1_TRAVEL | S6_BRAKE_OPEN);
         assert_eq!(out.reply.data, 480u16.to_be_bytes(), "deceleration distance");
+        assert_eq!(out.request, Some(Request::Remaining { remaining_mm: remaining }), "{remaining}");
+        assert_eq!(out.reply.status & S5_ACCEPTED == 0, (299..=899).contains(&remaining), "{remaining}");
+        if remaining == 999 {
+            s.refuse_remaining();
+        }
+        if remaining == 299 {
+            s.take_remaining();
+        }
     }
+
     // Arrived, brake set: the master still sends a few mm before clearing the stop switch.
     let out = m.send(&mut s, frame(Kind::Decelerate, false, 3u16.to_be_bytes()), &idle_drive());
     assert_eq!(out.request, None, "a second travel after the arrival");
