@@ -82,7 +82,8 @@ fn identify_and_analyze_refuse_a_travel_without_a_constant_speed_stage() {
     let data = tmp.path().join("data");
     // 0.8 m: the ramps all but meet (0.2 s of cruise).
     simulate_travel(&data, "short", "down", "4.2", "3.4");
-    // The same travel cut at 0.49 s, in its run-up (before: c_sheave = -82.7 N m s/rad, exit 0).
+    // The same travel cut at 0.49 s, in its run-up, its metadata unchanged
+    // (before: c_sheave = -82.7 N m s/rad, exit 0).
     let cut = tmp.path().join("cut");
     fs::create_dir(&cut).unwrap();
     let csv = fs::read_to_string(data.join("short.csv")).unwrap();
@@ -91,7 +92,15 @@ fn identify_and_analyze_refuse_a_travel_without_a_constant_speed_stage() {
     fs::write(cut.join("short.csv"), head.join("\n") + "\n").unwrap();
     fs::copy(data.join("short.toml"), cut.join("short.toml")).unwrap();
 
-    for dataset in [&cut, &data] {
+    // The cut recording contradicts its metadata (0.8 m of rope, 1 mm turned):
+    // refused with both sides named, by both commands.
+    for command in ["identify", "analyze"] {
+        let out = tmp.path().join("cut-out");
+        let err = run_err(&[command, s(&cut), "--out", s(&out)]);
+        assert!(err.contains("short.toml") && err.contains("0.800 m") && err.contains("m of rope"), "{command}: {err}");
+        assert!(!out.exists(), "{command} left {:?}", entries(&out));
+    }
+    for dataset in [&data] {
         let out = tmp.path().join("id");
         let err = run_err(&["identify", s(dataset), "--out", s(&out)]);
         assert!(err.contains("no travel") && err.contains("short:") && err.contains("constant-speed stage"), "{err}");

@@ -71,6 +71,10 @@ fn an_output_directory_inside_the_input_dataset_is_refused_even_with_force() {
         (vec!["analyze", s(&data)], data.clone()),
         (vec!["analyze", s(&data)], data.join("results")),
         (vec!["analyze", s(&data)], data.join("..").join("data")),
+        // Before: `identify DATASET --out DATASET --force` overwrote a
+        // recording named `free_decays` with its results table.
+        (vec!["identify", s(&data)], data.clone()),
+        (vec!["gap", s(&data)], data.join("gap")),
     ] {
         let mut args = args.clone();
         args.extend(["--force", "--out", s(&out)]);

@@ -348,8 +348,20 @@ fn k09_value_out_of_physical_range_names_field() {
     let cases = [
         ("m_car_kg = 70.5", "m_car_kg = -70.5", "line 5", "`m_car_kg` = -70.5", "car mass > 0 kg"),
         ("m_cw_kg = 33.0", "m_cw_kg = 0.0", "line 6", "`m_cw_kg` = 0", "counterweight mass > 0 kg"),
-        ("sample_rate_hz = 1000.0", "sample_rate_hz = 0", "line 3", "`sample_rate_hz` = 0", "sample rate > 0 Hz"),
-        ("sample_rate_hz = 1000.0", "sample_rate_hz = -1e3", "line 3", "`sample_rate_hz` = -1000", "> 0 Hz"),
+        (
+            "sample_rate_hz = 1000.0",
+            "sample_rate_hz = 0",
+            "line 3",
+            "`sample_rate_hz` = 0",
+            "sample rate of 1 to 10000000 Hz",
+        ),
+        (
+            "sample_rate_hz = 1000.0",
+            "sample_rate_hz = -1e3",
+            "line 3",
+            "`sample_rate_hz` = -1000",
+            "sample rate of 1 to 10000000 Hz",
+        ),
         ("sample_rate_hz = 1000.0", "sample_rate_hz = nan", "line 3", "`sample_rate_hz` = NaN", "finite"),
         ("lw_start_m = 1.0", "lw_start_m = 0.0", "line 8", "`lw_start_m` = 0", "in (0, 8.6) m"),
         ("lw_end_m = 7.6", "lw_end_m = 8.6", "line 9", "`lw_end_m` = 8.6", "in (0, 8.6) m"),

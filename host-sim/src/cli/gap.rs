@@ -5,12 +5,10 @@ use std::path::PathBuf;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::output_dir;
 use diagnosis::{diagnose, report::write_report, GapOptions};
 use dsp::stft_spectrogram;
 use plant::effects::EffectKind;
 use plots::spectrogram_plot;
-use recording::read_dataset;
 use rig_config::RigConfig;
 
 /// Arguments of `gap`.
@@ -87,8 +85,8 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
             })
             .collect::<anyhow::Result<Vec<_>>>()?
     };
-    let dataset = read_dataset(&args.dataset, rig.mechanics.rope_total_length_m)?;
-    let out = output_dir(&args.out, args.force)?;
+    let dataset = super::read_dataset_on(rig, &args.dataset)?;
+    let out = super::output_dir_reading(&args.out, args.force, &[&args.dataset])?;
     out.refuse_existing(["gap.json", "gap.md"])?;
     let bar = ProgressBar::new(1);
     bar.set_style(

@@ -10,11 +10,9 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use super::output_dir;
 use diagnosis::identify::rope_ea_from_first_frequency;
 use diagnosis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
 use plots::{stacked_plot, Level, Mark, Panel, Series};
-use recording::read::read_dataset;
 use recording::{Recording, RecordingKind};
 use rig_config::RigConfig;
 
@@ -328,8 +326,8 @@ fn decays_plot(
 pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     super::check_open_range("--max-frequency", args.max_frequency_hz, 1.0, 1.0e6)?;
     let m = &rig.mechanics;
-    let dataset = read_dataset(&args.dataset, m.rope_total_length_m)?;
-    let out = output_dir(&args.out, args.force)?;
+    let dataset = super::read_dataset_on(rig, &args.dataset)?;
+    let out = super::output_dir_reading(&args.out, args.force, &[&args.dataset])?;
     out.refuse_existing(OUTPUTS)?;
     let id = identify_dataset(rig, &dataset, args.max_frequency_hz);
     refuse_empty_results(rig, args, &dataset, &id)?;
