@@ -970,4 +970,40 @@ mod tests {
         // The car went on to the first target (the sheave's 2000 mm) plus the slip.
         assert!((stop_mm - 4600.0).abs() <= 3.0, "{stop_mm}");
     }
+
+    #[test]
+    fn no_dcp_message_clears_a_latched_fault() {
+        // DCP has no fault-reset command: the master clears B0 and waits
+        // for S3 to clear; only the service port's `reset` clears the fault.
+        let rig = reference_rig();
+        let mut p = port();
+        let mut c = Controller::new(&rig);
+        let mut t = 0u32;
+        let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
+        give_position(&mut p, &mut t, 1000, &idle);
+        let mut bad = SensorFrame { phase_current_codes: [2048; 3], encoder_count: 0, dc_bus_code: 2048, time_us: 0 };
+        c.step(&bad);
+        bad.phase_current_codes = [2048 + 1300, 2048 - 650, 2048 - 650];
+        bad.time_us = 62;
+        let tripped = c.step(&bad).state;
+        assert!(matches!(tripped, DriveState::Tripped(_)), "{tripped:?}");
+        // Every command byte, with data of each kind, twice (edges of every bit).
+        for round in 0..2 {
+            for command in 0..=255u8 {
+                for data in [[0, 0], [0x01, 0xF4], Speed::V4.data(), Speed::V0.data()] {
+                    let status = drive_status(c.state(), 0.0, true, &rig);
+                    let event = send(&mut p, &mut t, MasterFrame { command, data, comm: [0; 2] }, &status);
+                    if let Some(command) = event.command {
+                        let _ = apply(command, &mut c);
+                    }
+                    let reply = event.reply.unwrap()[0];
+                    assert_eq!(c.state(), tripped, "round {round}, command {command:#010b}");
+                    assert_ne!(reply & crate::dcp::slave::S3_FAULT, 0, "command {command:#010b}");
+                    assert_eq!(reply & (crate::dcp::slave::S0_READY | crate::dcp::slave::S6_BRAKE_OPEN), 0);
+                }
+            }
+        }
+        let out = c.step(&SensorFrame { time_us: 124, ..bad });
+        assert!(!out.pwm_enabled && !out.brake_released, "still in the safe state");
+    }
 }

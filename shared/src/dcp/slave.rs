@@ -58,6 +58,14 @@
 //!   So is, conservatively, a reversed direction or a cleared stop switch
 //!   before a distance travel has arrived (the texts do not cover them).
 //!
+//! Faults: DCP has no fault-reset command (the L1000A addendum's command
+//! bits B0..B7 are all taken, none is a reset; its fault bit S3 tells the
+//! master to clear B0 and wait until the fault is cleared on the drive's
+//! side, p. 21). No message clears a latched fault here: an idle message
+//! (B0 clear) only disables the slave, since taking it as a reset would
+//! clear every fault at once. The master sends idle messages until S3
+//! clears and S0 returns; the fault is cleared on the drive's service port.
+//!
 //! Position: the master sends the car position after each stop (channel
 //! message `I9`, see [`super::channel`]); a distance or speed travel needs
 //! it (the drive derives its rope lengths and the shaft limits from it), so
