@@ -100,7 +100,9 @@ fn identify_and_analyze_refuse_a_travel_without_a_constant_speed_stage() {
         assert!(err.contains("short.toml") && err.contains("0.800 m") && err.contains("m of rope"), "{command}: {err}");
         assert!(!out.exists(), "{command} left {:?}", entries(&out));
     }
-    for dataset in [&data] {
+    // The whole travel: no constant-speed stage of 1 s.
+    {
+        let dataset = &data;
         let out = tmp.path().join("id");
         let err = run_err(&["identify", s(dataset), "--out", s(&out)]);
         assert!(err.contains("no travel") && err.contains("short:") && err.contains("constant-speed stage"), "{err}");
