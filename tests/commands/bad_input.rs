@@ -10,26 +10,26 @@ use std::process::{Command, Output, Stdio};
 
 use recording::{read_evimp, read_recording, ReadError, MAX_LINE_BYTES, MAX_META_BYTES};
 
-fn host_sim() -> Command {
+pub(super) fn host_sim() -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_host-sim"));
     command.env("RUST_BACKTRACE", "0");
     command
 }
 
 /// Runs `host-sim args` and returns its output.
-fn run(args: &[&str]) -> Output {
+pub(super) fn run(args: &[&str]) -> Output {
     host_sim().args(args).output().unwrap()
 }
 
 /// Runs `host-sim args`, which must succeed.
-fn run_ok(args: &[&str]) -> Output {
+pub(super) fn run_ok(args: &[&str]) -> Output {
     let out = run(args);
     assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
     out
 }
 
 /// Runs `host-sim args`, which must fail without a panic; returns stderr.
-fn run_err(args: &[&str]) -> String {
+pub(super) fn run_err(args: &[&str]) -> String {
     let out = run(args);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(!out.status.success(), "{args:?} succeeded: {}", String::from_utf8_lossy(&out.stdout));
@@ -39,7 +39,7 @@ fn run_err(args: &[&str]) -> String {
     err
 }
 
-fn s(path: &Path) -> &str {
+pub(super) fn s(path: &Path) -> &str {
     path.to_str().unwrap()
 }
 

@@ -4,36 +4,10 @@
 
 use std::fs;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-fn host_sim() -> Command {
-    let mut command = Command::new(env!("CARGO_BIN_EXE_host-sim"));
-    command.env("RUST_BACKTRACE", "0");
-    command
-}
-
-fn run(args: &[&str]) -> Output {
-    host_sim().args(args).output().unwrap()
-}
-
-fn run_ok(args: &[&str]) -> Output {
-    let out = run(args);
-    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
-    out
-}
-
-fn run_err(args: &[&str]) -> String {
-    let out = run(args);
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "{args:?} succeeded: {}", String::from_utf8_lossy(&out.stdout));
-    assert!(!err.contains("panicked"), "{args:?}: {err}");
-    err
-}
-
-fn s(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
+use super::bad_input::{host_sim, run_err, run_ok, s};
 
 /// Every file under `dir` with its contents, sorted by path.
 fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
