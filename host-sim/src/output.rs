@@ -303,7 +303,7 @@ fn install_interrupt_handler() {
             for staging in lock(&LIVE_STAGING).drain(..) {
                 let _ = fs::remove_dir_all(staging);
             }
-            eprintln!("error: interrupted; no output of this run was written");
+            eprintln!("error: interrupted; the outputs this run had not yet published were removed");
             std::process::exit(130);
         });
     });

@@ -105,15 +105,18 @@ fn interrupt(args: &[&str], signal: &str, after: Duration) -> Option<std::proces
 fn an_interrupted_forced_run_leaves_the_earlier_outputs_whole_and_no_staging_directory() {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
-    let args = ["dataset", "--mass", "70.5", "--seed", "1", "--out", s(&data)];
+    let args = ["dataset", "--seed", "1", "--out", s(&data)];
+    let started = Instant::now();
     run_ok(&args);
+    // The same work again is interrupted a third of the way through.
+    let after = started.elapsed() / 3;
     let before = snapshot(&data);
     assert!(before.len() >= 4, "{}", before.len());
-    // Another seed over it, with --force, interrupted half-way.
+    // Another seed over it, with --force, interrupted while it simulates.
     for signal in ["-INT", "-TERM"] {
-        let forced = ["dataset", "--mass", "70.5", "--seed", "2", "--force", "--out", s(&data)];
-        let Some(status) = interrupt(&forced, signal, Duration::from_millis(700)) else {
-            panic!("`dataset` finished within 0.7 s: the interruption was not tried");
+        let forced = ["dataset", "--seed", "2", "--force", "--out", s(&data)];
+        let Some(status) = interrupt(&forced, signal, after) else {
+            panic!("`dataset` finished within {after:?}: the interruption was not tried");
         };
         assert!(!status.success(), "{signal}: an interrupted run reported success");
         assert_eq!(snapshot(&data), before, "{signal}: the earlier dataset changed");
