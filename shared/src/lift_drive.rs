@@ -762,6 +762,18 @@ mod tests {
     }
 
     /// Gives the port position `position_mm` over the channel of stop messages.
+    /// The reference rig's drive, idle, its port given the position 1000 mm
+    /// by the master; with the time (ms) the messages took.
+    fn idle_at_1000_mm() -> (DriveConfig, DcpPort, Controller, u32) {
+        let rig = reference_rig();
+        let mut p = port();
+        let c = Controller::new(&rig);
+        let mut t = 0u32;
+        let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
+        give_position(&mut p, &mut t, 1000, &idle);
+        (rig, p, c, t)
+    }
+
     fn give_position(p: &mut DcpPort, t: &mut u32, position_mm: i32, drive: &DriveStatus) {
         let mut channel = position_message(position_mm).to_vec();
         for _ in 0..9 {
@@ -859,12 +871,7 @@ mod tests {
     /// clear during the travel, and the speed references of the speed-loop ticks (m/s).
     fn slipping_travel(slip_mm: f64) -> (f64, bool, std::vec::Vec<f32>) {
         extern crate std;
-        let rig = reference_rig();
-        let mut p = port();
-        let mut c = Controller::new(&rig);
-        let mut t = 0u32;
-        let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
-        give_position(&mut p, &mut t, 1000, &idle);
+        let (rig, mut p, mut c, mut t) = idle_at_1000_mm();
         let counts_per_m = rig.encoder_counts_per_rev as f64 / (rig.sheave_radius_m as f64 * core::f64::consts::TAU);
         let (mut sheave_m, mut slip_m, mut speed_radps) = (0.0f64, 0.0f64, 0.0f32);
         let mut refused = false;
@@ -975,12 +982,7 @@ mod tests {
     fn no_dcp_message_clears_a_latched_fault() {
         // DCP has no fault-reset command: the master clears B0 and waits
         // for S3 to clear; only the service port's `reset` clears the fault.
-        let rig = reference_rig();
-        let mut p = port();
-        let mut c = Controller::new(&rig);
-        let mut t = 0u32;
-        let idle = drive_status(DriveState::Idle, 0.0, true, &rig);
-        give_position(&mut p, &mut t, 1000, &idle);
+        let (rig, mut p, mut c, mut t) = idle_at_1000_mm();
         let mut bad = SensorFrame { phase_current_codes: [2048; 3], encoder_count: 0, dc_bus_code: 2048, time_us: 0 };
         c.step(&bad);
         bad.phase_current_codes = [2048 + 1300, 2048 - 650, 2048 - 650];

@@ -324,6 +324,18 @@ mod tests {
         }
     }
 
+    /// A start-up calibrated at rest, commanded to align and one period into
+    /// the alignment (encoder at count 0).
+    fn aligning() -> Startup {
+        let mut s = startup();
+        while !s.is_waiting_for_alignment() {
+            s.step([ZERO; 3], BUS_100V, 0);
+        }
+        s.command(StartupCommand::Align).unwrap();
+        drive(s.step([ZERO; 3], BUS_100V, 0));
+        s
+    }
+
     #[test]
     fn after_a_reset_the_drive_stays_safe_until_the_alignment_is_commanded() {
         let mut s = startup();
@@ -351,12 +363,7 @@ mod tests {
 
     #[test]
     fn a_protection_trip_during_the_alignment_ends_safe_and_only_a_reset_clears_it() {
-        let mut s = startup();
-        while !s.is_waiting_for_alignment() {
-            s.step([ZERO; 3], BUS_100V, 0);
-        }
-        s.command(StartupCommand::Align).unwrap();
-        drive(s.step([ZERO; 3], BUS_100V, 0));
+        let mut s = aligning();
         // The bus collapses (below the 70 V under-voltage level).
         let out = drive(s.step([ZERO; 3], 1000, 0));
         assert_eq!(out.event, Some(StartupEvent::Fault(StartupFault::Protection(Fault::DcBusUnderVoltage))));
@@ -374,12 +381,7 @@ mod tests {
 
     #[test]
     fn an_encoder_jump_during_the_alignment_trips() {
-        let mut s = startup();
-        while !s.is_waiting_for_alignment() {
-            s.step([ZERO; 3], BUS_100V, 0);
-        }
-        s.command(StartupCommand::Align).unwrap();
-        drive(s.step([ZERO; 3], BUS_100V, 0));
+        let mut s = aligning();
         let out = drive(s.step([ZERO; 3], BUS_100V, 5000));
         assert_eq!(out.event, Some(StartupEvent::Fault(StartupFault::Protection(Fault::EncoderImplausible))));
         assert!(!out.pwm_on && !out.brake_released);
