@@ -22,7 +22,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{bail, DiagnosisError, Result};
-use dsp::highpass_zero_phase;
+use dsp::{central_difference, highpass_zero_phase};
 
 /// Band in which the controller's fit and the estimate's lag are judged,
 /// Hz: above the speed reference's content and the lowest ripple orders,
@@ -92,22 +92,6 @@ fn fit_band(x: &[f64], fs: f64) -> Result<Vec<f64>> {
     let above = highpass_zero_phase(x, fs, FIT_BAND_HZ.0)?;
     let top = highpass_zero_phase(&above, fs, FIT_BAND_HZ.1.min(0.4 * fs))?;
     Ok(above.iter().zip(&top).map(|(a, t)| a - t).collect())
-}
-
-/// The rate of `x` sampled at `fs` Hz: central differences inside,
-/// one-sided at the ends.
-pub fn central_difference(x: &[f64], fs: f64) -> Vec<f64> {
-    let n = x.len();
-    (0..n)
-        .map(|k| {
-            let (a, b) = (k.saturating_sub(1), (k + 1).min(n.saturating_sub(1)));
-            if b > a {
-                (x[b] - x[a]) * fs / (b - a) as f64
-            } else {
-                0.0
-            }
-        })
-        .collect()
 }
 
 /// `x` delayed by `samples` (the first value held before).

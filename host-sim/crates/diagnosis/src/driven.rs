@@ -28,8 +28,8 @@ use std::ops::Range;
 
 use crate::error::{bail, Context, Result};
 
-use super::drive_law::{central_difference, SpeedController};
-use dsp::highpass_zero_phase;
+use super::drive_law::SpeedController;
+use dsp::{central_difference, highpass_zero_phase};
 use plant::angle::AngleSeries;
 use plant::effects::{EffectKind, Effects};
 use plant::line::{BrakeAction, Line, MAX_NODES};

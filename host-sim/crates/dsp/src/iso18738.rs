@@ -224,18 +224,6 @@ fn check_input(input: &RideInput<'_>) -> Result<(), AnalysisError> {
     Ok(())
 }
 
-/// The derivative of `signal` sampled at `fs` (central differences, one-sided
-/// at the ends), in its unit per second. `signal` has at least 2 samples.
-fn derivative(signal: &[f64], fs: f64) -> Vec<f64> {
-    let n = signal.len();
-    (0..n)
-        .map(|k| {
-            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
-            (signal[b] - signal[a]) * fs / (b - a) as f64
-        })
-        .collect()
-}
-
 /// Checks that `regions` lie inside `n` samples.
 fn check_regions(regions: &RideRegions, n: usize) -> Result<(), AnalysisError> {
     if regions.stop.end != n || regions.motion().start > regions.motion().end {
@@ -330,7 +318,9 @@ pub fn ride_report(input: &RideInput<'_>, regions: Option<&RideRegions>) -> Resu
     });
     let motion = regions.zip(velocity.as_ref()).map(|(r, v)| {
         let (level, source) = match input.speed_mps {
-            Some(speed) => (lowpass_acceleration(&derivative(speed, fs), fs), MotionSource::RecordedSpeed),
+            Some(speed) => {
+                (lowpass_acceleration(&crate::central_difference(speed, fs), fs), MotionSource::RecordedSpeed)
+            }
             None => {
                 let offset = motion_offset(input.z_mps2, fs, r.motion());
                 (lowpassed.iter().map(|v| v - offset).collect(), MotionSource::IntegratedAcceleration)

@@ -20,6 +20,7 @@
 
 mod biquad;
 pub mod burg;
+pub mod difference;
 pub mod dq0;
 pub mod filter;
 pub mod iso18738;
@@ -53,6 +54,7 @@ pub(crate) mod test_signals {
 }
 
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
+pub use difference::central_difference;
 pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::highpass_zero_phase;
 pub use iso18738::{
