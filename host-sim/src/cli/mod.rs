@@ -326,15 +326,9 @@ pub fn car_mass_kg(rig: &RigConfig, given: Option<f64>) -> anyhow::Result<f64> {
     }
 }
 
-/// `x` as a reader wants it: plain decimals for everyday magnitudes,
-/// scientific notation for the very small and very large (never 300 zeros).
-pub fn readable(x: f64) -> String {
-    if x == 0.0 || !x.is_finite() || (1e-4..1e9).contains(&x.abs()) {
-        format!("{x}")
-    } else {
-        format!("{x:e}")
-    }
-}
+/// A number as a reader wants it in a message (never 300 zeros): the
+/// reader's own, so that every error writes numbers alike.
+pub use recording::read::readable;
 
 #[cfg(test)]
 mod tests {

@@ -13,7 +13,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::output_dir_reading;
+use super::output_dir;
 use dsp::ride_quality::MPS2_PER_MG;
 use dsp::{
     regions_from_acceleration, regions_from_speed, ride_report, RegionFigures, RideInput, RideRegions, RideReport,
@@ -92,7 +92,7 @@ fn load(rig: &RigConfig, path: &Path) -> anyhow::Result<Run> {
     let first = first_line(path)?;
     if first == "EVIMP1" {
         let e = read_evimp(path)?;
-        refuse_dead_sensor(&e.z_mg, "z", path)?;
+        recording::consistency::check_live(&e.z_mg, "z_mg", path)?;
         let mps2 = |v: &[f64]| v.iter().map(|a| a * MPS2_PER_MG).collect::<Vec<f64>>();
         let source = if e.sound_dba.is_some() {
             "EVIMP1 export: x, y, z in mg, sound in dB(A)"
@@ -120,7 +120,6 @@ fn load(rig: &RigConfig, path: &Path) -> anyhow::Result<Run> {
             }
             RecordingKind::FreeDecay { .. } => (None, None),
         };
-        refuse_dead_sensor(&acc, ACC_CAR, path)?;
         let source = "measurement format: vertical acc_car_mps2 (no horizontal axes, no sound)";
         let fs = recording.meta.sample_rate_hz;
         let radius_m = rig.mechanics.sheave_radius_m;
@@ -139,23 +138,6 @@ fn load(rig: &RigConfig, path: &Path) -> anyhow::Result<Run> {
          `<stem>.csv` beside it",
         path.display()
     )
-}
-
-/// Refuses an acceleration that never changes over the run (every sample
-/// equal: a dead, saturated or disconnected sensor), which would report a
-/// ride of 0 mg.
-fn refuse_dead_sensor(samples: &[f64], column: &str, path: &Path) -> anyhow::Result<()> {
-    if let Some(&first) = samples.first() {
-        if samples.iter().all(|&a| a == first) {
-            anyhow::bail!(
-                "`{}`: column `{column}` is {first} in all {} samples: a dead, saturated or disconnected \
-                 accelerometer; expected a live vertical acceleration (a ride always vibrates)",
-                path.display(),
-                samples.len()
-            );
-        }
-    }
-    Ok(())
 }
 
 /// The regions of `run` as `--regions-from` asks; `None` with a note when the
@@ -187,7 +169,7 @@ fn find_regions(run: &Run, from: RegionsFrom, file: &Path) -> anyhow::Result<Opt
 pub fn run(rig: &RigConfig, args: &RideQualityArgs) -> anyhow::Result<()> {
     let run = load(rig, &args.file)?;
     let regions = find_regions(&run, args.regions_from, &args.file)?;
-    let out = output_dir_reading(&args.out, args.force, &[&args.file])?;
+    let out = output_dir(&args.out, args.force)?;
     out.refuse_existing(OUTPUTS)?;
     let input = RideInput {
         sample_rate_hz: run.fs,

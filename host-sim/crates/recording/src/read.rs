@@ -402,7 +402,7 @@ pub enum ReadError {
 
 /// `x` for a message: plain decimals for everyday magnitudes, scientific
 /// notation for the very small and very large (never 300 zeros).
-fn readable(x: f64) -> String {
+pub fn readable(x: f64) -> String {
     if x == 0.0 || !x.is_finite() || (1e-4..1e9).contains(&x.abs()) {
         format!("{x}")
     } else {
