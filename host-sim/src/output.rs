@@ -113,7 +113,6 @@ impl OutputDir {
             let staging = dir.join(format!("{STAGING_PREFIX}{}-{n}", std::process::id()));
             match fs::create_dir(&staging) {
                 Ok(()) => {
-                    lock(&LIVE_STAGING).push(staging.clone());
                     lock(&STAGED_AS).push((staging.clone(), dir.to_path_buf()));
                     return Ok(Self { dir: dir.to_path_buf(), staging, force, committed: false, created });
                 }
@@ -200,7 +199,6 @@ impl OutputDir {
         }
         fs::remove_dir_all(&self.staging).map_err(|source| OutputError::Io { path: self.staging.clone(), source })?;
         self.committed = true;
-        forget_staging(&self.staging);
         Ok(published)
     }
 }
@@ -211,7 +209,6 @@ impl Drop for OutputDir {
             // Best effort: a failed run's files must not linger; the run's
             // own error is what gets reported.
             let _ = fs::remove_dir_all(&self.staging);
-            forget_staging(&self.staging);
             for dir in &self.created {
                 // Only an empty directory goes: another process may have
                 // written there since.
@@ -261,11 +258,10 @@ fn real_path(path: &Path) -> PathBuf {
     }
 }
 
-/// Staging directories of this process not yet committed or dropped: what
-/// an interrupt removes.
-static LIVE_STAGING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// Every staging directory of this process with the output directory it
-/// stands for: [`public_paths`] puts the latter in messages.
+/// stands for: [`public_paths`] puts the latter in messages, an interrupt
+/// removes those still there (a committed or dropped run's are gone, and
+/// the names, process id and counter, are this process's alone).
 static STAGED_AS: Mutex<Vec<(PathBuf, PathBuf)>> = Mutex::new(Vec::new());
 
 /// `message` with every staging directory of this process replaced by the
@@ -287,12 +283,8 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-fn forget_staging(staging: &Path) {
-    lock(&LIVE_STAGING).retain(|s| s != staging);
-}
-
 /// Installs, once per process, the SIGINT/SIGTERM handler that waits for a
-/// commit in progress, removes the live staging directories and exits with
+/// commit in progress, removes this process's staging directories and exits with
 /// status 130. A process that cannot install it (another handler is set)
 /// keeps the default behaviour; the next run then removes what it left.
 fn install_interrupt_handler() {
@@ -300,7 +292,7 @@ fn install_interrupt_handler() {
     INSTALL.call_once(|| {
         let _ = ctrlc::set_handler(|| {
             let _moving = lock(&COMMITTING);
-            for staging in lock(&LIVE_STAGING).drain(..) {
+            for (staging, _) in lock(&STAGED_AS).iter() {
                 let _ = fs::remove_dir_all(staging);
             }
             eprintln!("error: interrupted; the outputs this run had not yet published were removed");
