@@ -88,7 +88,7 @@ pub enum ConfigError {
         expected: String,
     },
     /// A value outside its physical range.
-    #[error("{path}: field `{field}` = {value} is out of range: expected {expected}")]
+    #[error("{path}: field `{field}` = {} is out of range: expected {expected}", readable(*value))]
     OutOfRange {
         /// File path.
         path: String,
@@ -311,33 +311,75 @@ fn default_current_sum_limit_a() -> f64 {
     5.0
 }
 
+/// `x` for a message: plain decimals for everyday magnitudes, scientific
+/// notation for the very small and very large (never 300 zeros).
+pub fn readable(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() || (1e-4..1e9).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// Fastest rate of the rig's mechanics that a run accepts, rad/s (about
+/// 160 kHz): the simulation steps at least once per `1 / omega` of the
+/// fastest mode, so a faster one makes a 20 s travel take hours. The
+/// reference rig's fastest, its shortest rope's elements, is about
+/// 9200 rad/s.
+pub const MAX_MECHANICAL_RATE_RADPS: f64 = 1.0e6;
+/// Longest reference travel a rig may ask for, s: at the rig's sample rate
+/// a longer one holds more samples than a run writes (and takes minutes to
+/// simulate). The reference rig's travel takes about 19 s.
+pub const MAX_TRAVEL_S: f64 = 600.0;
+/// Shortest rope on either side of the sheave over the travel, m: a
+/// shorter one rings too fast to simulate and leaves the sheave no room.
+pub const MIN_ROPE_SIDE_M: f64 = 0.1;
+
+/// The physical range of a field: `[lo, hi]` (or `(lo, hi]`), its unit and
+/// why (for the message).
+struct Bound<'w> {
+    lo: f64,
+    lo_open: bool,
+    hi: f64,
+    unit: &'static str,
+    why: &'w str,
+}
+
+impl<'w> Bound<'w> {
+    /// `[lo, hi]`.
+    fn closed(lo: f64, hi: f64, unit: &'static str, why: &'w str) -> Self {
+        Self { lo, lo_open: false, hi, unit, why }
+    }
+
+    /// `(lo, hi]`.
+    fn above(lo: f64, hi: f64, unit: &'static str, why: &'w str) -> Self {
+        Self { lo, lo_open: true, hi, unit, why }
+    }
+}
+
 /// Range checker that names the file and field.
 struct Checker<'a> {
     path: &'a str,
 }
 
 impl Checker<'_> {
-    fn within(&self, field: &str, value: f64, lo: f64, hi: f64, lo_open: bool) -> Result<(), ConfigError> {
-        let above = if lo_open { value > lo } else { value >= lo };
-        if value.is_finite() && above && value <= hi {
-            Ok(())
-        } else {
-            let open = if lo_open { "(" } else { "[" };
-            Err(ConfigError::OutOfRange {
-                path: self.path.to_string(),
-                field: field.to_string(),
-                value,
-                expected: format!("a finite value in {open}{lo}, {hi}]"),
-            })
+    fn check(&self, field: &str, value: f64, b: Bound) -> Result<(), ConfigError> {
+        let above = if b.lo_open { value > b.lo } else { value >= b.lo };
+        if value.is_finite() && above && value <= b.hi {
+            return Ok(());
         }
+        let open = if b.lo_open { "(" } else { "[" };
+        let unit = if b.unit.is_empty() { String::new() } else { format!(" {}", b.unit) };
+        let why = if b.why.is_empty() { String::new() } else { format!(": {}", b.why) };
+        Err(self.out_of_range(
+            field,
+            value,
+            format!("a finite value in {open}{}, {}]{unit}{why}", readable(b.lo), readable(b.hi)),
+        ))
     }
 
-    fn positive(&self, field: &str, value: f64, hi: f64) -> Result<(), ConfigError> {
-        self.within(field, value, 0.0, hi, true)
-    }
-
-    fn non_negative(&self, field: &str, value: f64, hi: f64) -> Result<(), ConfigError> {
-        self.within(field, value, 0.0, hi, false)
+    fn out_of_range(&self, field: &str, value: f64, expected: String) -> ConfigError {
+        ConfigError::OutOfRange { path: self.path.to_string(), field: field.to_string(), value, expected }
     }
 }
 
@@ -362,14 +404,30 @@ impl RigConfig {
         Self::from_toml_str(EMBEDDED_RIG_TOML, EMBEDDED_RIG_NAME)
     }
 
-    /// Checks every value against its physical range; `origin` names the file.
+    /// Checks every value against its physical range, with the physical
+    /// reason in the message; then the rig as a whole: its fastest
+    /// mechanical rate ([`MAX_MECHANICAL_RATE_RADPS`]) and the length of
+    /// its reference travel ([`MAX_TRAVEL_S`]), so that every run on an
+    /// accepted rig finishes in bounded time and memory. `origin` names the
+    /// file.
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
         let c = Checker { path: origin };
+        self.validate_mechanics(&c)?;
+        self.validate_travel(&c)?;
+        self.validate_fastest_rate(&c)?;
+        self.validate_motor_and_inverter(&c)?;
+        self.validate_control(&c)?;
+        self.validate_ripple_and_measurement(&c)
+    }
+
+    fn validate_mechanics(&self, c: &Checker) -> Result<(), ConfigError> {
         let m = &self.mechanics;
-        c.positive("[mechanics].m_cw_kg", m.m_cw_kg, 1.0e5)?;
+        const MASS: &str = "lighter than 1 kg, a mass rings on its rope so fast that a run never ends; \
+                            no lift carries more than 100 t";
+        c.check("[mechanics].m_cw_kg", m.m_cw_kg, Bound::closed(1.0, 1.0e5, "kg", MASS))?;
         if m.m_car_kg.is_empty() {
             return Err(ConfigError::Invalid {
-                path: origin.to_string(),
+                path: c.path.to_string(),
                 field: "[mechanics].m_car_kg".to_string(),
                 found: "is an empty list".to_string(),
                 expected: "at least one car mass in kg, e.g. m_car_kg = [70.5] (the commands default to the \
@@ -378,108 +436,324 @@ impl RigConfig {
             });
         }
         for (i, mass) in m.m_car_kg.iter().enumerate() {
-            c.positive(&format!("[mechanics].m_car_kg[{i}]"), *mass, 1.0e5)?;
+            c.check(&format!("[mechanics].m_car_kg[{i}]"), *mass, Bound::closed(1.0, 1.0e5, "kg", MASS))?;
         }
-        c.positive("[mechanics].rope_total_length_m", m.rope_total_length_m, 1.0e3)?;
-        c.positive("[mechanics].rope_ea_n", m.rope_ea_n, 1.0e12)?;
-        c.non_negative("[mechanics].rope_mass_per_length_kg_per_m", m.rope_mass_per_length_kg_per_m, 1.0e3)?;
-        c.positive("[mechanics].sheave_inertia_kg_m2", m.sheave_inertia_kg_m2, 1.0e4)?;
-        c.positive("[mechanics].sheave_radius_m", m.sheave_radius_m, 10.0)?;
-        c.positive("[mechanics].gravity_mps2", m.gravity_mps2, 100.0)?;
-        c.non_negative("[mechanics].guide_damping_ratio", m.guide_damping_ratio, 1.0)?;
-        c.non_negative("[mechanics].c_cw_kg_per_s", m.c_cw_kg_per_s, 1.0e6)?;
-        c.non_negative("[mechanics].c_car_kg_per_s", m.c_car_kg_per_s, 1.0e6)?;
-        c.non_negative("[mechanics].c_sheave_nms_per_rad", m.c_sheave_nms_per_rad, 1.0e6)?;
-        c.positive("[mechanics].car_frame_first_mode_hz", m.car_frame_first_mode_hz, 1.0e5)?;
+        let length = "room for a travel (at least 1 m), no longer than any lift's hoist rope (1000 m)";
+        c.check("[mechanics].rope_total_length_m", m.rope_total_length_m, Bound::closed(1.0, 1.0e3, "m", length))?;
+        let ea = "from a thin synthetic cord to a thick steel rope";
+        c.check("[mechanics].rope_ea_n", m.rope_ea_n, Bound::closed(1.0e4, 1.0e9, "N", ea))?;
+        let mu = "from a 1 mm cord (about 0.001 kg/m) to a bundle of the heaviest steel ropes; \
+                  a massless rope leaves its elements nothing to ring with";
+        c.check(
+            "[mechanics].rope_mass_per_length_kg_per_m",
+            m.rope_mass_per_length_kg_per_m,
+            Bound::closed(1.0e-3, 100.0, "kg/m", mu),
+        )?;
+        let inertia = "from a small machine's rotor (0.001 kg m^2) to the largest traction sheave";
+        c.check(
+            "[mechanics].sheave_inertia_kg_m2",
+            m.sheave_inertia_kg_m2,
+            Bound::closed(1.0e-3, 1.0e4, "kg m^2", inertia),
+        )?;
+        let radius = "a traction sheave of 1 cm to 2 m radius";
+        c.check("[mechanics].sheave_radius_m", m.sheave_radius_m, Bound::closed(0.01, 2.0, "m", radius))?;
+        let g = "the gravity of the Earth's surface, 9.78 m/s^2 at the equator to 9.83 m/s^2 at the poles";
+        c.check("[mechanics].gravity_mps2", m.gravity_mps2, Bound::closed(9.7, 9.9, "m/s^2", g))?;
+        let zeta = "a fraction of critical damping (1: critical; guides never damp more)";
+        c.check("[mechanics].guide_damping_ratio", m.guide_damping_ratio, Bound::closed(0.0, 1.0, "", zeta))?;
+        let guide = "never negative, and beyond the guides of any lift above 1e5 kg/s (the rig: 148 kg/s)";
+        c.check("[mechanics].c_cw_kg_per_s", m.c_cw_kg_per_s, Bound::closed(0.0, 1.0e5, "kg/s", guide))?;
+        c.check("[mechanics].c_car_kg_per_s", m.c_car_kg_per_s, Bound::closed(0.0, 1.0e5, "kg/s", guide))?;
+        let sheave = "never negative, and beyond any machine's bearing and viscous loss above 1000 N m s/rad \
+                      (the rig: 3 N m s/rad)";
+        c.check(
+            "[mechanics].c_sheave_nms_per_rad",
+            m.c_sheave_nms_per_rad,
+            Bound::closed(0.0, 1.0e3, "N m s/rad", sheave),
+        )?;
+        let frame = "a car frame's first mode (the rig: 235 Hz): below 1 Hz no frame stands, above 10 kHz no \
+                     frame of a car rings";
+        c.check(
+            "[mechanics].car_frame_first_mode_hz",
+            m.car_frame_first_mode_hz,
+            Bound::closed(1.0, 1.0e4, "Hz", frame),
+        )?;
         if m.rope_lumping != "all-at-midpoint" {
             return Err(ConfigError::Parse {
-                path: origin.to_string(),
+                path: c.path.to_string(),
                 message: format!(
                     "field `[mechanics].rope_lumping` = {:?}: expected \"all-at-midpoint\"",
                     m.rope_lumping
                 ),
             });
         }
-        let t = &self.travel;
-        c.positive("[travel].rated_speed_mps", t.rated_speed_mps, 20.0)?;
-        c.positive("[travel].max_accel_mps2", t.max_accel_mps2, 20.0)?;
-        c.positive("[travel].max_jerk_mps3", t.max_jerk_mps3, 100.0)?;
-        c.positive("[travel].lw_low_m", t.lw_low_m, m.rope_total_length_m)?;
-        c.within("[travel].lw_high_m", t.lw_high_m, t.lw_low_m, m.rope_total_length_m, true)?;
-        if t.lw_high_m >= m.rope_total_length_m {
-            c.within("[travel].lw_high_m", t.lw_high_m, t.lw_low_m, m.rope_total_length_m * (1.0 - 1e-9), true)?;
+        Ok(())
+    }
+
+    fn validate_travel(&self, c: &Checker) -> Result<(), ConfigError> {
+        let (t, lt) = (&self.travel, self.mechanics.rope_total_length_m);
+        let speed = "from the slowest lift (5 cm/s) to the fastest (about 20 m/s)";
+        c.check("[travel].rated_speed_mps", t.rated_speed_mps, Bound::closed(0.05, 20.0, "m/s", speed))?;
+        let accel = "from a crawl to 2 g, more than any lift's passengers bear";
+        c.check("[travel].max_accel_mps2", t.max_accel_mps2, Bound::closed(0.05, 20.0, "m/s^2", accel))?;
+        let jerk = "from a crawl to 100 m/s^3, more than any lift's drive commands";
+        c.check("[travel].max_jerk_mps3", t.max_jerk_mps3, Bound::closed(0.05, 100.0, "m/s^3", jerk))?;
+        let side = format!(
+            "each rope side keeps at least {} m over the travel (a shorter one rings too fast to simulate), \
+             of [mechanics].rope_total_length_m = {} m",
+            readable(MIN_ROPE_SIDE_M),
+            readable(lt)
+        );
+        let top = lt - MIN_ROPE_SIDE_M;
+        c.check("[travel].lw_low_m", t.lw_low_m, Bound::closed(MIN_ROPE_SIDE_M, top, "m", &side))?;
+        c.check(
+            "[travel].lw_high_m",
+            t.lw_high_m,
+            Bound::above(t.lw_low_m, top, "m", &format!("above lw_low_m; {side}")),
+        )?;
+        let seconds = self.reference_travel_s();
+        if seconds > MAX_TRAVEL_S {
+            let distance = t.lw_high_m - t.lw_low_m;
+            return Err(c.out_of_range(
+                "[travel].rated_speed_mps",
+                t.rated_speed_mps,
+                format!(
+                    "a travel of at most {} s: lw_low_m -> lw_high_m ({} m) at this speed, max_accel_mps2 and \
+                     max_jerk_mps3 takes about {} s, which a run would simulate and record whole; a speed of at \
+                     least {} m/s",
+                    readable(MAX_TRAVEL_S),
+                    readable(distance),
+                    readable(seconds.round()),
+                    readable((distance / (0.9 * MAX_TRAVEL_S)).max(0.05))
+                ),
+            ));
         }
+        Ok(())
+    }
+
+    /// Duration of the reference travel from `lw_low_m` to `lw_high_m`, s:
+    /// the cruise `d / v` plus the acceleration's `v / a + a / j` (an upper
+    /// bound of the jerk-limited profile's).
+    pub fn reference_travel_s(&self) -> f64 {
+        let t = &self.travel;
+        (t.lw_high_m - t.lw_low_m) / t.rated_speed_mps
+            + t.rated_speed_mps / t.max_accel_mps2
+            + t.max_accel_mps2 / t.max_jerk_mps3
+    }
+
+    /// The fastest rate of the rope-sheave chain over the travel, rad/s,
+    /// and the field it comes from with the smallest value of that field
+    /// that keeps it at [`MAX_MECHANICAL_RATE_RADPS`]: on the shortest rope
+    /// side `l` (of the travel's range) with each side's mass at its
+    /// midpoint, the rope's elements `sqrt(8 EA / (mu l^2))`, the sheave
+    /// between its ropes `sqrt(8 EA r^2 / (I l))`, a hanging mass on its
+    /// rope `sqrt(4 EA / (m l))`, and the damping rates `c / m`.
+    pub fn fastest_mechanical_rate(&self) -> (f64, &'static str, f64) {
+        let (m, t) = (&self.mechanics, &self.travel);
+        let l = t.lw_low_m.min(m.rope_total_length_m - t.lw_high_m);
+        let ea = m.rope_ea_n;
+        let w2 = MAX_MECHANICAL_RATE_RADPS * MAX_MECHANICAL_RATE_RADPS;
+        let r2 = m.sheave_radius_m * m.sheave_radius_m;
+        let car = m.m_car_kg.iter().copied().fold(f64::INFINITY, f64::min);
+        let w = MAX_MECHANICAL_RATE_RADPS;
+        let rates = [
+            (
+                (8.0 * ea / (m.rope_mass_per_length_kg_per_m * l * l)).sqrt(),
+                "[mechanics].rope_mass_per_length_kg_per_m",
+                8.0 * ea / (l * l * w2),
+            ),
+            (
+                (8.0 * ea * r2 / (m.sheave_inertia_kg_m2 * l)).sqrt(),
+                "[mechanics].sheave_inertia_kg_m2",
+                8.0 * ea * r2 / (l * w2),
+            ),
+            ((4.0 * ea / (m.m_cw_kg * l)).sqrt(), "[mechanics].m_cw_kg", 4.0 * ea / (l * w2)),
+            ((4.0 * ea / (car * l)).sqrt(), "[mechanics].m_car_kg", 4.0 * ea / (l * w2)),
+            (m.c_cw_kg_per_s / m.m_cw_kg, "[mechanics].m_cw_kg", m.c_cw_kg_per_s / w),
+            (m.c_car_kg_per_s / car, "[mechanics].m_car_kg", m.c_car_kg_per_s / w),
+            (
+                m.c_sheave_nms_per_rad / m.sheave_inertia_kg_m2,
+                "[mechanics].sheave_inertia_kg_m2",
+                m.c_sheave_nms_per_rad / w,
+            ),
+        ];
+        rates.into_iter().fold((0.0, "", 0.0), |a, b| if b.0 > a.0 { b } else { a })
+    }
+
+    fn validate_fastest_rate(&self, c: &Checker) -> Result<(), ConfigError> {
+        let (rate, field, smallest) = self.fastest_mechanical_rate();
+        if rate <= MAX_MECHANICAL_RATE_RADPS {
+            return Ok(());
+        }
+        let m = &self.mechanics;
+        let value = match field {
+            "[mechanics].rope_mass_per_length_kg_per_m" => m.rope_mass_per_length_kg_per_m,
+            "[mechanics].sheave_inertia_kg_m2" => m.sheave_inertia_kg_m2,
+            "[mechanics].m_cw_kg" => m.m_cw_kg,
+            _ => m.m_car_kg.iter().copied().fold(f64::INFINITY, f64::min),
+        };
+        let t = &self.travel;
+        Err(c.out_of_range(
+            field,
+            value,
+            format!(
+                "a rig whose fastest mechanical rate is at most {} rad/s (the simulation steps at least once per \
+                 1/rate; a faster mode makes a run never end): with [mechanics].rope_ea_n = {} N and the shortest \
+                 rope side {} m (of lw_low_m and rope_total_length_m - lw_high_m) this value rings at {} rad/s; a \
+                 value of at least {} (or a softer rope, a longer shortest side)",
+                readable(MAX_MECHANICAL_RATE_RADPS),
+                readable(m.rope_ea_n),
+                readable(t.lw_low_m.min(m.rope_total_length_m - t.lw_high_m)),
+                readable(rate.round()),
+                readable(smallest),
+            ),
+        ))
+    }
+
+    fn validate_motor_and_inverter(&self, c: &Checker) -> Result<(), ConfigError> {
         let mo = &self.motor;
-        c.within("[motor].pole_pairs", mo.pole_pairs as f64, 1.0, 64.0, false)?;
-        c.positive("[motor].stator_resistance_ohm", mo.stator_resistance_ohm, 1.0e3)?;
-        c.positive("[motor].ld_h", mo.ld_h, 10.0)?;
-        c.positive("[motor].lq_h", mo.lq_h, 10.0)?;
-        c.positive("[motor].flux_linkage_wb", mo.flux_linkage_wb, 100.0)?;
-        c.positive("[motor].rated_current_a", mo.rated_current_a, 1.0e4)?;
-        c.within("[motor].overcurrent_trip_a", mo.overcurrent_trip_a, mo.rated_current_a, 1.0e4, true)?;
+        c.check("[motor].pole_pairs", mo.pole_pairs as f64, Bound::closed(1.0, 64.0, "", "a machine's pole pairs"))?;
+        let r = "from a large machine's milliohm to a small one's hundreds of ohm";
+        c.check("[motor].stator_resistance_ohm", mo.stator_resistance_ohm, Bound::closed(1.0e-3, 1.0e3, "ohm", r))?;
+        let l = "from a large machine's 10 uH to 10 H";
+        c.check("[motor].ld_h", mo.ld_h, Bound::closed(1.0e-5, 10.0, "H", l))?;
+        c.check("[motor].lq_h", mo.lq_h, Bound::closed(1.0e-5, 10.0, "H", l))?;
+        let psi = "a permanent-magnet machine's flux linkage, 1 mWb to 100 Wb";
+        c.check("[motor].flux_linkage_wb", mo.flux_linkage_wb, Bound::closed(1.0e-3, 100.0, "Wb", psi))?;
+        let i = "a machine's rated current, 0.1 A to 10 kA";
+        c.check("[motor].rated_current_a", mo.rated_current_a, Bound::closed(0.1, 1.0e4, "A", i))?;
+        let trip = "above the rated current (a trip below it stops every travel)";
+        c.check(
+            "[motor].overcurrent_trip_a",
+            mo.overcurrent_trip_a,
+            Bound::above(mo.rated_current_a, 1.0e4, "A", trip),
+        )?;
         let inv = &self.inverter;
-        c.positive("[inverter].dc_bus_v", inv.dc_bus_v, 1.0e4)?;
-        c.within("[inverter].pwm_hz", inv.pwm_hz, 1.0e3, 1.0e5, false)?;
-        c.non_negative("[inverter].dead_time_s", inv.dead_time_s, 0.1 / inv.pwm_hz)?;
-        c.within(
+        let bus = "an inverter's DC bus, 10 V (less drives no lift machine) to 10 kV";
+        c.check("[inverter].dc_bus_v", inv.dc_bus_v, Bound::closed(10.0, 1.0e4, "V", bus))?;
+        let pwm = "an inverter's switching frequency, 1 kHz to 100 kHz";
+        c.check("[inverter].pwm_hz", inv.pwm_hz, Bound::closed(1.0e3, 1.0e5, "Hz", pwm))?;
+        let dead = "at most a tenth of the PWM period";
+        c.check("[inverter].dead_time_s", inv.dead_time_s, Bound::closed(0.0, 0.1 / inv.pwm_hz, "s", dead))?;
+        let sense = "above the over-current trip, which the sensor must read";
+        c.check(
             "[inverter].current_sense_full_scale_a",
             inv.current_sense_full_scale_a,
-            mo.overcurrent_trip_a,
-            1.0e4,
-            true,
+            Bound::above(mo.overcurrent_trip_a, 1.0e4, "A", sense),
         )?;
-        c.within("[inverter].adc_bits", inv.adc_bits as f64, 8.0, 16.0, false)?;
-        c.within("[inverter].encoder_counts_per_rev", inv.encoder_counts_per_rev as f64, 4.0, 1.0e8, false)?;
-        c.within("[inverter].dc_bus_sense_full_scale_v", inv.dc_bus_sense_full_scale_v, inv.dc_bus_v, 1.0e4, true)?;
-        c.within("[inverter].pwm_timer_clock_hz", inv.pwm_timer_clock_hz, 2.0 * inv.pwm_hz * 100.0, 1.0e9, false)?;
-        let co = &self.control;
-        c.within("[control].current_loop_hz", co.current_loop_hz, inv.pwm_hz, inv.pwm_hz, false)?;
-        c.within("[control].speed_loop_hz", co.speed_loop_hz, 10.0, co.current_loop_hz, false)?;
+        c.check("[inverter].adc_bits", inv.adc_bits as f64, Bound::closed(8.0, 16.0, "bits", "a drive's ADC"))?;
+        let counts = "an encoder's counts per revolution, 4 (one line) to 1e8";
+        c.check(
+            "[inverter].encoder_counts_per_rev",
+            inv.encoder_counts_per_rev as f64,
+            Bound::closed(4.0, 1.0e8, "", counts),
+        )?;
+        let bus_sense = "above the DC bus, which the sensor must read";
+        c.check(
+            "[inverter].dc_bus_sense_full_scale_v",
+            inv.dc_bus_sense_full_scale_v,
+            Bound::above(inv.dc_bus_v, 1.0e4, "V", bus_sense),
+        )?;
+        let clock = "at least 100 counts a half PWM period";
+        c.check(
+            "[inverter].pwm_timer_clock_hz",
+            inv.pwm_timer_clock_hz,
+            Bound::closed(2.0 * inv.pwm_hz * 100.0, 1.0e9, "Hz", clock),
+        )
+    }
+
+    fn validate_control(&self, c: &Checker) -> Result<(), ConfigError> {
+        let (co, inv) = (&self.control, &self.inverter);
+        let once = "one current-loop update per PWM period";
+        c.check("[control].current_loop_hz", co.current_loop_hz, Bound::closed(inv.pwm_hz, inv.pwm_hz, "Hz", once))?;
+        let speed = "from 10 Hz to the current loop's rate";
+        c.check("[control].speed_loop_hz", co.speed_loop_hz, Bound::closed(10.0, co.current_loop_hz, "Hz", speed))?;
         let ratio = co.current_loop_hz / co.speed_loop_hz;
         if (ratio - ratio.round()).abs() > 1e-9 {
-            return Err(ConfigError::OutOfRange {
-                path: origin.to_string(),
-                field: "[control].speed_loop_hz".to_string(),
-                value: co.speed_loop_hz,
-                expected: "a whole divisor of current_loop_hz".to_string(),
-            });
+            return Err(c.out_of_range(
+                "[control].speed_loop_hz",
+                co.speed_loop_hz,
+                "a whole divisor of current_loop_hz".to_string(),
+            ));
         }
-        c.within(
+        let bandwidth =
+            |of: &str, over: u32| format!("at most the loop rate over {over} ({of}): a sampled loop's limit");
+        c.check(
             "[control].current_loop_bandwidth_hz",
             co.current_loop_bandwidth_hz,
-            0.0,
-            co.current_loop_hz / 8.0,
-            true,
+            Bound::above(0.0, co.current_loop_hz / 8.0, "Hz", &bandwidth("current_loop_hz", 8)),
         )?;
-        c.within("[control].speed_loop_bandwidth_hz", co.speed_loop_bandwidth_hz, 0.0, co.speed_loop_hz / 20.0, true)?;
-        c.within(
+        c.check(
+            "[control].speed_loop_bandwidth_hz",
+            co.speed_loop_bandwidth_hz,
+            Bound::above(0.0, co.speed_loop_hz / 20.0, "Hz", &bandwidth("speed_loop_hz", 20)),
+        )?;
+        c.check(
             "[control].speed_estimator_bandwidth_hz",
             co.speed_estimator_bandwidth_hz,
-            0.0,
-            co.speed_loop_hz / 10.0,
-            true,
+            Bound::above(0.0, co.speed_loop_hz / 10.0, "Hz", &bandwidth("speed_loop_hz", 10)),
         )?;
-        c.within("[control].overspeed_factor", co.overspeed_factor, 1.0, 10.0, true)?;
-        c.within("[control].dc_bus_undervoltage_fraction", co.dc_bus_undervoltage_fraction, 0.0, 1.0, true)?;
-        c.within("[control].dc_bus_overvoltage_fraction", co.dc_bus_overvoltage_fraction, 1.0, 10.0, true)?;
-        c.positive("[control].current_sum_limit_a", co.current_sum_limit_a, inv.current_sense_full_scale_a)?;
+        let over = "a trip above the rated speed, at most 10 times it";
+        c.check("[control].overspeed_factor", co.overspeed_factor, Bound::above(1.0, 10.0, "", over))?;
+        let under = "a fraction of the DC bus below 1";
+        c.check(
+            "[control].dc_bus_undervoltage_fraction",
+            co.dc_bus_undervoltage_fraction,
+            Bound::above(0.0, 1.0, "", under),
+        )?;
+        let over = "a multiple of the DC bus above 1, at most 10";
+        c.check(
+            "[control].dc_bus_overvoltage_fraction",
+            co.dc_bus_overvoltage_fraction,
+            Bound::above(1.0, 10.0, "", over),
+        )?;
+        let sum = "within the current sensor's full scale";
+        c.check(
+            "[control].current_sum_limit_a",
+            co.current_sum_limit_a,
+            Bound::above(0.0, inv.current_sense_full_scale_a, "A", sum),
+        )
+    }
+
+    fn validate_ripple_and_measurement(&self, c: &Checker) -> Result<(), ConfigError> {
         for (i, r) in self.ripple.iter().enumerate() {
-            c.within(&format!("[[ripple]][{i}].mechanical_order"), r.mechanical_order as f64, 1.0, 1000.0, false)?;
-            c.non_negative(&format!("[[ripple]][{i}].amplitude_nm"), r.amplitude_nm, 1.0e4)?;
-            c.within(&format!("[[ripple]][{i}].phase_rad"), r.phase_rad, -1.0e3, 1.0e3, false)?;
+            let order = "a harmonic of the shaft's rotation, 1 to 1000";
+            c.check(
+                &format!("[[ripple]][{i}].mechanical_order"),
+                r.mechanical_order as f64,
+                Bound::closed(1.0, 1000.0, "", order),
+            )?;
+            let amplitude = "never negative, at most 10 kN m";
+            c.check(
+                &format!("[[ripple]][{i}].amplitude_nm"),
+                r.amplitude_nm,
+                Bound::closed(0.0, 1.0e4, "N m", amplitude),
+            )?;
+            let phase = "an angle, within +-1000 rad";
+            c.check(&format!("[[ripple]][{i}].phase_rad"), r.phase_rad, Bound::closed(-1.0e3, 1.0e3, "rad", phase))?;
         }
         let me = &self.measurement;
-        c.within("[measurement].sample_rate_hz", me.sample_rate_hz, 1.0, 1.0e7, false)?;
-        c.within("[measurement].highpass_hz", me.highpass_hz, 0.0, me.sample_rate_hz / 2.0, false)?;
-        c.non_negative("[measurement].spectrogram_band_hz[0]", me.spectrogram_band_hz[0], me.sample_rate_hz / 2.0)?;
-        c.within(
+        let fs = "slower than 100 Hz holds none of the rig's vibration (the paper: 16384 Hz); faster than 10 MHz \
+                  no acquisition samples";
+        c.check("[measurement].sample_rate_hz", me.sample_rate_hz, Bound::closed(100.0, 1.0e7, "Hz", fs))?;
+        let nyquist = me.sample_rate_hz / 2.0;
+        let below = "below the Nyquist frequency, half of sample_rate_hz";
+        c.check("[measurement].highpass_hz", me.highpass_hz, Bound::closed(0.0, nyquist, "Hz", below))?;
+        c.check(
+            "[measurement].spectrogram_band_hz[0]",
+            me.spectrogram_band_hz[0],
+            Bound::closed(0.0, nyquist, "Hz", below),
+        )?;
+        c.check(
             "[measurement].spectrogram_band_hz[1]",
             me.spectrogram_band_hz[1],
-            me.spectrogram_band_hz[0],
-            me.sample_rate_hz / 2.0,
-            true,
-        )?;
-        Ok(())
+            Bound::above(
+                me.spectrogram_band_hz[0],
+                nyquist,
+                "Hz",
+                "above the band's start and below the Nyquist frequency",
+            ),
+        )
     }
 
     /// PWM timer auto-reload for centre-aligned counting: `f_clk / (2 f_pwm)`, counts.
@@ -668,12 +942,97 @@ mod tests {
         let text = EMBEDDED_RIG_TOML.replace("sheave_radius_m = 0.065", "sheave_radius_m = -0.065");
         let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
         assert!(
-            err.contains("bad.toml") && err.contains("[mechanics].sheave_radius_m") && err.contains("(0, 10]"),
+            err.contains("bad.toml") && err.contains("[mechanics].sheave_radius_m") && err.contains("[0.01, 2] m"),
             "{err}"
         );
         let text = EMBEDDED_RIG_TOML.replace("lw_high_m = 7.6", "lw_high_m = 9.0");
         let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
         assert!(err.contains("[travel].lw_high_m"), "{err}");
+    }
+
+    /// The rig with `line` (a whole line of the embedded file, found by its
+    /// start `key`) replaced by `key = value`.
+    fn rig_with(key: &str, value: &str) -> String {
+        let line = EMBEDDED_RIG_TOML.lines().find(|l| l.starts_with(&format!("{key} = "))).unwrap();
+        let text = EMBEDDED_RIG_TOML.replacen(line, &format!("{key} = {value}"), 1);
+        assert_ne!(text, EMBEDDED_RIG_TOML, "{key}");
+        text
+    }
+
+    #[test]
+    fn every_value_is_bounded_below_and_above_with_the_physical_reason() {
+        // Absurd but positive values, each side of every bound: refused
+        // naming the file, the field, the range and why.
+        let cases: &[(&str, &str, &str)] = &[
+            ("m_cw_kg", "1e-9", "[mechanics].m_cw_kg"),
+            ("m_cw_kg", "1e6", "[mechanics].m_cw_kg"),
+            ("m_car_kg", "[1e-9]", "[mechanics].m_car_kg[0]"),
+            ("m_car_kg", "[33.0, 2e5]", "[mechanics].m_car_kg[1]"),
+            ("rope_total_length_m", "1e-6", "[mechanics].rope_total_length_m"),
+            ("rope_total_length_m", "1e5", "[mechanics].rope_total_length_m"),
+            ("rope_ea_n", "1e-9", "[mechanics].rope_ea_n"),
+            ("rope_ea_n", "1e12", "[mechanics].rope_ea_n"),
+            ("rope_mass_per_length_kg_per_m", "0.0", "[mechanics].rope_mass_per_length_kg_per_m"),
+            ("rope_mass_per_length_kg_per_m", "1e-9", "[mechanics].rope_mass_per_length_kg_per_m"),
+            ("rope_mass_per_length_kg_per_m", "1e3", "[mechanics].rope_mass_per_length_kg_per_m"),
+            ("sheave_inertia_kg_m2", "1e-9", "[mechanics].sheave_inertia_kg_m2"),
+            ("sheave_inertia_kg_m2", "1e5", "[mechanics].sheave_inertia_kg_m2"),
+            ("sheave_radius_m", "1e-9", "[mechanics].sheave_radius_m"),
+            ("sheave_radius_m", "10.0", "[mechanics].sheave_radius_m"),
+            ("gravity_mps2", "1e-9", "[mechanics].gravity_mps2"),
+            ("gravity_mps2", "100.0", "[mechanics].gravity_mps2"),
+            ("c_cw_kg_per_s", "1e6", "[mechanics].c_cw_kg_per_s"),
+            ("c_sheave_nms_per_rad", "1e6", "[mechanics].c_sheave_nms_per_rad"),
+            ("car_frame_first_mode_hz", "1e-9", "[mechanics].car_frame_first_mode_hz"),
+            ("car_frame_first_mode_hz", "1e5", "[mechanics].car_frame_first_mode_hz"),
+            ("rated_speed_mps", "1e-9", "[travel].rated_speed_mps"),
+            ("max_accel_mps2", "1e-9", "[travel].max_accel_mps2"),
+            ("max_jerk_mps3", "1e-9", "[travel].max_jerk_mps3"),
+            ("lw_low_m", "1e-7", "[travel].lw_low_m"),
+            ("lw_high_m", "8.59", "[travel].lw_high_m"),
+            ("stator_resistance_ohm", "1e-9", "[motor].stator_resistance_ohm"),
+            ("ld_h", "1e-9", "[motor].ld_h"),
+            ("lq_h", "100.0", "[motor].lq_h"),
+            ("flux_linkage_wb", "1e-9", "[motor].flux_linkage_wb"),
+            ("rated_current_a", "1e-9", "[motor].rated_current_a"),
+            ("dc_bus_v", "1e-9", "[inverter].dc_bus_v"),
+            ("sample_rate_hz", "1.0", "[measurement].sample_rate_hz"),
+            ("sample_rate_hz", "1e8", "[measurement].sample_rate_hz"),
+        ];
+        for (key, value, field) in cases {
+            let err = RigConfig::from_toml_str(&rig_with(key, value), "bad.toml").unwrap_err().to_string();
+            assert!(err.starts_with(&format!("bad.toml: field `{field}` = ")), "{key} = {value}: {err}");
+            // The range and its reason; no number written with hundreds of digits.
+            assert!(err.contains("expected a finite value in ") && err.contains("]"), "{err}");
+            let reason = &err[err.find(']').unwrap()..];
+            assert!(reason.contains(": "), "{key} = {value}: no reason in {err}");
+            assert!(!err.contains("0.0000000"), "{err}");
+        }
+    }
+
+    #[test]
+    fn a_rig_that_rings_too_fast_or_travels_too_long_is_refused_naming_the_field() {
+        // Each value within its own bounds, the rig as a whole beyond the
+        // simulation's: a stiff rope on a short side.
+        let text = rig_with("rope_ea_n", "1e9");
+        let text = text.replace("lw_low_m = 1.0 ", "lw_low_m = 0.1 ");
+        let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
+        assert!(err.contains("[mechanics].rope_mass_per_length_kg_per_m") && err.contains("rad/s"), "{err}");
+        let rig = RigConfig::embedded_default().unwrap();
+        let (rate, field, _) = rig.fastest_mechanical_rate();
+        assert!((8000.0..10000.0).contains(&rate) && field.contains("rope_mass"), "{rate} {field}");
+        // ... and a light sheave of large radius between them.
+        let text = text
+            .replace("rope_mass_per_length_kg_per_m = 0.095", "rope_mass_per_length_kg_per_m = 100.0")
+            .replace("sheave_radius_m = 0.065", "sheave_radius_m = 2.0")
+            .replace("sheave_inertia_kg_m2 = 0.3385", "sheave_inertia_kg_m2 = 0.001");
+        let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
+        assert!(err.contains("field `[mechanics].sheave_inertia_kg_m2` = 0.001") && err.contains("at least"), "{err}");
+        // A travel of hours at the slowest speed on the longest rope.
+        let text = rig_with("rope_total_length_m", "1000.0").replace("lw_high_m = 7.6", "lw_high_m = 900.0");
+        let text = text.replace("rated_speed_mps = 0.4 ", "rated_speed_mps = 0.05 ");
+        let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
+        assert!(err.contains("[travel].rated_speed_mps") && err.contains("600 s"), "{err}");
     }
 
     #[test]
