@@ -63,7 +63,8 @@ use cortex_m_rt::entry;
 use drive_core::dcp::{Mode, SlaveConfig};
 use drive_core::frame::{command_result_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME};
 use drive_core::lift_drive::{
-    speed_table, DcpPort, LiftDrive, MAX_BYTES_PER_STEP, MAX_REPLY_PER_STEP, MAX_SERVICE_BYTES_PER_STEP,
+    speed_table, AngleReference, DcpPort, DriveOutput, LiftDrive, PeriodIo, ServiceReply, MAX_BYTES_PER_STEP,
+    MAX_REPLY_PER_STEP, MAX_SERVICE_BYTES_PER_STEP,
 };
 use drive_core::param_store::{DriveParameters, MAX_RECORD};
 use drive_core::ripple::harmonics::HarmonicTable;
@@ -172,7 +173,7 @@ fn main() -> ! {
     let mut uart = uart::Uart0::enable();
     let mut dcp_uart = uart::Polled::uart1();
     let mut service_uart = uart::Polled::uart2();
-    let mut drive = LiftDrive::new(Controller::new(&DRIVE_CONFIG), dcp_port(), &DRIVE_CONFIG);
+    let mut drive = LiftDrive::new(Controller::new(&DRIVE_CONFIG), dcp_port(), &DRIVE_CONFIG, AngleReference::Given);
     let mut store: Store =
         MapStorage::new(flash::Flash::load(), const { MapConfig::new(0..flash::SIZE as u32) }, Cache::new_uncached());
     let (stored, status) = load(&mut store);
@@ -195,67 +196,24 @@ fn main() -> ! {
         let reply = match decoder.push(uart.read_byte()) {
             None => continue,
             Some(Ok(Message::Sense(sensors))) => {
-                // The service port: bytes up to the end of one line.
-                let mut service_taken = [0u8; MAX_SERVICE_BYTES_PER_STEP];
-                let mut n_service = 0;
-                while n_service < MAX_SERVICE_BYTES_PER_STEP {
-                    let Some(byte) = service_uart.try_read_byte() else { break };
-                    service_taken[n_service] = byte;
-                    n_service += 1;
-                    if let Some(reply) = drive.service_byte(byte) {
-                        let written = reply.save.is_none_or(|p| save(&mut store, &p));
-                        if written {
-                            service_uart.write_all(&reply.bytes[..reply.len]);
-                        } else {
-                            service_uart.write_all(b"error flash-write\r\n");
-                        }
-                        break;
+                let mut io = ChipIo::new(&mut dcp_uart, &mut service_uart, &mut store, timing_overhead_ticks);
+                let period = drive.period(&sensors, &mut io);
+                let observer_end = SYST::get_current();
+                let observer_cost = match (period.observer_ran, io.observer_start) {
+                    (true, Some(start)) => {
+                        (start.wrapping_sub(observer_end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks)
                     }
-                }
-                let mut taken = [0u8; MAX_BYTES_PER_STEP];
-                let mut n_in = 0;
-                while n_in < MAX_BYTES_PER_STEP {
-                    match dcp_uart.try_read_byte() {
-                        Some(byte) => {
-                            taken[n_in] = byte;
-                            n_in += 1;
-                        }
-                        None => break,
-                    }
-                }
-                let dcp = drive.dcp_step(&taken[..n_in], sensors.time_us);
-                // The cost of the controller step alone: on the chip the DCP
-                // slave runs in a task, outside the control interrupt.
-                let start = SYST::get_current();
-                let output = drive.control_step(&sensors);
-                let end = SYST::get_current();
-                // SysTick counts down, modulo its 24-bit reload.
-                let cost_ticks = (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
-                // The chain observer's task, timed on its own.
-                let start = SYST::get_current();
-                let observer_ran = drive.observer_step();
-                let end = SYST::get_current();
-                let observer_ticks = (start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
-                record[0] = n_in as u8;
-                record[1..1 + n_in].copy_from_slice(&taken[..n_in]);
-                record[1 + n_in] = dcp.reply_len as u8;
-                let mut end = 2 + n_in + dcp.reply_len;
-                record[2 + n_in..end].copy_from_slice(&dcp.reply[..dcp.reply_len]);
-                record[end] = n_service as u8;
-                record[end + 1..end + 1 + n_service].copy_from_slice(&service_taken[..n_service]);
-                end += 1 + n_service;
-                record[end] = observer_ran as u8;
-                let observer_cost = if observer_ran { observer_ticks } else { 0 };
-                record[end + 1..end + 5].copy_from_slice(&observer_cost.to_le_bytes());
-                end += 5;
-                dcp_uart.write_all(&record[..end]);
-                Message::Output(StepReport::new(&output, cost_ticks))
+                    _ => 0,
+                };
+                let n = io.write_record(&mut record, period.observer_ran, observer_cost);
+                let cost_ticks = io.control_ticks;
+                dcp_uart.write_all(&record[..n]);
+                Message::Output(StepReport::new(&period.drive.control, cost_ticks))
             }
-            Some(Ok(Message::Travel(command))) => {
-                Message::Ack(command_result_code(drive.controller_mut().command_travel(command)))
-            }
+            Some(Ok(Message::Travel(command))) => Message::Ack(command_result_code(drive.command_travel(command))),
             Some(Ok(Message::Reset)) => {
-                drive.controller_mut().reset();
+                // Nothing latched: nothing to clear, as the service port's `reset`.
+                let _ = drive.reset();
                 Message::Ack(0)
             }
             Some(Ok(Message::Compensation { strategy, table })) => {
@@ -273,6 +231,122 @@ fn main() -> ! {
         };
         let n = encode(&reply, &mut frame);
         uart.write_all(&frame[..n]);
+    }
+}
+
+/// The edges of the application layer on the emulated chip: UART1 (DCP)
+/// and UART2 (service port) polled, the parameter store written on `save`,
+/// the control step timed with SysTick; what a period took and replied, for
+/// its record on UART1.
+struct ChipIo<'a> {
+    dcp_uart: &'a mut uart::Polled,
+    service_uart: &'a mut uart::Polled,
+    store: &'a mut Store,
+    timing_overhead_ticks: u32,
+    dcp_taken: [u8; MAX_BYTES_PER_STEP],
+    n_dcp: usize,
+    replies: [u8; MAX_REPLY_PER_STEP],
+    n_replies: usize,
+    service_taken: [u8; MAX_SERVICE_BYTES_PER_STEP],
+    n_service: usize,
+    control_start: u32,
+    /// The control step's cost, SysTick ticks (the two reads' own cost taken off).
+    control_ticks: u32,
+    observer_start: Option<u32>,
+}
+
+impl<'a> ChipIo<'a> {
+    fn new(
+        dcp_uart: &'a mut uart::Polled,
+        service_uart: &'a mut uart::Polled,
+        store: &'a mut Store,
+        timing_overhead_ticks: u32,
+    ) -> Self {
+        Self {
+            dcp_uart,
+            service_uart,
+            store,
+            timing_overhead_ticks,
+            dcp_taken: [0; MAX_BYTES_PER_STEP],
+            n_dcp: 0,
+            replies: [0; MAX_REPLY_PER_STEP],
+            n_replies: 0,
+            service_taken: [0; MAX_SERVICE_BYTES_PER_STEP],
+            n_service: 0,
+            control_start: 0,
+            control_ticks: 0,
+            observer_start: None,
+        }
+    }
+
+    /// The step's record: `n_in, the DCP bytes taken, n_out, the reply
+    /// bytes, n_service, the service bytes taken, observer, its cost`; its length.
+    fn write_record(&self, record: &mut [u8], observer_ran: bool, observer_ticks: u32) -> usize {
+        let n_in = self.n_dcp;
+        record[0] = n_in as u8;
+        record[1..1 + n_in].copy_from_slice(&self.dcp_taken[..n_in]);
+        record[1 + n_in] = self.n_replies as u8;
+        let mut end = 2 + n_in + self.n_replies;
+        record[2 + n_in..end].copy_from_slice(&self.replies[..self.n_replies]);
+        record[end] = self.n_service as u8;
+        record[end + 1..end + 1 + self.n_service].copy_from_slice(&self.service_taken[..self.n_service]);
+        end += 1 + self.n_service;
+        record[end] = observer_ran as u8;
+        record[end + 1..end + 5].copy_from_slice(&observer_ticks.to_le_bytes());
+        end + 5
+    }
+}
+
+impl PeriodIo for ChipIo<'_> {
+    fn service_byte(&mut self) -> Option<u8> {
+        if self.n_service == MAX_SERVICE_BYTES_PER_STEP {
+            return None;
+        }
+        let byte = self.service_uart.try_read_byte()?;
+        self.service_taken[self.n_service] = byte;
+        self.n_service += 1;
+        Some(byte)
+    }
+
+    fn dcp_byte(&mut self) -> Option<u8> {
+        if self.n_dcp == MAX_BYTES_PER_STEP {
+            return None;
+        }
+        let byte = self.dcp_uart.try_read_byte()?;
+        self.dcp_taken[self.n_dcp] = byte;
+        self.n_dcp += 1;
+        Some(byte)
+    }
+
+    fn control_started(&mut self) {
+        self.control_start = SYST::get_current();
+    }
+
+    fn drive(&mut self, _output: &DriveOutput) {
+        let end = SYST::get_current();
+        // SysTick counts down, modulo its 24-bit reload.
+        self.control_ticks =
+            (self.control_start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(self.timing_overhead_ticks);
+    }
+
+    fn service_reply(&mut self, reply: &ServiceReply) {
+        let written = reply.save.is_none_or(|p| save(self.store, &p));
+        if written {
+            self.service_uart.write_all(reply.line().as_bytes());
+        } else {
+            self.service_uart.write_all(b"error flash-write\r\n");
+        }
+    }
+
+    fn dcp_reply(&mut self, reply: &[u8; 6]) {
+        let end = (self.n_replies + reply.len()).min(MAX_REPLY_PER_STEP);
+        let n = end - self.n_replies;
+        self.replies[self.n_replies..end].copy_from_slice(&reply[..n]);
+        self.n_replies = end;
+    }
+
+    fn observer_started(&mut self) {
+        self.observer_start = Some(SYST::get_current());
     }
 }
 

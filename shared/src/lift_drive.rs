@@ -23,16 +23,18 @@
 use crate::config::{Direction, DriveConfig};
 use crate::controller::{
     CommandError, ControlOutput, Controller, DriveState, RetargetError, SensorFrame, SpeedCommandError,
-    SpeedTravelCommand, TravelCommand,
+    SpeedTravelCommand, Telemetry, TravelCommand,
 };
 use crate::dcp::command::{Mode, Speed};
 use crate::dcp::frame::{FrameError, FrameReceiver, MasterFrame, CHARACTER_US, FRAME_LEN};
 use crate::dcp::slave::{DriveStatus, Outcome, Refusal, Request, Slave, SlaveConfig, StopReason, Travel};
-use crate::observer::{ChainModel, ObserverTask};
+use crate::observer::{ChainModel, ObserverInput, ObserverOutput, ObserverTask};
 use crate::param_store::DriveParameters;
 use crate::ripple::harmonics::HarmonicTable;
 use crate::ripple::Strategy;
-use crate::service::{ParamsStatus, ServiceState, FAULT_LOG, MAX_ANSWER, MAX_LINE};
+use crate::service::{ParamsStatus, Response, ServiceState, FAULT_LOG, MAX_ANSWER, MAX_LINE};
+use crate::startup::{Startup, StartupCommand, StartupEvent, StartupFault, StartupRefusal, StartupStep};
+use crate::supervisor::Fault;
 
 /// The speeds the drive offers for the DCP speed bits (order of
 /// [`crate::dcp::Speed::ALL`]), m/s, as fractions of the rated car speed
@@ -100,6 +102,8 @@ pub enum ApplyError {
     Speed(SpeedCommandError),
     /// A changed remaining distance refused (the travel keeps its target).
     Remaining(RetargetError),
+    /// A travel before the start-up sequence is done, or with a fault latched.
+    NotReady,
 }
 
 fn direction(travel: Travel) -> Direction {
@@ -368,26 +372,209 @@ impl DcpPort {
     }
 }
 
-/// Most DCP bytes one [`LiftDrive::step`] takes.
+/// Most DCP bytes one [`LiftDrive::period`] takes.
 pub const MAX_BYTES_PER_STEP: usize = 8;
 
-/// Most reply bytes one [`LiftDrive::step`] gives: a reply per byte and one for the poll.
+/// Most reply bytes one [`LiftDrive::period`] gives: a reply per byte and one for the poll.
 pub const MAX_REPLY_PER_STEP: usize = 6 * (MAX_BYTES_PER_STEP + 1);
 
-/// The drive's application layer in one call per PWM period, for targets
-/// that run the DCP line and the controller in one loop (the
-/// processor-in-the-loop target and its host shadow): the DCP bytes
-/// received since the previous period, time stamped with this period's
-/// sensor time, then the controller step. The firmware runs the same
-/// [`DcpPort`] in a task of its own and hands the commands to the control
-/// interrupt.
+/// Most service-port bytes one period takes (it stops after a line's end).
+pub const MAX_SERVICE_BYTES_PER_STEP: usize = 8;
+
+/// Longest service answer with its `\r\n`, bytes.
+pub const MAX_SERVICE_REPLY: usize = MAX_ANSWER + 2;
+
+/// Where the controller's electrical angle reference comes from after a reset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AngleReference {
+    /// An incremental encoder (the rig's; the firmware's drive): after the
+    /// calibration the drive waits, gates off and brake applied, for the
+    /// service port's `align` ([`crate::startup`]).
+    Alignment,
+    /// The encoder count of the controller's first step is electrical zero
+    /// (an absolute encoder at its stored offset; the simulated machine of
+    /// the host and of the processor in the loop, whose rotor starts there):
+    /// the controller runs after the calibration, idle (gates off, brake
+    /// applied) until a travel is commanded; `align` is answered
+    /// `error unsupported`.
+    Given,
+}
+
+/// A fault of the hardware around the drive, found by the firmware's own
+/// checks and latched with [`LiftDrive::latch`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HardwareFault {
+    /// A control step wrote its compares after the valley that follows its
+    /// sample (`crate::pwm_timing`: they would take effect a period late).
+    Overrun {
+        /// CPU cycles from the step's start to its compare write.
+        cycles: u32,
+    },
+    /// The next conversion sequence completed before the period's work finished.
+    TriggerOverrun,
+    /// The inverter's over-current comparator tripped the timer's break
+    /// input (the hardware had already switched every gate off).
+    InverterBreak,
+    /// The phase-current conversions of a period were incomplete.
+    AdcSequenceIncomplete,
+}
+
+/// A fault the application layer latches besides the controller's own trips.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DriveFault {
+    /// The hardware's ([`HardwareFault`]).
+    Hardware(HardwareFault),
+    /// The start-up sequence's (calibration, alignment, a protection during it).
+    Startup(StartupFault),
+}
+
+impl DriveFault {
+    /// The supervisor fault it is reported as (the DCP fault bit, the
+    /// service port's fault log, the reported state `Tripped`): an overrun
+    /// is a missed deadline, the break an over-current, incomplete
+    /// conversions and a refused calibration current-sensor faults, a
+    /// failed alignment an encoder fault.
+    pub fn as_fault(self) -> Fault {
+        match self {
+            DriveFault::Hardware(HardwareFault::Overrun { .. } | HardwareFault::TriggerOverrun) => {
+                Fault::DeadlineMissed
+            }
+            DriveFault::Hardware(HardwareFault::InverterBreak) => Fault::OverCurrent,
+            DriveFault::Hardware(HardwareFault::AdcSequenceIncomplete) => Fault::CurrentSensorImplausible,
+            DriveFault::Startup(StartupFault::Calibration(_)) => Fault::CurrentSensorOffset,
+            DriveFault::Startup(StartupFault::Alignment(_)) => Fault::EncoderImplausible,
+            DriveFault::Startup(StartupFault::Protection(fault)) => fault,
+        }
+    }
+}
+
+/// The outputs of one period's control step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveOutput {
+    /// Compares, gates and brake to drive, the reported state and the
+    /// controller's telemetry. Before the controller runs (start-up) the
+    /// start-up sequence's outputs, the state `Idle` (not ready) and zero
+    /// telemetry; with a fault latched (any: the controller's, the start-up
+    /// sequence's, the hardware's) gates off, compares 0, brake applied and
+    /// the state `Tripped` with the fault. The brake is released only while
+    /// the gates are on.
+    pub control: ControlOutput,
+    /// Whether the controller stepped (the start-up sequence is done).
+    pub controller_ran: bool,
+    /// The phase-current codes seen: offset-corrected once calibrated, ADC codes.
+    pub codes: [u16; 3],
+    /// What the start-up sequence reported this period.
+    pub event: Option<StartupEvent>,
+}
+
+/// The answer to one service request line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServiceReply {
+    /// The answer, not yet written as text ([`ServiceReply::line`]).
+    pub response: Response,
+    /// The parameters to write to flash (a `save`): the caller writes them
+    /// and, if that fails, sends `error flash-write\r\n` instead of this answer.
+    pub save: Option<DriveParameters>,
+}
+
+/// An answer line with its `\r\n`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServiceLine {
+    bytes: [u8; MAX_SERVICE_REPLY],
+    len: usize,
+}
+
+impl ServiceLine {
+    /// The line's bytes.
+    pub fn as_bytes(&self) -> &[u8] {
+        &self.bytes[..self.len]
+    }
+}
+
+impl ServiceReply {
+    /// The answer line and its `\r\n` (formatting numbers: thousands of
+    /// cycles, so the firmware does it in its service task, not in the
+    /// control interrupt).
+    pub fn line(&self) -> ServiceLine {
+        let answer = self.response.write();
+        let text = answer.as_bytes();
+        let mut line = ServiceLine { bytes: [0; MAX_SERVICE_REPLY], len: text.len() + 2 };
+        line.bytes[..text.len()].copy_from_slice(text);
+        line.bytes[text.len()..text.len() + 2].copy_from_slice(b"\r\n");
+        line
+    }
+}
+
+/// The edges of the application layer for one PWM period: where its
+/// messages come from and where its outputs go. The firmware's are its
+/// peripherals and Embassy queues, the processor-in-the-loop target's its
+/// emulated UARTs, the host's the bytes the chip reports it took.
+pub trait PeriodIo {
+    /// The next service-port byte received, if any.
+    fn service_byte(&mut self) -> Option<u8>;
+    /// The next DCP byte received, if any.
+    fn dcp_byte(&mut self) -> Option<u8>;
+    /// The chain observer's output handed back since the previous period
+    /// by a task outside the drive (the firmware's), if any.
+    fn observer_output(&mut self) -> Option<ObserverOutput> {
+        None
+    }
+    /// Called just before the control step.
+    fn control_started(&mut self) {}
+    /// The period's outputs, as soon as the control step has them: drive
+    /// them now (compares, gates, brake), before the messages are handled.
+    fn drive(&mut self, output: &DriveOutput);
+    /// A service-port answer to send.
+    fn service_reply(&mut self, reply: &ServiceReply);
+    /// A DCP reply to send.
+    fn dcp_reply(&mut self, reply: &[u8; FRAME_LEN]);
+    /// Latched faults were cleared by a reset: clear the hardware's latches
+    /// too (the firmware: the timer's break flag).
+    fn faults_cleared(&mut self) {}
+    /// The chain observer's input of this speed-loop tick, for a task
+    /// outside the drive (the firmware's); not called when the drive runs
+    /// its own task ([`LiftDrive::take_observer_task`] not called).
+    fn observer_input(&mut self, input: ObserverInput) {
+        let _ = input;
+    }
+    /// Called just before the drive runs its own observer task.
+    fn observer_started(&mut self) {}
+}
+
+/// What one [`LiftDrive::period`] did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PeriodOutput {
+    /// The control step's outputs.
+    pub drive: DriveOutput,
+    /// A DCP command applied to the controller this period, and its result.
+    pub applied: Option<(ControllerCommand, Result<(), ApplyError>)>,
+    /// A DCP message got the error answer this period.
+    pub refused: Option<Refusal>,
+    /// Whether the drive's own chain observer task ran.
+    pub observer_ran: bool,
+}
+
+/// The lift drive's application layer: the start-up sequence
+/// ([`crate::startup`]), the controller, the DCP port, the service port,
+/// the chain observer's mailbox and the faults the hardware reports, one
+/// [`LiftDrive::period`] per PWM period. Its inputs and outputs are
+/// messages through [`PeriodIo`]: received bytes, the sensor frame and the
+/// observer's output in; replies, the outputs to drive and the observer's
+/// input out. The firmware (its control interrupt), the
+/// processor-in-the-loop target and the host run this same type.
 #[derive(Clone, Copy, Debug)]
 pub struct LiftDrive {
     controller: Controller,
+    startup: Startup,
+    hardware_fault: Option<HardwareFault>,
     port: DcpPort,
     config: DriveConfig,
+    /// The reported state of the latest period.
     state: DriveState,
     speed_radps: f32,
+    /// The outputs driven in the latest period.
+    pwm_on: bool,
+    brake_released: bool,
     /// What the service port reads and changes.
     service: ServiceState,
     /// The service request line being received.
@@ -397,49 +584,18 @@ pub struct LiftDrive {
     chain: Option<ChainModel>,
     /// The rotor alignment's encoder offset, counts (kept in the record).
     encoder_offset_counts: u32,
-    /// The chain observer's task (on the drive's chain model, once known):
-    /// it serves the controller's observer link when a strategy uses it.
+    /// The chain observer's task (on the drive's chain model, once known),
+    /// unless a task outside the drive runs it.
     observer_task: Option<ObserverTask>,
 }
 
-/// Most service-port bytes one step takes (it stops after a line's end).
-pub const MAX_SERVICE_BYTES_PER_STEP: usize = 8;
-
-/// Longest service answer with its `\r\n`, bytes.
-pub const MAX_SERVICE_REPLY: usize = MAX_ANSWER + 2;
-
-/// The answer to one service request line.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ServiceReply {
-    /// The answer line and its `\r\n` (the first `len` bytes).
-    pub bytes: [u8; MAX_SERVICE_REPLY],
-    /// Bytes used.
-    pub len: usize,
-    /// The parameters to write to flash (a `save`): the caller writes
-    /// them and, if that fails, sends `error flash-write\r\n` instead of
-    /// this answer.
-    pub save: Option<DriveParameters>,
-}
-
-/// What one [`LiftDrive::step`] did besides the controller step.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StepDcp {
-    /// Reply bytes to send, in order (the first `reply_len`).
-    pub reply: [u8; MAX_REPLY_PER_STEP],
-    /// Reply bytes used.
-    pub reply_len: usize,
-    /// A command applied to the controller this period, and its result.
-    pub applied: Option<(ControllerCommand, Result<(), ApplyError>)>,
-    /// A message got the error answer this period.
-    pub refused: Option<Refusal>,
-}
-
 impl LiftDrive {
-    /// The application layer of `controller` with `port`; `config` is the controller's.
-    /// Its service port sets the strategy and the DCP variant, and cannot
-    /// save (see [`LiftDrive::set_savable`]); no parameters are installed
-    /// (see [`LiftDrive::install_parameters`]).
-    pub fn new(controller: Controller, port: DcpPort, config: &DriveConfig) -> Self {
+    /// The application layer of `controller` with `port` after a reset
+    /// (settling, calibration, then the angle reference `angle`); `config`
+    /// is the controller's. Its service port sets the strategy and the DCP
+    /// variant, and cannot save (see [`LiftDrive::set_savable`]); no
+    /// parameters are installed (see [`LiftDrive::install_parameters`]).
+    pub fn new(controller: Controller, port: DcpPort, config: &DriveConfig, angle: AngleReference) -> Self {
         let service = ServiceState {
             strategy: Strategy::Off,
             table: HarmonicTable::default(),
@@ -455,12 +611,21 @@ impl LiftDrive {
             savable: false,
             save_requested: false,
         };
+        let startup = Startup::new(config, *controller.supervisor_limits());
+        let startup = match angle {
+            AngleReference::Alignment => startup,
+            AngleReference::Given => startup.with_angle_given(),
+        };
         Self {
             controller,
+            startup,
+            hardware_fault: None,
             port,
             config: *config,
             state: DriveState::Idle,
             speed_radps: 0.0,
+            pwm_on: false,
+            brake_released: false,
             service,
             line: [0; MAX_LINE + 1],
             line_len: 0,
@@ -508,11 +673,243 @@ impl LiftDrive {
         }
     }
 
-    /// One byte of the service port; the answer when it ends a request line.
+    /// The controller.
+    pub fn controller(&self) -> &Controller {
+        &self.controller
+    }
+
+    /// The controller, to install compensation directly (the
+    /// processor-in-the-loop link's controller-level test messages).
+    pub fn controller_mut(&mut self) -> &mut Controller {
+        &mut self.controller
+    }
+
+    /// The start-up sequence.
+    pub fn startup(&self) -> &Startup {
+        &self.startup
+    }
+
+    /// The DCP port.
+    pub fn port(&self) -> &DcpPort {
+        &self.port
+    }
+
+    /// The chain observer's task, if the drive runs it itself.
+    pub fn observer_task(&self) -> Option<&ObserverTask> {
+        self.observer_task.as_ref()
+    }
+
+    /// Takes the chain observer's task out of the drive, for a task of its
+    /// own (the firmware's interrupt executor): from then on each period
+    /// hands the observer's input out ([`PeriodIo::observer_input`]) and
+    /// takes its output in ([`PeriodIo::observer_output`]).
+    pub fn take_observer_task(&mut self) -> Option<ObserverTask> {
+        self.observer_task.take()
+    }
+
+    /// The state reported in the latest period (`Tripped` with any latched fault).
+    pub fn state(&self) -> DriveState {
+        self.state
+    }
+
+    /// The fault latched besides the controller's trips, if any.
+    pub fn fault(&self) -> Option<DriveFault> {
+        self.hardware_fault.map(DriveFault::Hardware).or(self.startup.fault().map(DriveFault::Startup))
+    }
+
+    /// Whether any fault is latched (the controller's included): the DCP fault bit.
+    pub fn fault_latched(&self) -> bool {
+        self.fault().is_some() || matches!(self.controller.state(), DriveState::Tripped(_))
+    }
+
+    /// Whether a travel may start: the start-up sequence done, no fault
+    /// latched, the controller idle.
+    pub fn is_ready(&self) -> bool {
+        self.startup.is_running() && !self.fault_latched() && self.controller.state() == DriveState::Idle
+    }
+
+    /// Whether the drive is at rest in its safe state (gates off, brake
+    /// applied, no travel, no alignment): the firmware may pause its
+    /// periods to write the flash.
+    pub fn is_quiescent(&self) -> bool {
+        !self.pwm_on
+            && !self.brake_released
+            && matches!(self.controller.state(), DriveState::Idle | DriveState::Tripped(_))
+            && (self.startup.is_running() || self.startup.is_waiting_for_alignment() || self.startup.fault().is_some())
+    }
+
+    /// After the caller held the periods back on purpose (a flash write):
+    /// the next step's interval is not a missed deadline.
+    pub fn resume_after_pause(&mut self) {
+        self.controller.resume_after_pause();
+    }
+
+    /// Latches a hardware fault (the first one stays): from the next
+    /// period gates off, brake applied, the fault reported, until a reset.
+    /// The caller puts its outputs in the safe state at once.
+    pub fn latch(&mut self, fault: HardwareFault) {
+        if self.hardware_fault.is_none() {
+            self.hardware_fault = Some(fault);
+        }
+        self.pwm_on = false;
+        self.brake_released = false;
+    }
+
+    /// Clears every latched fault: the hardware's, the start-up sequence's
+    /// (a failed calibration calibrates again) and the controller's trip
+    /// (the service port's `reset`).
+    ///
+    /// # Errors
+    /// [`StartupRefusal::NothingToReset`] when none is latched (it never
+    /// stops a running travel).
+    pub fn reset(&mut self) -> Result<(), StartupRefusal> {
+        let tripped = matches!(self.controller.state(), DriveState::Tripped(_));
+        let startup = self.startup.fault().is_some();
+        if self.hardware_fault.is_none() && !tripped && !startup {
+            return Err(StartupRefusal::NothingToReset);
+        }
+        self.hardware_fault = None;
+        if startup {
+            let _ = self.startup.command(StartupCommand::Reset);
+        }
+        if tripped {
+            self.controller.reset();
+        }
+        self.state = self.controller.state();
+        Ok(())
+    }
+
+    /// Starts the rotor alignment (the service port's `align`).
+    ///
+    /// # Errors
+    /// [`StartupRefusal`]: not waiting for it, or a fault latched.
+    pub fn align(&mut self) -> Result<(), StartupRefusal> {
+        if self.hardware_fault.is_some() {
+            return Err(StartupRefusal::Faulted);
+        }
+        self.startup.command(StartupCommand::Align)
+    }
+
+    /// Starts a distance travel directly (the processor-in-the-loop link's
+    /// controller-level test messages; the lift controller's travels come
+    /// over DCP).
+    ///
+    /// # Errors
+    /// [`CommandError::NotIdle`] before the start-up sequence is done or
+    /// with a fault latched; the controller's refusals.
+    pub fn command_travel(&mut self, travel: TravelCommand) -> Result<(), CommandError> {
+        if !self.startup.is_running() || self.fault().is_some() {
+            return Err(CommandError::NotIdle);
+        }
+        self.controller.command_travel(travel)
+    }
+
+    /// One PWM period on `sensors` (phase-current codes with the board's
+    /// sign, DC-bus code, encoder count, time stamp): the observer's output
+    /// taken in, the control step (start-up sequence or controller) and its
+    /// outputs driven at once ([`PeriodIo::drive`]), then the service
+    /// port's bytes (up to the end of one line, at most
+    /// [`MAX_SERVICE_BYTES_PER_STEP`]), the DCP bytes (at most
+    /// [`MAX_BYTES_PER_STEP`]) time stamped with the period's time, the
+    /// DCP idle gap and timeout, the commands applied (they act from the
+    /// next period), and last the chain observer's task or its input handed out.
+    pub fn period(&mut self, sensors: &SensorFrame, io: &mut impl PeriodIo) -> PeriodOutput {
+        if let Some(output) = io.observer_output() {
+            self.controller.deliver_observer_output(output);
+        }
+        io.control_started();
+        let drive = self.control_step(sensors);
+        io.drive(&drive);
+        for _ in 0..MAX_SERVICE_BYTES_PER_STEP {
+            let Some(byte) = io.service_byte() else { break };
+            if let Some(reply) = self.service_byte(byte, io) {
+                io.service_reply(&reply);
+                break;
+            }
+        }
+        let mut out = PeriodOutput { drive, applied: None, refused: None, observer_ran: false };
+        for _ in 0..MAX_BYTES_PER_STEP {
+            let Some(byte) = io.dcp_byte() else { break };
+            let event = self.port.byte(byte, sensors.time_us, &self.status());
+            self.handle(&event, io, &mut out);
+        }
+        let event = self.port.poll(sensors.time_us, &self.status());
+        self.handle(&event, io, &mut out);
+        match self.observer_task.as_mut() {
+            Some(task) if self.controller.uses_observer() => {
+                io.observer_started();
+                out.observer_ran = task.serve(&mut self.controller);
+            }
+            Some(_) => {}
+            None => {
+                if let Some(input) = self.controller.take_observer_input() {
+                    io.observer_input(input);
+                }
+            }
+        }
+        out
+    }
+
+    /// What the DCP slave is told: the reported state, the outputs driven,
+    /// any latched fault.
+    fn status(&self) -> DriveStatus {
+        output_status(
+            Some(self.state),
+            self.speed_radps,
+            self.startup.is_running() && self.fault().is_none(),
+            self.fault_latched(),
+            self.pwm_on,
+            self.brake_released,
+            &self.config,
+        )
+    }
+
+    /// The start-up sequence or the controller, with the latched faults.
+    fn control_step(&mut self, sensors: &SensorFrame) -> DriveOutput {
+        let step = self.startup.step(sensors.phase_current_codes, sensors.dc_bus_code, sensors.encoder_count);
+        let (mut control, controller_ran, codes, event) = match step {
+            StartupStep::Drive(out) => (
+                ControlOutput {
+                    pwm_compare: out.compare,
+                    pwm_enabled: out.pwm_on,
+                    brake_released: out.brake_released,
+                    state: self.controller.state(),
+                    telemetry: Telemetry::default(),
+                },
+                false,
+                out.codes,
+                out.event,
+            ),
+            StartupStep::Run(codes) => {
+                let frame = SensorFrame { phase_current_codes: codes, ..*sensors };
+                (self.controller.step(&frame), true, codes, None)
+            }
+        };
+        control.brake_released &= control.pwm_enabled;
+        if let Some(fault) = self.fault() {
+            control.pwm_enabled = false;
+            control.pwm_compare = [0; 3];
+            control.brake_released = false;
+            control.state = DriveState::Tripped(fault.as_fault());
+        }
+        if let DriveState::Tripped(fault) = control.state {
+            if self.state != control.state {
+                self.service.log_fault(fault.code());
+            }
+        }
+        self.state = control.state;
+        self.speed_radps = control.telemetry.speed_radps;
+        self.pwm_on = control.pwm_enabled;
+        self.brake_released = control.brake_released;
+        DriveOutput { control, controller_ran, codes, event }
+    }
+
+    /// One byte of the service port; the reply when it ends a request line.
     /// A `set` takes effect at once (refused during a travel): the strategy
     /// is installed over the table in use, the car mass is the next
-    /// travel's, a new DCP variant restarts the slave.
-    pub fn service_byte(&mut self, byte: u8) -> Option<ServiceReply> {
+    /// travel's, a new DCP variant restarts the slave; `reset` and `align`
+    /// go to the drive ([`LiftDrive::reset`], [`LiftDrive::align`]).
+    fn service_byte(&mut self, byte: u8, io: &mut impl PeriodIo) -> Option<ServiceReply> {
         if byte != b'\n' {
             // A line too long is answered `error line` once it ends.
             if self.line_len < self.line.len() {
@@ -525,30 +922,35 @@ impl LiftDrive {
         let s = &mut self.service;
         s.state_code = self.state.code();
         s.speed_radps = self.speed_radps;
-        s.travelling = self.state.pwm_enabled() || self.state.brake_released();
+        s.travelling = self.pwm_on || self.brake_released || self.state.pwm_enabled() || self.state.brake_released();
         s.table = parameters.table;
         s.m_car_kg = parameters.m_car_kg;
         s.dcp_mode = parameters.dcp_mode;
         s.strategy_settable = self.chain.is_some();
         let before = *s;
         let request = crate::service::parse(&self.line[..self.line_len]).ok();
-        let answer = crate::service::answer(&self.line[..self.line_len], s);
+        let mut response = crate::service::respond(&self.line[..self.line_len], s);
         self.line_len = 0;
-        // `reset` clears a tripped controller; `align` is the firmware's
-        // (this layer's controller takes its angle reference as given).
-        let refused: Option<&[u8]> = match request {
-            Some(crate::service::Request::Reset) => {
-                if matches!(self.controller.state(), DriveState::Tripped(_)) {
-                    self.controller.reset();
-                    None
-                } else {
-                    Some(b"error nothing-to-reset")
-                }
-            }
-            Some(crate::service::Request::Align) => Some(b"error unsupported"),
-            _ => None,
-        };
         let after = *s;
+        if response.is_ok() {
+            match request {
+                Some(crate::service::Request::Reset) => {
+                    if self.reset().is_ok() {
+                        io.faults_cleared();
+                    } else {
+                        response = Response::Error("nothing-to-reset");
+                    }
+                }
+                Some(crate::service::Request::Align) => {
+                    if self.startup.angle_given() {
+                        response = Response::Error("unsupported");
+                    } else if self.align().is_err() {
+                        response = Response::Error("busy");
+                    }
+                }
+                _ => {}
+            }
+        }
         if after.strategy != before.strategy {
             if let Some(chain) = self.chain {
                 self.controller.install_compensation(after.strategy, &after.table, &chain);
@@ -566,115 +968,33 @@ impl LiftDrive {
         } else {
             None
         };
-        let mut reply = ServiceReply { bytes: [0; MAX_SERVICE_REPLY], len: 0, save };
-        let text = refused.unwrap_or(answer.as_bytes());
-        reply.bytes[..text.len()].copy_from_slice(text);
-        reply.bytes[text.len()..text.len() + 2].copy_from_slice(b"\r\n");
-        reply.len = text.len() + 2;
-        Some(reply)
+        Some(ServiceReply { response, save })
     }
 
-    /// Logs a fault code in the service port's fault log.
-    pub fn log_fault(&mut self, code: u8) {
-        self.service.log_fault(code);
-    }
-
-    /// The controller.
-    pub fn controller(&self) -> &Controller {
-        &self.controller
-    }
-
-    /// The controller, to install compensation or command it directly.
-    pub fn controller_mut(&mut self) -> &mut Controller {
-        &mut self.controller
-    }
-
-    /// The chain observer's task, if the drive's chain model is known.
-    pub fn observer_task(&self) -> Option<&ObserverTask> {
-        self.observer_task.as_ref()
-    }
-
-    /// The chain observer's task, run once between two PWM periods: takes
-    /// the input the controller published at its latest speed-loop tick
-    /// (if any: only with a strategy that uses the observer), runs the
-    /// observer and hands the output back, in time for the next tick
-    /// (`drive_core::observer::task`). Whether it ran. The firmware runs
-    /// the same [`ObserverTask`] in an interrupt executor below the
-    /// control interrupt.
-    pub fn observer_step(&mut self) -> bool {
-        match self.observer_task.as_mut() {
-            Some(task) if self.controller.uses_observer() => task.serve(&mut self.controller),
-            _ => false,
-        }
-    }
-
-    /// The DCP port.
-    pub fn port(&self) -> &DcpPort {
-        &self.port
-    }
-
-    /// One PWM period: [`LiftDrive::dcp_step`], [`LiftDrive::control_step`],
-    /// then [`LiftDrive::observer_step`].
-    pub fn step(&mut self, dcp_in: &[u8], sensors: &SensorFrame) -> (ControlOutput, StepDcp) {
-        let dcp = self.dcp_step(dcp_in, sensors.time_us);
-        let output = self.control_step(sensors);
-        self.observer_step();
-        (output, dcp)
-    }
-
-    /// The DCP part of a period: the bytes `dcp_in` (at most
-    /// [`MAX_BYTES_PER_STEP`]; the rest are ignored) time stamped `now_us`
-    /// (the period's sensor time), then the idle gap and the timeout; the
-    /// commands go to the controller at once. The drive status the slave
-    /// sees is the previous period's.
-    pub fn dcp_step(&mut self, dcp_in: &[u8], now_us: u32) -> StepDcp {
-        let mut dcp = StepDcp { reply: [0; MAX_REPLY_PER_STEP], reply_len: 0, applied: None, refused: None };
-        for &byte in dcp_in.iter().take(MAX_BYTES_PER_STEP) {
-            let status = drive_status(self.state, self.speed_radps, true, &self.config);
-            let event = self.port.byte(byte, now_us, &status);
-            self.handle(&event, &mut dcp);
-        }
-        let status = drive_status(self.state, self.speed_radps, true, &self.config);
-        let event = self.port.poll(now_us, &status);
-        self.handle(&event, &mut dcp);
-        dcp
-    }
-
-    /// The controller part of a period.
-    pub fn control_step(&mut self, sensors: &SensorFrame) -> ControlOutput {
-        let output = self.controller.step(sensors);
-        if let DriveState::Tripped(fault) = output.state {
-            if self.state != output.state {
-                self.service.log_fault(fault.code());
-            }
-        }
-        self.state = output.state;
-        self.speed_radps = output.telemetry.speed_radps;
-        output
-    }
-
-    fn handle(&mut self, event: &PortEvent, dcp: &mut StepDcp) {
+    fn handle(&mut self, event: &PortEvent, io: &mut impl PeriodIo, out: &mut PeriodOutput) {
         if let Some(reply) = event.reply {
-            let end = (dcp.reply_len + reply.len()).min(MAX_REPLY_PER_STEP);
-            let n = end - dcp.reply_len;
-            dcp.reply[dcp.reply_len..end].copy_from_slice(&reply[..n]);
-            dcp.reply_len = end;
+            io.dcp_reply(&reply);
         }
         if event.refused.is_some() {
-            dcp.refused = event.refused;
+            out.refused = event.refused;
         }
         if let Some(command) = event.command {
-            let result = apply(command, &mut self.controller);
+            let starts = matches!(command, ControllerCommand::Travel(_) | ControllerCommand::SpeedTravel(_));
+            let result = if starts && !self.is_ready() {
+                Err(ApplyError::NotReady)
+            } else {
+                apply(command, &mut self.controller)
+            };
             match (command, result) {
                 (_, Err(ApplyError::Remaining(_))) => self.port.refuse_remaining(),
                 (ControllerCommand::RemainingDistance { .. }, Ok(())) => self.port.take_remaining(),
                 _ => {}
             }
-            if result.is_ok() {
+            if result.is_ok() && self.fault().is_none() {
                 // The next status already shows a started travel or a stop.
                 self.state = self.controller.state();
             }
-            dcp.applied = Some((command, result));
+            out.applied = Some((command, result));
         }
     }
 }

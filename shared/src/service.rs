@@ -254,9 +254,88 @@ impl Write for Answer {
     }
 }
 
-/// Answers one request line, changing `state` for a valid `set`.
-pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
-    let mut out = Answer::new();
+/// What a request line is answered, before it is written as text: the
+/// values it reads are copied in, so that the (costly) formatting can run
+/// apart from the state, in another task ([`Response::write`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Response {
+    /// `error <word>`.
+    Error(&'static str),
+    /// `strategy <name>`.
+    Strategy(Strategy),
+    /// `ok strategy <name>`.
+    StrategySet(Strategy),
+    /// `mass <kg>`.
+    Mass(f32),
+    /// `ok mass <kg>`.
+    MassSet(f32),
+    /// `table <n> <order> <re N m> <im N m> ...`.
+    Table(HarmonicTable),
+    /// `faults <n> <code> ...`: the codes, oldest first (the first `n`).
+    Faults([u8; FAULT_LOG], usize),
+    /// `state <code> speed <rad/s>`.
+    State(u8, f32),
+    /// `dcp-mode <name>`.
+    DcpMode(Mode),
+    /// `ok dcp-mode <name>`.
+    DcpModeSet(Mode),
+    /// `params ...`.
+    Params(ParamsStatus),
+    /// `ok saved`.
+    Saved,
+    /// `ok reset`.
+    Reset,
+    /// `ok align`.
+    Align,
+}
+
+impl Response {
+    /// The answer line (without `\n`).
+    pub fn write(&self) -> Answer {
+        let mut out = Answer::new();
+        // Every answer fits MAX_ANSWER (numbers in Rust's shortest round-trip
+        // form, a full table at most 8 x 38 bytes): the writes cannot fail.
+        let _ = match self {
+            Response::Error(word) => write!(out, "error {word}"),
+            Response::Strategy(s) => write!(out, "strategy {}", s.name()),
+            Response::StrategySet(s) => write!(out, "ok strategy {}", s.name()),
+            Response::Mass(kg) => write!(out, "mass {kg:?}"),
+            Response::MassSet(kg) => write!(out, "ok mass {kg:?}"),
+            Response::Table(t) => {
+                let n = t.len.min(t.orders.len());
+                let _ = write!(out, "table {n}");
+                (0..n).try_for_each(|k| write!(out, " {} {:?} {:?}", t.orders[k], t.torque_nm[k].re, t.torque_nm[k].im))
+            }
+            Response::Faults(codes, n) => {
+                let n = (*n).min(FAULT_LOG);
+                let _ = write!(out, "faults {n}");
+                codes[..n].iter().try_for_each(|c| write!(out, " {c}"))
+            }
+            Response::State(code, speed) => write!(out, "state {code} speed {speed:?}"),
+            Response::DcpMode(mode) => write!(out, "dcp-mode {}", mode_name(*mode)),
+            Response::DcpModeSet(mode) => write!(out, "ok dcp-mode {}", mode_name(*mode)),
+            Response::Params(status) => match status {
+                ParamsStatus::None => write!(out, "params none"),
+                ParamsStatus::Stored => write!(out, "params stored"),
+                ParamsStatus::Refused(e) => write!(out, "params refused {}", record_error_word(*e)),
+                ParamsStatus::Unreadable => write!(out, "params unreadable"),
+            },
+            Response::Saved => write!(out, "ok saved"),
+            Response::Reset => write!(out, "ok reset"),
+            Response::Align => write!(out, "ok align"),
+        };
+        out
+    }
+
+    /// Whether the request was taken (not an `error` answer).
+    pub fn is_ok(&self) -> bool {
+        !matches!(self, Response::Error(_))
+    }
+}
+
+/// The response to one request line, changing `state` for a valid `set`
+/// (no formatting: see [`Response::write`]).
+pub fn respond(line: &[u8], state: &mut ServiceState) -> Response {
     let result = parse(line).and_then(|request| {
         let is_set = matches!(
             request,
@@ -272,52 +351,43 @@ pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
             Ok(request)
         }
     });
-    // Every answer fits MAX_ANSWER (numbers in Rust's shortest round-trip
-    // form, a full table at most 8 x 38 bytes): the writes cannot fail.
-    let _ = match result {
-        Err(e) => write!(out, "error {}", e.word()),
-        Ok(Request::GetStrategy) => write!(out, "strategy {}", state.strategy.name()),
+    match result {
+        Err(e) => Response::Error(e.word()),
+        Ok(Request::GetStrategy) => Response::Strategy(state.strategy),
         Ok(Request::SetStrategy(s)) => {
             state.strategy = s;
-            write!(out, "ok strategy {}", s.name())
+            Response::StrategySet(s)
         }
-        Ok(Request::GetMass) => write!(out, "mass {:?}", state.m_car_kg),
+        Ok(Request::GetMass) => Response::Mass(state.m_car_kg),
         Ok(Request::SetMass(kg)) => {
             state.m_car_kg = kg;
-            write!(out, "ok mass {kg:?}")
+            Response::MassSet(kg)
         }
-        Ok(Request::GetTable) => {
-            let t = &state.table;
-            let n = t.len.min(t.orders.len());
-            let _ = write!(out, "table {n}");
-            (0..n).try_for_each(|k| write!(out, " {} {:?} {:?}", t.orders[k], t.torque_nm[k].re, t.torque_nm[k].im))
-        }
-        Ok(Request::GetFaults) => {
-            let _ = write!(out, "faults {}", state.fault_count);
-            state.faults[..state.fault_count].iter().try_for_each(|c| write!(out, " {c}"))
-        }
-        Ok(Request::GetState) => write!(out, "state {} speed {:?}", state.state_code, state.speed_radps),
-        Ok(Request::GetDcpMode) => write!(out, "dcp-mode {}", mode_name(state.dcp_mode)),
+        Ok(Request::GetTable) => Response::Table(state.table),
+        Ok(Request::GetFaults) => Response::Faults(state.faults, state.fault_count),
+        Ok(Request::GetState) => Response::State(state.state_code, state.speed_radps),
+        Ok(Request::GetDcpMode) => Response::DcpMode(state.dcp_mode),
         Ok(Request::SetDcpMode(mode)) => {
             state.dcp_mode = mode;
-            write!(out, "ok dcp-mode {}", mode_name(mode))
+            Response::DcpModeSet(mode)
         }
-        Ok(Request::GetParams) => match state.params {
-            ParamsStatus::None => write!(out, "params none"),
-            ParamsStatus::Stored => write!(out, "params stored"),
-            ParamsStatus::Refused(e) => write!(out, "params refused {}", record_error_word(e)),
-            ParamsStatus::Unreadable => write!(out, "params unreadable"),
-        },
+        Ok(Request::GetParams) => Response::Params(state.params),
         Ok(Request::Save) => {
             state.save_requested = true;
-            write!(out, "ok saved")
+            Response::Saved
         }
         // Carried out by the caller, which answers `error nothing-to-reset`
-        // (or `error unsupported` for `align`) instead when it does not apply.
-        Ok(Request::Reset) => write!(out, "ok reset"),
-        Ok(Request::Align) => write!(out, "ok align"),
-    };
-    out
+        // (or `error busy`, `error unsupported` for `align`) instead when it
+        // does not apply.
+        Ok(Request::Reset) => Response::Reset,
+        Ok(Request::Align) => Response::Align,
+    }
+}
+
+/// Answers one request line, changing `state` for a valid `set`
+/// ([`respond`], then [`Response::write`]).
+pub fn answer(line: &[u8], state: &mut ServiceState) -> Answer {
+    respond(line, state).write()
 }
 
 #[cfg(test)]

@@ -129,6 +129,9 @@ pub struct Startup {
     brake_set_steps: u32,
     lsb_a: Q16,
     dc_bus_v_per_code: Q16,
+    /// The angle reference is given (no alignment): the controller runs
+    /// right after the calibration ([`Startup::with_angle_given`]).
+    angle_given: bool,
 }
 
 impl Startup {
@@ -145,7 +148,24 @@ impl Startup {
             brake_set_steps: (crate::controller::BRAKE_SET_S * config.current_loop_hz) as u32,
             lsb_a: q16(config.current_lsb_a()),
             dc_bus_v_per_code: q16(config.dc_bus_sense_full_scale_v / config.adc_max_code() as f32),
+            angle_given: false,
         }
+    }
+
+    /// The sequence for a machine whose electrical angle reference is
+    /// given (the encoder count of the controller's first step is
+    /// electrical zero: an absolute encoder at its stored offset, or the
+    /// simulated machine): after the calibration the controller runs at
+    /// once, idle (gates off, brake applied) until a travel is commanded;
+    /// [`StartupCommand::Align`] is refused ([`StartupRefusal::Busy`]).
+    pub fn with_angle_given(mut self) -> Self {
+        self.angle_given = true;
+        self
+    }
+
+    /// Whether the angle reference is given ([`Startup::with_angle_given`]).
+    pub fn angle_given(&self) -> bool {
+        self.angle_given
     }
 
     /// The latched fault, if any.
@@ -224,7 +244,7 @@ impl Startup {
                 }
                 match calibration.finish() {
                     Ok(offsets) => {
-                        self.phase = Phase::Waiting(offsets);
+                        self.phase = if self.angle_given { Phase::Running(offsets) } else { Phase::Waiting(offsets) };
                         off(phase_codes, Some(StartupEvent::Calibrated(offsets)))
                     }
                     Err(error) => {
@@ -377,6 +397,23 @@ mod tests {
         assert_eq!(s.command(StartupCommand::Reset), Ok(()));
         assert!(s.fault().is_none() && s.is_waiting_for_alignment());
         assert_eq!(s.command(StartupCommand::Align), Ok(()));
+    }
+
+    #[test]
+    fn with_the_angle_given_the_controller_runs_after_the_calibration_and_never_before() {
+        let mut s = startup().with_angle_given();
+        let mut steps = 0u32;
+        let codes = loop {
+            match s.step([ZERO + 3; 3], BUS_100V, 0) {
+                StartupStep::Drive(out) => assert!(!out.pwm_on && !out.brake_released && out.compare == [0; 3]),
+                StartupStep::Run(codes) => break codes,
+            }
+            steps += 1;
+        };
+        assert_eq!(steps, (SETTLE_STEPS + CALIBRATION_SAMPLES) as u32);
+        assert_eq!(codes, [ZERO; 3], "the offsets are taken off");
+        assert!(s.is_running() && !s.is_waiting_for_alignment());
+        assert_eq!(s.command(StartupCommand::Align), Err(StartupRefusal::Busy));
     }
 
     #[test]

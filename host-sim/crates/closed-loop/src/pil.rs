@@ -23,9 +23,15 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use drive_core::dcp::{Mode, SlaveConfig};
 use drive_core::frame::{
     command_result_from_code, encode, Decoder, Message, StepReport, ACK_FRAME_REJECTED, MAX_FRAME,
 };
+use drive_core::lift_drive::{
+    speed_table, AngleReference, DcpPort, DriveOutput, LiftDrive, LiftGeometry, PeriodIo, ServiceReply,
+};
+use drive_core::param_store::DriveParameters;
+use drive_core::service::ParamsStatus;
 use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame, TravelCommand};
 
 use crate::{corrupted_frame, DriveController, SimError};
@@ -98,6 +104,9 @@ pub enum PilError {
     /// A valid frame of the wrong kind.
     #[error("unexpected reply from the PIL target: {0:?}")]
     Unexpected(Message),
+    /// The start-up sequence failed or differed from the host build's.
+    #[error("start-up of the PIL target: {0}")]
+    StartUp(String),
 }
 
 impl From<PilError> for SimError {
@@ -114,9 +123,8 @@ pub struct PilTarget {
     timeout: Duration,
     icount_shift: u32,
     reports: Vec<StepReport>,
-    shadow: Controller,
-    /// The chain observer's task of the shadow (a strategy that uses it installed).
-    shadow_observer: Option<drive_core::observer::ObserverTask>,
+    /// The host build of the target's application layer.
+    shadow: LiftDrive,
 }
 
 impl PilTarget {
@@ -175,16 +183,46 @@ impl PilTarget {
         stream.set_nonblocking(false).map_err(|source| PilError::Io { context: "socket", source })?;
         stream.set_nodelay(true).map_err(|source| PilError::Io { context: "socket", source })?;
         stream.set_read_timeout(Some(options.timeout)).map_err(|source| PilError::Io { context: "socket", source })?;
-        Ok(Self {
+        let mut target = Self {
             qemu: target.qemu.take().expect("set above"),
             stream,
             decoder: Decoder::new(),
             timeout: options.timeout,
             icount_shift: options.icount_shift,
             reports: Vec::new(),
-            shadow: Controller::new(drive),
-            shadow_observer: None,
-        })
+            shadow: shadow(drive),
+        };
+        target.start_up(drive)?;
+        Ok(target)
+    }
+
+    /// Runs the start-up sequence (settling and the current-offset
+    /// calibration, gates off and brake applied throughout) on frames of
+    /// the machine at rest (no current, the nominal bus, the encoder at
+    /// zero), checked against the shadow; the steps are not kept in
+    /// [`PilTarget::reports`].
+    fn start_up(&mut self, drive: &DriveConfig) -> Result<(), PilError> {
+        let zero = drive.adc_zero_code();
+        let bus_code = (drive.dc_bus_nominal_v / drive.dc_bus_sense_full_scale_v * drive.adc_max_code() as f32) as u16;
+        let mut k = 0u32;
+        while !self.shadow.startup().is_running() {
+            let rest = SensorFrame {
+                phase_current_codes: [zero; 3],
+                encoder_count: 0,
+                dc_bus_code: bus_code,
+                time_us: k.wrapping_mul(1_000_000) / drive.current_loop_hz as u32,
+            };
+            let output = self.step(&rest).map_err(|e| PilError::StartUp(e.to_string()))?;
+            if output.pwm_enabled || output.brake_released {
+                return Err(PilError::StartUp(format!("step {k} of the start-up drives the outputs: {output:?}")));
+            }
+            k += 1;
+            if k > 100_000 {
+                return Err(PilError::StartUp("the start-up sequence did not end".to_string()));
+            }
+        }
+        self.reports.clear();
+        Ok(())
     }
 
     /// Instructions per SysTick tick: `(1 / 25 MHz) / 2^shift ns`.
@@ -316,19 +354,22 @@ impl PilTarget {
             Message::Ack(0) => {}
             other => return Err(PilError::Unexpected(other)),
         }
-        self.shadow.install_compensation(strategy, &sent, chain);
-        // The target keeps one task on its chain model (invalid: none, and
-        // the controller counts every tick as a missed deadline).
-        self.shadow_observer = drive_core::observer::ObserverTask::for_model(chain).ok();
+        // The target's drive keeps one task on its chain model (invalid:
+        // none, and the controller counts every tick as a missed deadline).
+        let parameters = DriveParameters {
+            strategy,
+            table: sent,
+            m_car_kg: self.shadow.port().car_mass_kg(),
+            encoder_offset_counts: 0,
+            dcp_mode: Mode::Dcp4,
+        };
+        self.shadow.install_parameters(&parameters, chain, ParamsStatus::None);
         Ok(())
     }
 
     /// Steps the shadow on `sensors` and checks the target's `report` against it.
     fn shadow_check(&mut self, sensors: &SensorFrame, report: StepReport) -> Result<ControlOutput, SimError> {
-        let host = self.shadow.step(sensors);
-        if let Some(task) = self.shadow_observer.as_mut() {
-            task.serve(&mut self.shadow);
-        }
+        let host = self.shadow.period(sensors, &mut Unconnected).drive.control;
         if !report.matches(&host) {
             return Err(SimError::Link(format!(
                 "step {}: the target's output differs from the host build\n  inputs {sensors:?}\n  target {report:?}\n  host   {:?}",
@@ -346,6 +387,36 @@ impl Drop for PilTarget {
         let _ = self.qemu.kill();
         let _ = self.qemu.wait();
     }
+}
+
+/// The shadow: the target's application layer built for the host, the
+/// angle reference given (the plant's rotor starts at electrical zero), as
+/// the target's. Its DCP port and service port hear nothing here, as the
+/// target's (only UART0 is connected in this mode); their landings do not
+/// matter.
+fn shadow(drive: &DriveConfig) -> LiftDrive {
+    let geometry = LiftGeometry { lw_lowest_landing_m: 0.0, shaft_travel_mm: 0 };
+    let slave = SlaveConfig::new(Mode::Dcp4, speed_table(drive.rated_speed_mps), geometry.shaft_travel_mm);
+    LiftDrive::new(Controller::new(drive), DcpPort::new(slave, geometry, 0.0), drive, AngleReference::Given)
+}
+
+/// The shadow's edges in this mode: nothing on the DCP line or the service port.
+struct Unconnected;
+
+impl PeriodIo for Unconnected {
+    fn service_byte(&mut self) -> Option<u8> {
+        None
+    }
+
+    fn dcp_byte(&mut self) -> Option<u8> {
+        None
+    }
+
+    fn drive(&mut self, _output: &DriveOutput) {}
+
+    fn service_reply(&mut self, _reply: &ServiceReply) {}
+
+    fn dcp_reply(&mut self, _reply: &[u8; 6]) {}
 }
 
 /// QEMU while the target has not connected yet: killed if launching fails.

@@ -25,7 +25,9 @@ use drive_core::dcp::command::{command_byte, Kind, Mode, Speed};
 use drive_core::dcp::slave::{S1_TRAVEL, S6_BRAKE_OPEN};
 use drive_core::dcp::{MasterFrame, SlaveConfig, SlaveFrame};
 use drive_core::frame::{encode, Decoder, Message, StepReport, MAX_FRAME};
-use drive_core::lift_drive::{speed_table, DcpPort, LiftDrive, LiftGeometry};
+use drive_core::lift_drive::{
+    speed_table, AngleReference, DcpPort, DriveOutput, LiftDrive, LiftGeometry, PeriodIo, ServiceReply,
+};
 use drive_core::param_store::DriveParameters;
 use drive_core::ripple::Strategy;
 use drive_core::service::ParamsStatus;
@@ -69,7 +71,9 @@ pub fn shadow(rig: &RigConfig, parameters: &DriveParameters, status: ParamsStatu
     let (geometry, m_car) = geometry(rig);
     let slave = SlaveConfig::new(Mode::Dcp4, speed_table(drive.rated_speed_mps), geometry.shaft_travel_mm);
     let port = DcpPort::new(slave, geometry, m_car);
-    let mut lift = LiftDrive::new(Controller::new(&drive), port, &drive);
+    // The plant's rotor starts at electrical zero with the encoder at zero:
+    // the angle reference is given (no alignment), as on the chip.
+    let mut lift = LiftDrive::new(Controller::new(&drive), port, &drive, AngleReference::Given);
     lift.install_parameters(parameters, &rig.observer_model(), status);
     // The target writes its record (to the emulated flash).
     lift.set_savable(true);
@@ -211,6 +215,36 @@ impl Chip {
     }
 }
 
+/// The shadow's edges: the bytes to take, the replies and answers it gives.
+struct ShadowIo<'a> {
+    dcp: &'a mut std::collections::VecDeque<u8>,
+    service: &'a mut std::collections::VecDeque<u8>,
+    replies: Vec<u8>,
+    answers: Vec<u8>,
+    saved: Option<DriveParameters>,
+}
+
+impl PeriodIo for ShadowIo<'_> {
+    fn service_byte(&mut self) -> Option<u8> {
+        self.service.pop_front()
+    }
+
+    fn dcp_byte(&mut self) -> Option<u8> {
+        self.dcp.pop_front()
+    }
+
+    fn drive(&mut self, _output: &DriveOutput) {}
+
+    fn service_reply(&mut self, reply: &ServiceReply) {
+        self.answers.extend_from_slice(reply.line().as_bytes());
+        self.saved = self.saved.or(reply.save);
+    }
+
+    fn dcp_reply(&mut self, reply: &[u8; 6]) {
+        self.replies.extend_from_slice(reply);
+    }
+}
+
 /// One step of [`Lift`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct LiftStep {
@@ -305,28 +339,50 @@ impl Lift {
     /// service port, the chip's step checked against the shadow's, the
     /// plant advanced.
     pub fn step(&mut self, dcp_out: &[u8], service_out: &[u8]) -> anyhow::Result<LiftStep> {
+        self.step_sensing(dcp_out, service_out, &mut |_| {})
+    }
+
+    /// [`Lift::step`] with the plant's sensor frame changed by `sense`
+    /// before the chip and the shadow get it (a sensor fault).
+    pub fn step_sensing(
+        &mut self,
+        dcp_out: &[u8],
+        service_out: &[u8],
+        sense: &mut dyn FnMut(&mut SensorFrame),
+    ) -> anyhow::Result<LiftStep> {
         let k = self.steps;
-        let sensors = closed_loop::sensor_frame(&self.plant);
+        let mut sensors = closed_loop::sensor_frame(&self.plant);
+        sense(&mut sensors);
         let chip = match self.chip.as_mut() {
             Some(chip) => Some(chip.step(dcp_out, service_out, &sensors).with_context(|| format!("step {k}"))?),
             None => None,
         };
-        let (dcp_taken, service_taken) = match &chip {
-            Some(chip) => (chip.dcp_taken.clone(), chip.service_taken.clone()),
-            None => self.take(dcp_out, service_out),
-        };
-        let mut expected_answers = Vec::new();
-        let mut saved = None;
-        for &byte in &service_taken {
-            if let Some(reply) = self.shadow.service_byte(byte) {
-                expected_answers.extend_from_slice(&reply.bytes[..reply.len]);
-                saved = saved.or(reply.save);
+        // The shadow takes what the chip took; alone, what is on the lines
+        // (by the same rule: at most 8 DCP bytes, one service line).
+        let (mut replayed, lines) = (Default::default(), &mut self.pending);
+        let (dcp_in, service_in) = match &chip {
+            Some(chip) => {
+                replayed = (chip.dcp_taken.iter().copied().collect(), chip.service_taken.iter().copied().collect());
+                (&mut replayed.0, &mut replayed.1)
             }
-        }
-        let dcp = self.shadow.dcp_step(&dcp_taken, sensors.time_us);
-        let output = self.shadow.control_step(&sensors);
-        let observer_ran = self.shadow.observer_step();
-        let dcp_replies = dcp.reply[..dcp.reply_len].to_vec();
+            None => {
+                lines.0.extend(dcp_out);
+                lines.1.extend(service_out);
+                (&mut lines.0, &mut lines.1)
+            }
+        };
+        let mut io =
+            ShadowIo { dcp: dcp_in, service: service_in, replies: Vec::new(), answers: Vec::new(), saved: None };
+        let period = self.shadow.period(&sensors, &mut io);
+        let ShadowIo { replies: dcp_replies, answers: expected_answers, saved, .. } = io;
+        ensure!(
+            replayed.0.is_empty() && replayed.1.is_empty(),
+            "step {k}: the shadow left bytes the chip took (DCP {:02x?}, service {:02x?})",
+            replayed.0,
+            replayed.1
+        );
+        let output = period.drive.control;
+        let observer_ran = period.observer_ran;
         let instructions = chip.as_ref().map(|c| c.report.cost_ticks as f64 * INSTRUCTIONS_PER_TICK);
         let observer_instructions =
             chip.as_ref().and_then(|c| c.observer_ticks).map(|t| t as f64 * INSTRUCTIONS_PER_TICK);
@@ -374,24 +430,6 @@ impl Lift {
             }
         }
         bail!("no answer to {line:?} within {max_steps} steps")
-    }
-
-    /// Host only: the bytes the chip would take this step.
-    fn take(&mut self, dcp_out: &[u8], service_out: &[u8]) -> (Vec<u8>, Vec<u8>) {
-        let (dcp, service) = &mut self.pending;
-        dcp.extend(dcp_out);
-        service.extend(service_out);
-        let n = dcp.len().min(drive_core::lift_drive::MAX_BYTES_PER_STEP);
-        let dcp_taken: Vec<u8> = dcp.drain(..n).collect();
-        let mut service_taken = Vec::new();
-        while service_taken.len() < drive_core::lift_drive::MAX_SERVICE_BYTES_PER_STEP {
-            let Some(byte) = service.pop_front() else { break };
-            service_taken.push(byte);
-            if byte == b'\n' {
-                break;
-            }
-        }
-        (dcp_taken, service_taken)
     }
 
     /// The chip's step against the shadow's.
