@@ -88,13 +88,25 @@ pub fn simulate_recording(
                 initial_acceleration_mps2: 1.0,
                 elements: DECAY_ROPE_ELEMENTS,
             };
-            let unit = simulate_free_decay_with(&spec, effects, sample_rate_hz, released_s)
-                .with_context(|| format!("`{stem}`: simulating the free decay"))?;
+            let simulate = |spec: &FreeDecaySpec| {
+                simulate_free_decay_with(spec, effects, sample_rate_hz, released_s)
+                    .with_context(|| format!("`{stem}`: simulating the free decay"))
+            };
             // The held displacement is the test's, not the model's: the
             // model's decay takes the measured level over its first second.
             let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
             let first_s = |v: &[f64], rate: f64| rms(&v[..((rate as usize).min(v.len()))]);
-            let level = first_s(&acc.values[release..], fs) / first_s(&unit, sample_rate_hz).max(1e-300);
+            let measured_level = first_s(&acc.values[release..], fs);
+            let mut unit = simulate(&spec)?;
+            let mut level = measured_level / first_s(&unit, sample_rate_hz).max(1e-300);
+            if amplitude_dependent(effects) && level.is_finite() && level > 0.0 {
+                // A stiffening rope or dry friction does not scale: the
+                // decay is simulated again released at the test's level,
+                // and the remaining (small) difference scaled.
+                let released = FreeDecaySpec { initial_acceleration_mps2: level, ..spec };
+                unit = simulate(&released)?;
+                level = measured_level / first_s(&unit, sample_rate_hz).max(1e-300);
+            }
             let pre_trigger = (release as f64 / fs * sample_rate_hz).round() as usize;
             let values: Vec<f64> =
                 std::iter::repeat_n(0.0, pre_trigger).chain(unit.iter().map(|a| a * level)).collect();
@@ -109,6 +121,15 @@ pub fn simulate_recording(
             })
         }
     }
+}
+
+/// Whether `effects` make a free decay's shape depend on its amplitude
+/// (a rope stiffening with its instantaneous tension, dry guide friction):
+/// then the model's decay is released at the test's level instead of
+/// being a scaled unit decay.
+fn amplitude_dependent(effects: &Effects) -> bool {
+    effects.tension_stiffening.is_some_and(|e| e.alpha != 0.0)
+        || effects.coulomb_guide_friction.is_some_and(|f| f.force_n(1.0) != 0.0)
 }
 
 /// How the model's counterpart of a recording is made, as the diagnosis

@@ -68,9 +68,12 @@ pub fn simulate_free_decay(
 /// [`simulate_free_decay`] with the library's `effects` that apply to a
 /// mass hanging on a rope with a fixed top:
 ///
-/// - `tension_stiffening`: each rope spring's EA is taken at its static
-///   tension, `(m + mu l_below) g` with `l_below` the rope below the middle
-///   of the spring's segment (`spec.rope_ea_n` is `EA0`, gravity 9.81 m/s^2);
+/// - `tension_stiffening`: each rope spring's EA follows its instantaneous
+///   tension (`TensionStiffening::tension_change_n`), from its static
+///   tension `(m + mu l_below) g` with `l_below` the rope below the middle
+///   of the spring's segment (`spec.rope_ea_n` is `EA0`, gravity 9.81
+///   m/s^2): a release from a millimetre swings the tension by about the
+///   static one, so the spring is far from linear;
 /// - `car_frame_mode`: the hanging mass is split like the car, a hitch
 ///   `(1 - beta) m` on the rope (which carries the guide damping and
 ///   friction) and a body `beta m` on the frame spring and damper, which
@@ -104,16 +107,25 @@ pub fn simulate_free_decay_with(
     check("duration_s", duration_s, duration_s > 0.0 && duration_s * sample_rate_hz < 1.0e8, "> 0 s, < 1e8 samples")?;
 
     let k = spec.rope_ea_n * n as f64 / spec.rope_length_m;
-    // Spring i joins node i - 1 (the fixed top for i = 0) and node i.
-    let springs: Vec<f64> = match &effects.tension_stiffening {
+    let segment_length = spec.rope_length_m / n as f64;
+    let stiffening = effects.tension_stiffening;
+    // Spring i joins node i - 1 (the fixed top for i = 0) and node i; its
+    // static tension (tension stiffening).
+    let static_tensions: Vec<f64> = (0..n)
+        .map(|i| {
+            let below = spec.rope_length_m * (1.0 - (i as f64 + 0.5) / n as f64);
+            static_tension_n(spec.mass_kg, mu, below, DECAY_GRAVITY_MPS2)
+        })
+        .collect();
+    let springs: Vec<f64> = match &stiffening {
         None => vec![k; n],
-        Some(stiffening) => (0..n)
-            .map(|i| {
-                let below = spec.rope_length_m * (1.0 - (i as f64 + 0.5) / n as f64);
-                let tension = static_tension_n(spec.mass_kg, mu, below, DECAY_GRAVITY_MPS2);
-                stiffening.ea_n(spec.rope_ea_n, tension) * n as f64 / spec.rope_length_m
-            })
-            .collect(),
+        Some(e) => static_tensions.iter().map(|&t| e.ea_n(spec.rope_ea_n, t) / segment_length).collect(),
+    };
+    // Tension change (N) of spring i stretched by `stretch` (m) beyond its
+    // static stretch: linear, or following the instantaneous tension.
+    let tension_change = |i: usize, stretch: f64| match &stiffening {
+        None => springs[i] * stretch,
+        Some(e) => e.tension_change_n(spec.rope_ea_n, static_tensions[i], stretch, segment_length),
     };
     let segment = mu * spec.rope_length_m / n as f64;
     let frame = effects.car_frame_mode;
@@ -135,7 +147,14 @@ pub fn simulate_free_decay_with(
     let friction = effects.coulomb_guide_friction;
     // The chain's highest frequency sets the step: h w_max <= 1 (RK4 is
     // stable below 2.78 and accurate well below it).
-    let k_max = springs.iter().copied().fold(0.0f64, f64::max);
+    let mut k_max = springs.iter().copied().fold(0.0f64, f64::max);
+    if let Some(e) = &stiffening {
+        // The stiffest a spring gets: at its static tension plus three
+        // times the release force (the swing never exceeds it).
+        let swing = 3.0 * (spec.mass_kg * spec.initial_acceleration_mps2).abs();
+        let t_max = static_tensions.iter().copied().fold(0.0f64, f64::max) + swing;
+        k_max = k_max.max(e.ea_n(spec.rope_ea_n, t_max) / segment_length);
+    }
     let mut w_max = 2.0 * (k_max / masses[..n].iter().copied().fold(f64::INFINITY, f64::min)).sqrt();
     if frame.is_some() {
         w_max = w_max
@@ -158,10 +177,10 @@ pub fn simulate_free_decay_with(
                 *u = -force * (i + 1) as f64 / k;
             }
         }
-        Some(_) => {
+        Some(e) => {
             let mut u = 0.0;
             for i in 0..n {
-                u -= force / springs[i];
+                u -= e.stretch_change_m(spec.rope_ea_n, static_tensions[i], force, segment_length);
                 state[i] = u;
             }
         }
@@ -174,8 +193,13 @@ pub fn simulate_free_decay_with(
     let acceleration = |y: &[f64], out: &mut [f64]| {
         for i in 0..n {
             let below = if i == 0 { 0.0 } else { y[i - 1] };
-            let (above, k_above) = if i + 1 < n { (y[i + 1], springs[i + 1]) } else { (y[i], springs[i]) };
-            let mut f = -springs[i] * (y[i] - below) + k_above * (above - y[i]);
+            let mut f = if stiffening.is_none() {
+                let (above, k_above) = if i + 1 < n { (y[i + 1], springs[i + 1]) } else { (y[i], springs[i]) };
+                -springs[i] * (y[i] - below) + k_above * (above - y[i])
+            } else {
+                let lower = if i + 1 < n { tension_change(i + 1, y[i] - y[i + 1]) } else { 0.0 };
+                tension_change(i, below - y[i]) - lower
+            };
             if i == n - 1 {
                 f -= c * y[nodes + i];
                 if let Some(friction) = &friction {

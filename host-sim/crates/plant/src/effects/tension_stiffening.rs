@@ -21,6 +21,48 @@ impl TensionStiffening {
         let ratio = tension_n.max(f64::MIN_POSITIVE) / self.reference_tension_n;
         ea0_n * ratio.powf(self.alpha)
     }
+
+    /// Change of a rope segment's tension (N) when its stretch grows by
+    /// `stretch_change_m` (m) from the static one, the tension following
+    /// the rope's law `dT/d(strain) = EA(T)` at every instant, not only at
+    /// the static tension: with `beta = 1 - alpha` and
+    /// `s = EA0 T_ref^-alpha / l` (`l`, m, the segment's unstretched length),
+    /// `T = (T_s^beta + beta s dx)^(1/beta)` integrates the law from the
+    /// static tension `static_tension_n` (N). A segment stretched back below
+    /// zero tension is slack (`T = 0`). Its slope at `dx = 0` is
+    /// `EA(T_s) / l`, the linear spring of [`TensionStiffening::ea_n`]; a
+    /// swing comparable to the static tension (a free decay released from a
+    /// millimetre) makes the first mode's harmonics and a frequency that
+    /// rises as the amplitude decays. (An exponent at or above 1 has no
+    /// finite closed form; it falls back to the linear spring.)
+    pub fn tension_change_n(&self, ea0_n: f64, static_tension_n: f64, stretch_change_m: f64, length_m: f64) -> f64 {
+        let beta = 1.0 - self.alpha;
+        let t_s = static_tension_n.max(f64::MIN_POSITIVE);
+        if beta <= 1e-6 || self.alpha == 0.0 {
+            return self.ea_n(ea0_n, t_s) / length_m * stretch_change_m;
+        }
+        let s = ea0_n * self.reference_tension_n.powf(-self.alpha) / length_m;
+        let base = t_s.powf(beta) + beta * s * stretch_change_m;
+        if base <= 0.0 {
+            return -t_s;
+        }
+        base.powf(1.0 / beta) - t_s
+    }
+
+    /// The stretch change (m) that changes a segment's tension by
+    /// `tension_change_n` (N) from `static_tension_n` (N): the inverse of
+    /// [`TensionStiffening::tension_change_n`] (a tension at or below zero
+    /// gives the stretch at which the segment goes slack).
+    pub fn stretch_change_m(&self, ea0_n: f64, static_tension_n: f64, tension_change_n: f64, length_m: f64) -> f64 {
+        let beta = 1.0 - self.alpha;
+        let t_s = static_tension_n.max(f64::MIN_POSITIVE);
+        if beta <= 1e-6 || self.alpha == 0.0 {
+            return tension_change_n * length_m / self.ea_n(ea0_n, t_s);
+        }
+        let s = ea0_n * self.reference_tension_n.powf(-self.alpha) / length_m;
+        let t = (t_s + tension_change_n).max(0.0);
+        (t.powf(beta) - t_s.powf(beta)) / (beta * s)
+    }
 }
 
 /// EA (N) of rope at static tension `tension_n` (N): [`TensionStiffening::ea_n`]
@@ -53,5 +95,29 @@ mod tests {
         assert_eq!(zero.ea_n(1.0e6, 691.6), 1.0e6);
         assert_eq!(rope_ea_n(None, 1.0e6, 5.0), 1.0e6);
         assert!((static_tension_n(70.5, 0.095, 2.0, 9.81) - 70.69 * 9.81).abs() < 1e-9);
+    }
+
+    #[test]
+    fn instantaneous_tension_follows_the_law_and_its_inverse() {
+        let e = TensionStiffening { alpha: 0.45, reference_tension_n: 323.73 };
+        let (ea0, t_s, l) = (1.0e6, 450.0, 0.25);
+        // Slope at the static tension: the linear spring EA(T_s) / l.
+        let dx = 1e-9;
+        let slope = (e.tension_change_n(ea0, t_s, dx, l) - e.tension_change_n(ea0, t_s, -dx, l)) / (2.0 * dx);
+        let linear = e.ea_n(ea0, t_s) / l;
+        assert!((slope / linear - 1.0).abs() < 1e-6, "slope {slope} against {linear}");
+        // The law dT/dx = EA(T)/l holds at a large swing too (central difference).
+        let x = 2e-4;
+        let t = t_s + e.tension_change_n(ea0, t_s, x, l);
+        let d = (e.tension_change_n(ea0, t_s, x + dx, l) - e.tension_change_n(ea0, t_s, x - dx, l)) / (2.0 * dx);
+        assert!((d / (e.ea_n(ea0, t) / l) - 1.0).abs() < 1e-5);
+        // Stiffer when stretched than when relaxed: the swing is asymmetric.
+        assert!(e.tension_change_n(ea0, t_s, x, l) > -e.tension_change_n(ea0, t_s, -x, l));
+        // Slack below zero tension, and the inverse returns the stretch.
+        assert_eq!(e.tension_change_n(ea0, t_s, -1.0, l), -t_s);
+        for dt in [-300.0, -20.0, 0.0, 15.0, 400.0] {
+            let back = e.tension_change_n(ea0, t_s, e.stretch_change_m(ea0, t_s, dt, l), l);
+            assert!((back - dt).abs() < 1e-9 * t_s, "{dt} -> {back}");
+        }
     }
 }
