@@ -80,6 +80,7 @@ mod adc;
 mod board;
 mod control;
 mod dcp;
+mod edges;
 mod encoder;
 mod observer;
 mod params;
@@ -92,8 +93,8 @@ mod watchdog;
 use defmt::{error, info, warn};
 use defmt_rtt as _;
 use drive_core::dcp::{Mode, SlaveConfig};
-use drive_core::lift_drive::{speed_table, DcpPort};
-use drive_core::observer::ObserverTask;
+use drive_core::lift_drive::{speed_table, AngleReference, DcpPort, LiftDrive};
+use drive_core::param_store::DriveParameters;
 use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::Controller;
@@ -185,50 +186,37 @@ async fn main(spawner: Spawner) {
 
     let mut store = params::ParamStore::new(p.FLASH);
     let (stored, params_status) = store.load().await;
-    let (strategy, table, m_car_kg, dcp_mode, encoder_offset) = match stored {
-        Some(p) => (p.strategy, p.table, p.m_car_kg, p.dcp_mode, p.encoder_offset_counts),
-        None => (DEFAULT_STRATEGY, offline_table(), DEFAULT_CAR_MASS_KG, DCP_MODE, 0),
-    };
-    let mut controller = Controller::new(&DRIVE_CONFIG);
-    controller.install_compensation(strategy, &table, &CHAIN_MODEL);
+    let parameters = stored.unwrap_or(DriveParameters {
+        strategy: DEFAULT_STRATEGY,
+        table: offline_table(),
+        m_car_kg: DEFAULT_CAR_MASS_KG,
+        encoder_offset_counts: 0,
+        dcp_mode: DCP_MODE,
+    });
     info!(
         "compensation: {=str} over {=usize} harmonics ({=str}); car mass {=f32} kg",
-        strategy.name(),
-        table.len,
+        parameters.strategy.name(),
+        parameters.table.len,
         if stored.is_some() { "stored parameters" } else { "defaults" },
-        m_car_kg
+        parameters.m_car_kg
     );
-    critical_section::with(|cs| {
-        service::STATE.borrow_ref_mut(cs).replace(drive_core::service::ServiceState {
-            strategy,
-            table,
-            m_car_kg,
-            faults: [0; drive_core::service::FAULT_LOG],
-            fault_count: 0,
-            state_code: 0,
-            speed_radps: 0.0,
-            travelling: false,
-            strategy_settable: false,
-            dcp_mode,
-            params: params_status,
-            savable: true,
-            save_requested: false,
-        });
-    });
-    let uses_observer = controller.uses_observer();
-    control::start(controller, brake);
-    if uses_observer {
-        match ObserverTask::for_model(&CHAIN_MODEL) {
-            Ok(task) => {
-                observer::start(task);
-                info!("chain observer task running (interrupt executor at priority {=u8})", observer::PRIORITY as u8);
-            }
-            Err(e) => error!(
-                "chain observer model refused ({=str} must be {=str}): every speed tick counts a missed deadline",
-                e.field, e.expected
-            ),
+    // The drive's application layer, the code the processor-in-the-loop
+    // target and the host run: the rig's encoder is incremental, so the
+    // angle reference comes from the commanded alignment.
+    let slave = SlaveConfig::new(DCP_MODE, speed_table(DRIVE_CONFIG.rated_speed_mps), LIFT_GEOMETRY.shaft_travel_mm);
+    let port = DcpPort::new(slave, LIFT_GEOMETRY, parameters.m_car_kg);
+    let mut app = LiftDrive::new(Controller::new(&DRIVE_CONFIG), port, &DRIVE_CONFIG, AngleReference::Alignment);
+    app.install_parameters(&parameters, &CHAIN_MODEL, params_status);
+    app.set_savable(true);
+    // The chain observer runs in a task of its own, below the control interrupt.
+    match app.take_observer_task() {
+        Some(task) => {
+            observer::start(task);
+            info!("chain observer task running (interrupt executor at priority {=u8})", observer::PRIORITY as u8);
         }
+        None => error!("chain observer model refused: with car-observer every speed tick counts a missed deadline"),
     }
+    control::start(app, brake);
     info!(
         "control interrupt running: current loop {=f32} Hz, speed loop {=f32} Hz; calibrating current offsets",
         DRIVE_CONFIG.current_loop_hz, DRIVE_CONFIG.speed_loop_hz
@@ -246,7 +234,7 @@ async fn main(spawner: Spawner) {
     }
     let tx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 32] = [0; 32]));
     let rx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 64] = [0; 64]));
-    let uart = match usart::BufferedUart::new_with_de(
+    match usart::BufferedUart::new_with_de(
         p.UART5,
         board_pin!(p, DcpRx),
         board_pin!(p, DcpTx),
@@ -256,21 +244,23 @@ async fn main(spawner: Spawner) {
         rx_buffer,
         dcp::uart_config(),
     ) {
-        Ok(uart) => uart,
-        Err(e) => {
-            error!("UART5 (DCP) setup failed ({}): no lift controller link, the drive stays idle", e);
-            return;
+        Ok(uart) => {
+            let (tx, rx) = uart.split();
+            spawner.spawn(defmt::unwrap!(dcp::receive(rx)));
+            spawner.spawn(defmt::unwrap!(dcp::send(tx)));
         }
-    };
+        Err(e) => error!("UART5 (DCP) setup failed ({}): no lift controller link, the drive stays idle", e),
+    }
     let service_tx = defmt::unwrap!(cortex_m::singleton!(: [u8; 512] = [0; 512]));
     let service_rx = defmt::unwrap!(cortex_m::singleton!(: [u8; 128] = [0; 128]));
     match usart::BufferedUart::new(p.LPUART1, p.PA3, p.PA2, service_tx, service_rx, Irqs, service::uart_config()) {
-        Ok(uart) => spawner.spawn(defmt::unwrap!(service::run(uart, store, encoder_offset))),
+        Ok(uart) => {
+            let (tx, rx) = uart.split();
+            spawner.spawn(defmt::unwrap!(service::receive(rx)));
+            spawner.spawn(defmt::unwrap!(service::send(tx, store)));
+        }
         Err(e) => error!("LPUART1 (service port) setup failed ({}): no service port", e),
     }
-
-    let slave = SlaveConfig::new(dcp_mode, speed_table(DRIVE_CONFIG.rated_speed_mps), LIFT_GEOMETRY.shaft_travel_mm);
-    spawner.spawn(defmt::unwrap!(dcp::run(uart, DcpPort::new(slave, LIFT_GEOMETRY, m_car_kg))));
 }
 
 /// Stops with the drive in its safe state: undefined instruction, so the

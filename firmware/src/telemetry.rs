@@ -1,6 +1,6 @@
 //! The lower-priority task: every [`POLL_MS`] it feeds the watchdog (if the
 //! control interrupt is alive), drains the interrupt's event and telemetry
-//! queues into the defmt log.
+//! queues (`edges.rs`) into the defmt log.
 //!
 //! Log levels: events (calibration, faults, commands) and state changes at
 //! `info`/`error`, a one-line summary every [`SUMMARY_EVERY`] records
@@ -11,14 +11,17 @@ use defmt::{debug, error, info, warn};
 use drive_core::alignment::AlignmentError;
 use drive_core::controller::{CommandError, RetargetError, SpeedCommandError};
 use drive_core::current_offset::OffsetError;
-use drive_core::lift_drive::{ApplyError, ControllerCommand};
+use drive_core::dcp::slave::Refusal;
+use drive_core::dcp::FrameError;
+use drive_core::lift_drive::{ApplyError, ControllerCommand, DriveFault, HardwareFault};
+use drive_core::startup::{StartupEvent, StartupFault};
 use drive_core::supervisor::Fault;
 use drive_core::DriveState;
 use embassy_time::{Duration, Instant, Ticker};
 
-use crate::control::{self, Command, Event, FirmwareFault, Record, Refusal};
+use crate::edges::{Event, Record, EVENTS, RECORDS};
 use crate::watchdog::Watchdog;
-use crate::{pwm, DRIVE_CONFIG};
+use crate::{control, pwm, DRIVE_CONFIG};
 
 /// Polling period of the task, ms: 10 records per poll at 1 kHz, a tenth of
 /// the watchdog timeout.
@@ -30,7 +33,7 @@ pub const SUMMARY_EVERY: u32 = 1000;
 /// The task.
 #[embassy_executor::task]
 pub async fn run(mut watchdog: Watchdog) {
-    let mut last_state: Option<DriveState> = None;
+    let mut last_state: Option<(DriveState, bool)> = None;
     let mut records: u32 = 0;
     let mut ticker = Ticker::every(Duration::from_millis(POLL_MS));
     let mut last_poll = Instant::now();
@@ -46,17 +49,15 @@ pub async fn run(mut watchdog: Watchdog) {
         }
         stalled = !fed;
 
-        while let Some(event) = control::pop_event() {
+        while let Ok(event) = EVENTS.try_receive() {
             log_event(&event);
         }
-        while let Some(record) = control::pop_record() {
+        while let Ok(record) = RECORDS.try_receive() {
             records = records.wrapping_add(1);
-            if record.state != last_state {
-                if let Some(DriveState::Tripped(fault)) = record.state {
-                    crate::service::log_fault(fault.code());
-                }
-                info!("drive state: {=str} -> {=str}", state_name(last_state), state_name(record.state));
-                last_state = record.state;
+            let state = Some((record.state, record.controller_ran));
+            if state != last_state {
+                info!("drive state: {=str} -> {=str}", state_name(last_state), state_name(state));
+                last_state = state;
             }
             log_record(&record, records % SUMMARY_EVERY == 0);
         }
@@ -71,7 +72,7 @@ fn log_record(r: &Record, summary: bool) {
          torque_ref {=f32}",
         r.step,
         r.time_us,
-        state_name(r.state),
+        state_name(Some((r.state, r.controller_ran))),
         r.pwm_on,
         r.brake_released,
         r.phase_codes,
@@ -92,7 +93,7 @@ fn log_record(r: &Record, summary: bool) {
              (ref {=f32}), bus code {=u16}, longest step {=u32} cycles (deadline {=u32}), dropped {=u32}; chain observer: \
              {=u32} runs, longest {=u32} cycles, {=u32} missed deadlines",
             r.time_us / 1000,
-            state_name(r.state),
+            state_name(Some((r.state, r.controller_ran))),
             r.pwm_on,
             r.brake_released,
             t.iq_a,
@@ -112,7 +113,7 @@ fn log_record(r: &Record, summary: bool) {
 
 fn log_event(event: &Event) {
     match *event {
-        Event::Calibrated(offsets) => {
+        Event::Startup(StartupEvent::Calibrated(offsets)) => {
             let [u, v, w] = offsets.zero_current_codes;
             info!(
                 "current offsets calibrated with the inverter off: zero-current codes U {=u16} V {=u16} W {=u16} \
@@ -123,38 +124,43 @@ fn log_event(event: &Event) {
                 DRIVE_CONFIG.adc_zero_code()
             );
         }
-        Event::Aligned(count) => info!(
+        Event::Startup(StartupEvent::Aligned(count)) => info!(
             "rotor aligned: encoder count {=u32} at electrical angle zero (checks passed); brake applied, drive idle",
             count
         ),
+        Event::Startup(StartupEvent::Fault(fault)) => log_fault(DriveFault::Startup(fault)),
         Event::Fault(fault) => log_fault(fault),
-        Event::Applied(command) => info!("command applied: {=str}", command_name(&command)),
-        Event::Refused(command, refusal) => {
-            warn!("command refused: {=str}: {=str}", command_name(&command), refusal_name(refusal))
+        Event::Command(command, Ok(())) => info!("command applied: {=str}", command_name(&command)),
+        Event::Command(command, Err(e)) => {
+            warn!("command refused: {=str}: {=str}", command_name(&command), refusal_name(e))
         }
+        Event::Refused(refusal) => {
+            warn!("DCP message answered with the error bit: {=str}", message_refusal_name(refusal))
+        }
+        Event::Dropped => warn!("a DCP reply or service answer was dropped: its queue was full"),
     }
 }
 
-fn log_fault(fault: FirmwareFault) {
+fn log_fault(fault: DriveFault) {
     const SAFE: &str = "PWM off, brake applied, latched";
     match fault {
-        FirmwareFault::Overrun { cycles } => error!(
+        DriveFault::Hardware(HardwareFault::Overrun { cycles }) => error!(
             "control step wrote its compares after the valley ({=u32} cycles after its start; the valley is {=u32} \
              cycles after the sample): {=str}",
             cycles,
             pwm::HALF_PERIOD_CYCLES,
             SAFE
         ),
-        FirmwareFault::TriggerOverrun => {
-            error!("next ADC sequence completed before the control step finished: {=str}", SAFE)
+        DriveFault::Hardware(HardwareFault::TriggerOverrun) => {
+            error!("next ADC sequence completed before the control period's work finished: {=str}", SAFE)
         }
-        FirmwareFault::InverterBreak => {
+        DriveFault::Hardware(HardwareFault::InverterBreak) => {
             error!("inverter over-current (TIM1 break input): gates cut by hardware; {=str}", SAFE)
         }
-        FirmwareFault::AdcSequenceIncomplete => {
+        DriveFault::Hardware(HardwareFault::AdcSequenceIncomplete) => {
             error!("ADC1 sequence incomplete at ADC2's end of sequence: {=str}", SAFE)
         }
-        FirmwareFault::Alignment(error) => {
+        DriveFault::Startup(StartupFault::Alignment(error)) => {
             let (what, counts) = match error {
                 AlignmentError::CurrentNotReached => ("the injected current was not reached", 0),
                 AlignmentError::NotSettled(c) => ("the rotor did not settle (counts of motion)", c as i32),
@@ -172,10 +178,10 @@ fn log_fault(fault: FirmwareFault) {
             };
             error!("rotor alignment failed: {=str} {=i32}: {=str} until a reset command", what, counts, SAFE)
         }
-        FirmwareFault::Protection(fault) => {
+        DriveFault::Startup(StartupFault::Protection(fault)) => {
             error!("protection tripped during the alignment: {=str}: {=str}", fault.name(), SAFE)
         }
-        FirmwareFault::Calibration(error) => match error {
+        DriveFault::Startup(StartupFault::Calibration(error)) => match error {
             OffsetError::NotEnoughSamples { samples, required } => error!(
                 "current-offset calibration incomplete ({=u16} of {=u16} samples): {=str} until a reset command",
                 samples, required, SAFE
@@ -201,6 +207,19 @@ fn log_fault(fault: FirmwareFault) {
     }
 }
 
+fn message_refusal_name(refusal: Refusal) -> &'static str {
+    use drive_core::dcp::command::CommandError;
+    match refusal {
+        Refusal::Frame(FrameError::Checksum) => "checksum",
+        Refusal::Frame(FrameError::Truncated(_)) => "message too short",
+        Refusal::Frame(FrameError::TooLong) => "message too long",
+        Refusal::Frame(FrameError::Line) => "UART error in the message",
+        Refusal::Command(CommandError::Unknown) => "unknown command",
+        Refusal::Command(CommandError::BadSpeed) => "bad speed word",
+        Refusal::Command(CommandError::DistanceOutOfRange) => "remaining distance out of range",
+    }
+}
+
 fn phase_name(phase: u8) -> &'static str {
     match phase {
         0 => "U",
@@ -210,44 +229,44 @@ fn phase_name(phase: u8) -> &'static str {
     }
 }
 
-fn command_name(command: &Command) -> &'static str {
+fn command_name(command: &ControllerCommand) -> &'static str {
     match command {
-        Command::Drive(ControllerCommand::Travel(_)) => "distance travel",
-        Command::Drive(ControllerCommand::SpeedTravel(_)) => "speed travel",
-        Command::Drive(ControllerCommand::RemainingDistance { .. }) => "remaining distance",
-        Command::Drive(ControllerCommand::Speed(_)) => "speed change",
-        Command::Drive(ControllerCommand::Stop) => "stop",
-        Command::Drive(ControllerCommand::SafeStop(_)) => "safe stop",
-        Command::Reset => "reset",
-        Command::Align => "align",
+        ControllerCommand::Travel(_) => "distance travel",
+        ControllerCommand::SpeedTravel(_) => "speed travel",
+        ControllerCommand::RemainingDistance { .. } => "remaining distance",
+        ControllerCommand::Speed(_) => "speed change",
+        ControllerCommand::Stop => "stop",
+        ControllerCommand::SafeStop(_) => "safe stop",
     }
 }
 
-fn refusal_name(refusal: Refusal) -> &'static str {
+fn refusal_name(refusal: ApplyError) -> &'static str {
     match refusal {
-        Refusal::Controller(ApplyError::Travel(CommandError::NotIdle)) => "drive not idle",
-        Refusal::Controller(ApplyError::Travel(CommandError::Profile(_))) => "no travel profile for that distance",
-        Refusal::Controller(ApplyError::Travel(CommandError::OutOfRange)) => {
+        ApplyError::Travel(CommandError::NotIdle) => "drive not idle",
+        ApplyError::Travel(CommandError::Profile(_)) => "no travel profile for that distance",
+        ApplyError::Travel(CommandError::OutOfRange) => {
             "travel outside the rig, speed out of range or car mass not positive"
         }
-        Refusal::Controller(ApplyError::Speed(SpeedCommandError::NoSpeedTravel)) => "no speed travel running",
-        Refusal::Controller(ApplyError::Speed(SpeedCommandError::OutOfRange)) => "speed out of range",
-        Refusal::Controller(ApplyError::Remaining(RetargetError::NoDistanceTravel)) => "no distance travel running",
-        Refusal::Controller(ApplyError::Remaining(RetargetError::CannotStop)) => {
-            "remaining distance shorter than the car can stop in"
-        }
-        Refusal::Controller(ApplyError::Remaining(RetargetError::OutOfRange)) => "remaining distance out of range",
-        Refusal::NotReady => "drive not calibrated or not aligned, or a fault is latched",
-        Refusal::Busy => "the start-up sequence is not waiting for it",
-        Refusal::NothingToReset => "no fault latched",
+        ApplyError::Speed(SpeedCommandError::NoSpeedTravel) => "no speed travel running",
+        ApplyError::Speed(SpeedCommandError::OutOfRange) => "speed out of range",
+        ApplyError::Remaining(RetargetError::NoDistanceTravel) => "no distance travel running",
+        ApplyError::Remaining(RetargetError::CannotStop) => "remaining distance shorter than the car can stop in",
+        ApplyError::Remaining(RetargetError::OutOfRange) => "remaining distance out of range",
+        ApplyError::NotReady => "drive not calibrated or not aligned, or a fault is latched",
     }
 }
 
-/// Name of a drive state for the log ("not running" while calibrating or
-/// after a failed calibration).
-fn state_name(state: Option<DriveState>) -> &'static str {
+/// Name of a drive state for the log: the reported state and whether the
+/// controller ran ("starting" while the start-up sequence drives the
+/// outputs, before the controller runs).
+fn state_name(state: Option<(DriveState, bool)>) -> &'static str {
+    let state = match state {
+        None => return "none",
+        Some((DriveState::Idle, false)) => return "starting (not ready)",
+        Some((state, _)) => Some(state),
+    };
     match state {
-        None => "not running",
+        None => "none",
         Some(DriveState::Idle) => "Idle",
         Some(DriveState::PreTorque) => "PreTorque",
         Some(DriveState::BrakeLift) => "BrakeLift",
