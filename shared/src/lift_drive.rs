@@ -1328,4 +1328,137 @@ mod tests {
         let out = c.step(&SensorFrame { time_us: 124, ..bad });
         assert!(!out.pwm_enabled && !out.brake_released, "still in the safe state");
     }
+
+    /// The firmware's edges in a test: no bytes in, the replies kept, and
+    /// the deadline check of the firmware's control interrupt on a model of
+    /// its timer (centre-aligned, ARR 5312 at 170 MHz: the sample at the
+    /// peak, the compares loading at the valley 5312 cycles later): the
+    /// period's work starts `latency` cycles after the peak and writes the
+    /// compares `step_cycles` after its start.
+    struct TimedEdges {
+        latency: u32,
+        step_cycles: u32,
+        late: Option<u32>,
+        replies: std::vec::Vec<[u8; FRAME_LEN]>,
+        service_in: std::vec::Vec<u8>,
+        answers: std::vec::Vec<ServiceLine>,
+        cleared: bool,
+    }
+
+    impl PeriodIo for TimedEdges {
+        fn service_byte(&mut self) -> Option<u8> {
+            (!self.service_in.is_empty()).then(|| self.service_in.remove(0))
+        }
+        fn dcp_byte(&mut self) -> Option<u8> {
+            None
+        }
+        fn drive(&mut self, _output: &DriveOutput) {
+            let period = 2 * 5312;
+            let written = self.latency + self.step_cycles;
+            let counting_down = written % period < period / 2;
+            if !crate::pwm_timing::compares_in_time(counting_down, self.step_cycles, 5312) {
+                self.late = Some(self.step_cycles);
+            }
+        }
+        fn service_reply(&mut self, reply: &ServiceReply) {
+            self.answers.push(reply.line());
+        }
+        fn dcp_reply(&mut self, reply: &[u8; FRAME_LEN]) {
+            self.replies.push(*reply);
+        }
+        fn faults_cleared(&mut self) {
+            self.cleared = true;
+        }
+    }
+
+    #[test]
+    fn a_late_control_step_is_caught_and_holds_the_drive_safe_with_the_fault_bit_until_the_reset() {
+        let rig = reference_rig();
+        let mut drive = LiftDrive::new(Controller::new(&rig), port(), &rig, AngleReference::Given);
+        let mut edges = TimedEdges {
+            latency: 255,
+            step_cycles: 1500,
+            late: None,
+            replies: std::vec::Vec::new(),
+            service_in: std::vec::Vec::new(),
+            answers: std::vec::Vec::new(),
+            cleared: false,
+        };
+        let mut k = 0u32;
+        let mut period = |drive: &mut LiftDrive, edges: &mut TimedEdges| {
+            let sensors = SensorFrame {
+                phase_current_codes: [2048; 3],
+                encoder_count: 0,
+                dc_bus_code: 2048,
+                time_us: k * 62 + k / 2,
+            };
+            k += 1;
+            let out = drive.period(&sensors, edges);
+            // The firmware's control interrupt after the period.
+            if let Some(cycles) = edges.late.take() {
+                drive.latch(HardwareFault::Overrun { cycles });
+            }
+            out.drive.control
+        };
+        // The start-up, then a travel: the gates come on.
+        while !drive.startup().is_running() {
+            let out = period(&mut drive, &mut edges);
+            assert!(!out.pwm_enabled && !out.brake_released);
+        }
+        let travel = TravelCommand { direction: Direction::Up, distance_m: 1.0, m_car_kg: 70.5, lw_start_m: 2.0 };
+        assert_eq!(drive.command_travel(travel), Ok(()));
+        let mut on = false;
+        for _ in 0..100 {
+            on |= period(&mut drive, &mut edges).pwm_enabled;
+        }
+        assert!(on, "the pre-torque switches the bridge");
+        // Late by a hair (the compares written 5 313 cycles after the sample,
+        // the valley at 5 312): caught; the worst step measured on the
+        // emulated chip (5 376 instructions) would be too.
+        for step_cycles in [5312 - 255 + 1, 5376] {
+            let mut d = drive;
+            let mut e = TimedEdges {
+                latency: 255,
+                step_cycles,
+                late: None,
+                replies: std::vec::Vec::new(),
+                service_in: std::vec::Vec::new(),
+                answers: std::vec::Vec::new(),
+                cleared: false,
+            };
+            period(&mut d, &mut e);
+            assert_eq!(d.fault(), Some(DriveFault::Hardware(HardwareFault::Overrun { cycles: step_cycles })));
+        }
+        // One cycle earlier it is in time.
+        edges.step_cycles = 5312 - 255 - 1;
+        period(&mut drive, &mut edges);
+        assert_eq!(drive.fault(), None);
+        // The late step: from the next period gates off, brake applied,
+        // the fault reported, DCP S3 set and S0 clear, for as long as no
+        // reset comes, whatever the controller wants.
+        edges.step_cycles = 6000;
+        period(&mut drive, &mut edges);
+        edges.step_cycles = 1500;
+        for _ in 0..2000 {
+            let out = period(&mut drive, &mut edges);
+            assert!(!out.pwm_enabled && !out.brake_released && out.pwm_compare == [0; 3], "{out:?}");
+            assert_eq!(out.state, DriveState::Tripped(Fault::DeadlineMissed));
+        }
+        let status = drive.status();
+        assert!(status.fault && !status.ready && !status.brake_open && !status.travelling);
+        assert!(drive.command_travel(travel).is_err(), "no travel with the fault latched");
+        // The service port's reset clears it (and the hardware's latch).
+        edges.service_in.extend_from_slice(b"reset\n");
+        period(&mut drive, &mut edges);
+        assert_eq!(edges.answers.last().map(|l| l.as_bytes().to_vec()), Some(b"ok reset\r\n".to_vec()));
+        assert!(edges.cleared);
+        let out = period(&mut drive, &mut edges);
+        assert_eq!((out.state, out.pwm_enabled, out.brake_released), (DriveState::Idle, false, false));
+        assert!(drive.status().ready && !drive.status().fault);
+        assert_eq!(drive.command_travel(travel), Ok(()));
+        // A reset with nothing latched is refused.
+        edges.service_in.extend_from_slice(b"reset\n");
+        period(&mut drive, &mut edges);
+        assert_eq!(edges.answers.last().map(|l| l.as_bytes().to_vec()), Some(b"error nothing-to-reset\r\n".to_vec()));
+    }
 }
