@@ -568,12 +568,19 @@ fn the_rigs_car_is_simulated_as_given_and_an_absurd_one_is_refused_naming_its_so
         fs::read_dir(&out).unwrap().map(|e| e.unwrap().path()).find(|p| p.extension().is_some_and(|e| e == "toml"));
     let meta = fs::read_to_string(toml.unwrap()).unwrap();
     assert!(meta.contains("m_car_kg = 20.0"), "{meta}");
-    // A car of the rig beyond the bound names the rig's field, not a flag nobody gave.
-    let heavy = with_cars("m_car_kg = [99999.9, 1e5]", "heavy.toml");
+    // A car of the rig beyond the bound names the rig's field, not a flag nobody gave
+    // (before: `m_car_kg = [1e5]` passed the rig's check, then `travel` blamed `--m-car`).
+    let heavy = with_cars("m_car_kg = [99999.9, 2e5]", "heavy.toml");
     let err = run_err(&["--config", s(&heavy), "travel", "--quiet", "--out", s(&tmp.path().join("heavy"))]);
-    if !err.contains("heavy.toml") {
-        assert!(err.contains("[mechanics].m_car_kg") && !err.contains("--m-car ="), "{err}");
-    }
+    assert!(err.contains("heavy.toml: field `[mechanics].m_car_kg[1]` = 200000"), "{err}");
+    assert!(!err.contains("--m-car"), "{err}");
+    let heaviest = with_cars("m_car_kg = [1e5]", "heaviest.toml");
+    let out = host_sim()
+        .args(["--config", s(&heaviest), "travel", "--quiet", "--out", s(&tmp.path().join("heaviest"))])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("--m-car") && !err.contains("panicked"), "{err}");
     // A car of a nanogram would never finish: refused before the run, with readable numbers.
     let err = run_err(&["travel", "--quiet", "--m-car", "1e-9", "--out", s(&tmp.path().join("nano"))]);
     assert!(err.contains("--m-car = 1e-9 is out of range") && err.contains("at least 1 kg"), "{err}");
@@ -593,7 +600,7 @@ fn a_sample_rate_far_below_any_recording_and_a_file_given_as_the_dataset_are_ref
 /// Runs `host-sim args`, killed after `limit`; returns stderr, or panics if
 /// it had to be killed (a hang) or succeeded.
 #[cfg(unix)]
-fn run_err_within(args: &[&str], limit: std::time::Duration) -> String {
+pub(super) fn run_err_within(args: &[&str], limit: std::time::Duration) -> String {
     let mut child = host_sim().args(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
     let started = std::time::Instant::now();
     while child.try_wait().unwrap().is_none() {

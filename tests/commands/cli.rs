@@ -62,7 +62,7 @@ fn bad_flags_and_bad_rig_files_name_what_is_wrong() {
     let out = host_sim().args(["modes", "--m-car", "-3"]).output().unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("--m-car = -3") && err.contains("at least 1 kg and below 100000 kg"), "{err}");
+    assert!(err.contains("--m-car = -3") && err.contains("at least 1 kg and at most 100000 kg"), "{err}");
 
     let out = host_sim().args(["travel", "--lw-start", "9.5"]).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);

@@ -4,6 +4,7 @@
 
 mod bad_input;
 mod cli;
+mod decay_and_rig_input;
 mod doc_commands;
 mod foreign_rig;
 mod input_fuzz;

@@ -10,6 +10,9 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
+use super::identify_screen::{
+    ea_disagreement, name_decay_files, screen_decays, EaEstimate, MaxFrequency, DEFAULT_MAX_FREQUENCY_HZ,
+};
 use diagnosis::identify::rope_ea_from_first_frequency;
 use diagnosis::identify_dataset::{identify_dataset, DatasetIdentification, LeftOut};
 use plots::{stacked_plot, Level, Mark, Panel, Series};
@@ -21,9 +24,10 @@ use rig_config::RigConfig;
 pub struct IdentifyArgs {
     /// The dataset directory (pairs `<stem>.toml` + `<stem>.csv`).
     pub dataset: PathBuf,
-    /// Highest frequency searched for the first mode of a free decay, Hz.
-    #[arg(long = "max-frequency", value_name = "HZ", default_value_t = 200.0, allow_negative_numbers = true)]
-    pub max_frequency_hz: f64,
+    /// Highest frequency searched for the first mode of a free decay, Hz
+    /// (default 200 Hz).
+    #[arg(long = "max-frequency", value_name = "HZ", allow_negative_numbers = true)]
+    pub max_frequency_hz: Option<f64>,
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "out/identify")]
     pub out: PathBuf,
@@ -38,27 +42,28 @@ const OUTPUTS: [&str; 4] = ["identify.json", "free_decays.csv", "ea_vs_tension.p
 /// Refuses a dataset of which a kind of recording gives nothing: every free
 /// decay (or every travel) left out. The error lists each one's reason and,
 /// when `--max-frequency` lies below the first mode that the rig's `EA`
-/// predicts for a decay (Eqn 9), says so.
+/// predicts for a decay (Eqn 9), says so. `kinds` holds every recording
+/// of the dataset, those left out before the identification too.
 fn refuse_empty_results(
     rig: &RigConfig,
-    args: &IdentifyArgs,
-    dataset: &[(String, Recording)],
+    dataset_dir: &Path,
+    band: MaxFrequency,
+    kinds: &[(String, RecordingKind)],
     id: &DatasetIdentification,
 ) -> anyhow::Result<()> {
     let m = &rig.mechanics;
     let reasons = |decays: bool| -> String {
-        let of_kind = |stem: &str| {
-            dataset.iter().any(|(s, r)| s == stem && matches!(r.meta.kind, RecordingKind::FreeDecay { .. }) == decays)
-        };
+        let of_kind =
+            |stem: &str| kinds.iter().any(|(s, k)| s == stem && matches!(k, RecordingKind::FreeDecay { .. }) == decays);
         id.left_out
             .iter()
             .filter(|l| of_kind(&l.recording))
             .map(|l| format!("\n  {}: {}", l.recording, l.reason))
             .collect()
     };
-    let decays: Vec<(&str, f64, f64)> = dataset
+    let decays: Vec<(&str, f64, f64)> = kinds
         .iter()
-        .filter_map(|(stem, r)| match r.meta.kind {
+        .filter_map(|(stem, kind)| match *kind {
             RecordingKind::FreeDecay { mass_kg, rope_length_m } => Some((stem.as_str(), mass_kg, rope_length_m)),
             RecordingKind::Travel { .. } => None,
         })
@@ -77,24 +82,25 @@ fn refuse_empty_results(
             })
             .min_by(|a, b| a.1.total_cmp(&b.1));
         let hint = match predicted {
-            Some((stem, f1)) if args.max_frequency_hz < f1 => format!(
-                "\n--max-frequency = {} Hz lies below the first mode that the rig's EA ({:e} N) predicts \
-                 (Eqn 9: {f1:.2} Hz for `{stem}`): expected a --max-frequency above the first mode (default 200 Hz)",
-                args.max_frequency_hz, m.rope_ea_n
+            Some((stem, f1)) if band.hz < f1 => format!(
+                "\n{} lies below the first mode that the rig's EA ({:e} N) predicts \
+                 (Eqn 9: {f1:.2} Hz for `{stem}`): expected a --max-frequency above the first mode",
+                band.describe(),
+                m.rope_ea_n
             ),
             _ => String::new(),
         };
         anyhow::bail!(
             "no free decay of `{}` gives EA (Eqn 9); every one was left out:{}{hint}",
-            args.dataset.display(),
+            dataset_dir.display(),
             reasons(true)
         );
     }
-    let travels = dataset.len() - decays.len();
+    let travels = kinds.len() - decays.len();
     if travels > 0 && id.travels.is_empty() {
         anyhow::bail!(
             "no travel of `{}` gives the sheave damping (Eqn 13); every one was left out:{}",
-            args.dataset.display(),
+            dataset_dir.display(),
             reasons(false)
         );
     }
@@ -133,6 +139,9 @@ struct Report {
     dataset: String,
     free_decays: Vec<DecayResult>,
     mean_rope_ea_n: Option<f64>,
+    /// Set when the decays' EA values disagree beyond their uncertainty:
+    /// the mean is then no single EA of the rope.
+    rope_ea_disagreement: Option<String>,
     mean_damping_ratio: Option<f64>,
     mean_guide_damping_kg_per_s: Option<f64>,
     travels: Vec<SheaveResult>,
@@ -322,17 +331,93 @@ fn decays_plot(
     Ok(())
 }
 
-/// Runs `identify`.
+/// Runs `identify`: the decays screened ([`screen_decays`]), the dataset
+/// identified, the results written and printed.
 pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
-    super::check_open_range("--max-frequency", args.max_frequency_hz, 1.0, 1.0e6)?;
-    let m = &rig.mechanics;
+    let band = MaxFrequency {
+        hz: args.max_frequency_hz.unwrap_or(DEFAULT_MAX_FREQUENCY_HZ),
+        given: args.max_frequency_hz.is_some(),
+    };
+    super::check_open_range("--max-frequency", band.hz, 1.0, 1.0e6)?;
     let dataset = super::read_dataset_on(rig, &args.dataset)?;
     let out = super::output_dir_reading(&args.out, args.force, &[&args.dataset])?;
     out.refuse_existing(OUTPUTS)?;
-    let id = identify_dataset(rig, &dataset, args.max_frequency_hz);
-    refuse_empty_results(rig, args, &dataset, &id)?;
-    let kind_of = |stem: &str| dataset.iter().find(|(s, _)| s == stem).map(|(_, r)| r.meta.kind.clone());
-    let report = Report {
+    let kinds: Vec<(String, RecordingKind)> = dataset.iter().map(|(s, r)| (s.clone(), r.meta.kind.clone())).collect();
+    let (dataset, screened_out) = screen_decays(rig, &args.dataset, dataset, band);
+    let mut id = identify_dataset(rig, &dataset, band.hz);
+    name_decay_files(&args.dataset, &kinds, &mut id.left_out);
+    id.left_out.splice(0..0, screened_out);
+    refuse_empty_results(rig, &args.dataset, band, &kinds, &id)?;
+    let points = ea_points(rig, &dataset, &id);
+    let report = build_report(args, &kinds, &id, &points);
+
+    let json = out.path(OUTPUTS[0]);
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("cannot write {}", json.display()))?;
+    let csv_path = out.path(OUTPUTS[1]);
+    write_csv(&csv_path, &report.free_decays)?;
+    if points.len() >= 2 {
+        ea_plot(&out.path(OUTPUTS[2]), &args.dataset, &points, rig.mechanics.rope_ea_n)?;
+    }
+    if !id.decays.is_empty() {
+        decays_plot(&out.path(OUTPUTS[3]), &args.dataset, &dataset, &id)?;
+    }
+    let (json, csv_path) = (out.published(&json), out.published(&csv_path));
+    out.commit()?;
+    print_report(&report);
+    outln!("wrote {}, {}", json.display(), csv_path.display());
+    Ok(())
+}
+
+/// Each identified free decay's point of `ea_vs_tension.png`, with the
+/// error bar of its single cycles' EA ([`DecayCycles`]).
+fn ea_points(rig: &RigConfig, dataset: &[(String, Recording)], id: &DatasetIdentification) -> Vec<EaPoint> {
+    let m = &rig.mechanics;
+    id.decays
+        .iter()
+        .map(|(stem, decay)| {
+            let rec = dataset.iter().find(|(s, _)| s == stem).map(|(_, r)| r);
+            let length = match rec.map(|r| &r.meta.kind) {
+                Some(RecordingKind::FreeDecay { rope_length_m, .. }) => *rope_length_m,
+                _ => f64::NAN,
+            };
+            let cycles = rec.and_then(|rec| {
+                let acc = rec.column(recording::ACC_CAR)?;
+                DecayCycles::find(&acc.values, rec.meta.sample_rate_hz, decay.first_frequency_hz, decay.cycles_used)
+            });
+            let cycle_ea: Vec<f64> = cycles
+                .map(|c| {
+                    c.frequencies_hz()
+                        .iter()
+                        .map(|&f| {
+                            rope_ea_from_first_frequency(f, m.rope_mass_per_length_kg_per_m, length, decay.mass_kg)
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
+            EaPoint {
+                tension_n: decay.tension_n,
+                ea_n: decay.rope_ea_n,
+                error_n: two_standard_errors(&cycle_ea),
+                label: stem.clone(),
+            }
+        })
+        .collect()
+}
+
+/// The report of `identify`: each decay and travel kept with the
+/// recording's masses and rope, the means, and whether the decays' EA
+/// values agree within their uncertainty ([`ea_disagreement`]).
+fn build_report(
+    args: &IdentifyArgs,
+    kinds: &[(String, RecordingKind)],
+    id: &DatasetIdentification,
+    points: &[EaPoint],
+) -> Report {
+    let kind_of = |stem: &str| kinds.iter().find(|(s, _)| s == stem).map(|(_, k)| k.clone());
+    let estimates: Vec<EaEstimate> =
+        points.iter().map(|p| EaEstimate { recording: p.label.clone(), ea_n: p.ea_n, error_n: p.error_n }).collect();
+    Report {
         dataset: args.dataset.display().to_string(),
         free_decays: id
             .decays
@@ -353,6 +438,7 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
             })
             .collect(),
         mean_rope_ea_n: id.rope_ea_n,
+        rope_ea_disagreement: ea_disagreement(&estimates),
         mean_damping_ratio: id.damping_ratio,
         mean_guide_damping_kg_per_s: id.guide_damping_kg_per_s,
         travels: id
@@ -376,18 +462,19 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
             .collect(),
         mean_sheave_damping_nms_per_rad: id.sheave_damping_nms_per_rad,
         left_out: id.left_out.clone(),
-    };
+    }
+}
 
-    let json = out.path(OUTPUTS[0]);
-    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
-        .with_context(|| format!("cannot write {}", json.display()))?;
-    let csv_path = out.path(OUTPUTS[1]);
-    let mut csv = std::io::BufWriter::new(std::fs::File::create(&csv_path)?);
+/// `free_decays.csv`: one row per free decay kept.
+fn write_csv(path: &Path, decays: &[DecayResult]) -> anyhow::Result<()> {
+    let mut csv = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
+    );
     writeln!(
         csv,
         "recording,mass_kg,rope_length_m,tension_n,first_frequency_hz,rope_ea_n,damping_ratio,guide_damping_kg_per_s"
     )?;
-    for d in &report.free_decays {
+    for d in decays {
         writeln!(
             csv,
             "{},{},{},{},{},{},{},{}",
@@ -402,47 +489,12 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
         )?;
     }
     csv.flush()?;
-    if report.free_decays.len() >= 2 {
-        let points: Vec<EaPoint> = report
-            .free_decays
-            .iter()
-            .zip(&id.decays)
-            .map(|(d, (stem, decay))| {
-                let cycles = dataset.iter().find(|(s, _)| s == stem).and_then(|(_, rec)| {
-                    let acc = rec.column(recording::ACC_CAR)?;
-                    DecayCycles::find(&acc.values, rec.meta.sample_rate_hz, decay.first_frequency_hz, decay.cycles_used)
-                });
-                let cycle_ea: Vec<f64> = cycles
-                    .map(|c| {
-                        c.frequencies_hz()
-                            .iter()
-                            .map(|&f| {
-                                rope_ea_from_first_frequency(
-                                    f,
-                                    m.rope_mass_per_length_kg_per_m,
-                                    d.rope_length_m,
-                                    d.mass_kg,
-                                )
-                            })
-                            .collect()
-                    })
-                    .unwrap_or_default();
-                EaPoint {
-                    tension_n: d.tension_n,
-                    ea_n: d.rope_ea_n,
-                    error_n: two_standard_errors(&cycle_ea),
-                    label: d.recording.clone(),
-                }
-            })
-            .collect();
-        ea_plot(&out.path(OUTPUTS[2]), &args.dataset, &points, rig.mechanics.rope_ea_n)?;
-    }
-    if !id.decays.is_empty() {
-        decays_plot(&out.path(OUTPUTS[3]), &args.dataset, &dataset, &id)?;
-    }
+    Ok(())
+}
 
-    let (json, csv_path) = (out.published(&json), out.published(&csv_path));
-    out.commit()?;
+/// The report's table on standard output: the decays, the travels, a
+/// disagreement of the decays' EA values, the recordings left out.
+fn print_report(report: &Report) {
     outln!(
         "{:<28} {:>8} {:>6} {:>9} {:>12} {:>8} {:>10}",
         "free decay",
@@ -474,11 +526,12 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
             t.mean_speed_radps
         );
     }
+    if let Some(note) = &report.rope_ea_disagreement {
+        outln!("note: {note}");
+    }
     for l in &report.left_out {
         outln!("left out: {}: {}", l.recording, l.reason);
     }
-    outln!("wrote {}, {}", json.display(), csv_path.display());
-    Ok(())
 }
 
 #[cfg(test)]

@@ -24,6 +24,7 @@ pub mod drive;
 pub mod faults;
 pub mod gap;
 pub mod identify;
+pub mod identify_screen;
 pub mod modes;
 pub mod pil;
 pub mod ride_quality;
@@ -299,12 +300,13 @@ pub fn default_car_mass_kg(rig: &RigConfig) -> f64 {
 /// so fast (`sqrt(2EA / (l m))`) that the integrator's step shrinks without
 /// end; no lift car weighs less.
 pub const MIN_CAR_MASS_KG: f64 = 1.0;
-/// Bound on the car, kg (exclusive; the rig file's bound).
+/// Heaviest car a simulation takes, kg (the rig file's bound, and the
+/// recording format's).
 pub const MAX_CAR_MASS_KG: f64 = 1.0e5;
 
 /// The car mass of a run: `--m-car` when given, else the rig's heaviest car
 /// ([`default_car_mass_kg`]); either checked against
-/// `[MIN_CAR_MASS_KG, MAX_CAR_MASS_KG)`, the error naming where the
+/// `[MIN_CAR_MASS_KG, MAX_CAR_MASS_KG]`, the error naming where the
 /// value came from (the flag, or the rig's field).
 pub fn car_mass_kg(rig: &RigConfig, given: Option<f64>) -> anyhow::Result<f64> {
     let (m, source) = match given {
@@ -314,11 +316,11 @@ pub fn car_mass_kg(rig: &RigConfig, given: Option<f64>) -> anyhow::Result<f64> {
             "the rig's heaviest car ([mechanics].m_car_kg of --config, the default of --m-car)".to_string(),
         ),
     };
-    if m.is_finite() && (MIN_CAR_MASS_KG..MAX_CAR_MASS_KG).contains(&m) {
+    if m.is_finite() && (MIN_CAR_MASS_KG..=MAX_CAR_MASS_KG).contains(&m) {
         Ok(m)
     } else {
         anyhow::bail!(
-            "{source} = {} is out of range: expected a car mass of at least {} kg and below {} kg",
+            "{source} = {} is out of range: expected a car mass of at least {} kg and at most {} kg",
             readable(m),
             readable(MIN_CAR_MASS_KG),
             readable(MAX_CAR_MASS_KG)

@@ -94,6 +94,17 @@ pub(crate) fn check_window(window_s: f64, overlap: f64) -> Result<(), AnalysisEr
     Ok(())
 }
 
+/// The message of [`AnalysisError::TooShort`]: a count of cycles is no
+/// count of samples ("found 0 decaying cycles of the first mode", never
+/// "the signal has 0 samples").
+fn too_short_message(len: usize, min: usize, what: &str) -> String {
+    if what.split_whitespace().any(|w| w == "cycles") {
+        format!("the signal holds {len} {what}; expected at least {min}")
+    } else {
+        format!("the signal has {len} samples; expected at least {min} for {what}")
+    }
+}
+
 /// Error returned by the analysis functions when an input is unusable.
 ///
 /// Each variant names what was wrong and what was expected.
@@ -102,14 +113,17 @@ pub enum AnalysisError {
     /// The signal has no samples; at least one sample is required.
     #[error("the signal is empty; expected at least one sample")]
     EmptySignal,
-    /// The signal has fewer samples than the operation needs.
-    #[error("the signal has {len} samples; expected at least {min} for {what}")]
+    /// The signal has fewer samples (or, when `what` names cycles, fewer
+    /// such cycles) than the operation needs.
+    #[error("{}", too_short_message(*len, *min, what))]
     TooShort {
-        /// Number of samples in the signal.
+        /// Number of samples in the signal (or of the cycles `what` names).
         len: usize,
-        /// Smallest number of samples the operation accepts.
+        /// Smallest number the operation accepts.
         min: usize,
-        /// What needs that many samples (for the message).
+        /// What needs that many samples, or the cycles counted (a phrase
+        /// with the word `cycles`: "decaying cycles of the first mode"),
+        /// for the message.
         what: &'static str,
     },
     /// A sample is NaN or infinite.
@@ -233,6 +247,14 @@ mod tests {
         }
         assert_eq!(check_signal(&[], 1, "test"), Err(AnalysisError::EmptySignal));
         assert_eq!(check_signal(&[1.0, 2.0], 3, "test"), Err(AnalysisError::TooShort { len: 2, min: 3, what: "test" }));
+    }
+
+    #[test]
+    fn a_count_of_cycles_is_not_reported_as_a_count_of_samples() {
+        let cycles = AnalysisError::TooShort { len: 0, min: 3, what: "decaying cycles of the first mode" };
+        assert_eq!(cycles.to_string(), "the signal holds 0 decaying cycles of the first mode; expected at least 3");
+        let samples = AnalysisError::TooShort { len: 1, min: 2, what: "an amplitude spectrum" };
+        assert_eq!(samples.to_string(), "the signal has 1 samples; expected at least 2 for an amplitude spectrum");
     }
 
     #[test]
