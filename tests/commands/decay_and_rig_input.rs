@@ -169,3 +169,29 @@ fn an_absurd_rig_is_refused_before_any_run_naming_the_field_and_why() {
         }
     }
 }
+
+#[cfg(unix)]
+#[test]
+fn a_flag_of_an_absurd_magnitude_is_refused_before_the_run_with_readable_numbers() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // Before: a sweep from 0.000...0001 m, a count of 8.4e300 points written
+    // digit by digit, a whole travel simulated before its spectrogram window
+    // was refused as `window_s` = 0.000...0001, a decay of a 1e-300 kg mass
+    // written under a 300-digit stem.
+    let cases: [(&[&str], &str); 6] = [
+        (&["modes", "--lw-from", "1e-300"], "--lw-from = 1e-300 is out of range"),
+        (&["modes", "--lw-step", "1e-300"], "--lw-step = 1e-300 gives 8.4e300 points"),
+        (&["travel", "--quiet", "--spectrogram-window", "1e-300"], "--spectrogram-window = 1e-300"),
+        (&["travel", "--quiet", "--lw-start", "1e-300"], "--lw-start = 1e-300"),
+        (&["decay", "--mass", "1e-300"], "--mass = 1e-300 is out of range: expected a finite value in [1, 100000] kg"),
+        (&["decay", "--length", "1e300"], "--length = 1e300 is out of range"),
+    ];
+    for (args, needle) in cases {
+        let mut args = args.to_vec();
+        args.extend(["--out", s(&out)]);
+        let err = run_err_within(&args, Duration::from_secs(10));
+        assert!(err.contains(needle) && !err.contains("0000000000"), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} left {out:?}");
+    }
+}

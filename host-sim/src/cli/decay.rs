@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::{check_count, check_open_range, output_dir};
+use super::{check_count, check_open_range, check_physical_range, output_dir};
 use plant::effects::Effects;
 use plant::free_decay::{eqn9_first_frequency_hz, simulate_free_decay_with, FreeDecaySpec, MAX_ELEMENTS};
 use recording::write::write_recording;
@@ -63,13 +63,16 @@ pub fn run(rig: &RigConfig, args: &DecayArgs) -> anyhow::Result<()> {
     check_open_range("--duration", args.duration_s, 0.0, 600.0)?;
     check_count("--elements", args.elements, 1, MAX_ELEMENTS)?;
     for &mass in &masses {
-        check_open_range("--mass", mass, 0.0, 1.0e5)?;
+        let why = "lighter than 1 kg, the mass rings on its rope so fast that the run never ends; no lift carries \
+                   more than 100 t";
+        check_physical_range("--mass", mass, 1.0, 1.0e5, "kg", why)?;
     }
     for &length in &args.lengths_m {
-        check_open_range("--length", length, 0.0, 1.0e3)?;
+        let why = "a rope of 0.1 m (a shorter one rings too fast to simulate) to 1000 m";
+        check_physical_range("--length", length, rig_config::MIN_ROPE_SIDE_M, 1.0e3, "m", why)?;
     }
     if let Some(ea) = args.rope_ea_n {
-        check_open_range("--ea", ea, 0.0, 1.0e12)?;
+        check_physical_range("--ea", ea, 1.0e4, 1.0e9, "N", "from a thin synthetic cord to a thick steel rope")?;
     }
     if let Some(c) = args.damping_kg_per_s {
         check_open_range("--damping", c, -1e-300, 1.0e6)?;

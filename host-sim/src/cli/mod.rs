@@ -167,8 +167,27 @@ pub fn sweep_points(step_flag: &str, from: f64, to: f64, step: f64) -> anyhow::R
     } else {
         let smallest = (to - from) / (MAX_SWEEP_POINTS - 1) as f64;
         anyhow::bail!(
-            "{step_flag} = {step:e} gives {points:.0} points from {from} to {to}; expected at most \
-             {MAX_SWEEP_POINTS} points: a step of at least {smallest:.3e}"
+            "{step_flag} = {} gives {} points from {} to {}; expected at most {MAX_SWEEP_POINTS} points: a step of \
+             at least {smallest:.3e}",
+            readable(step),
+            readable(points.round()),
+            readable(from),
+            readable(to)
+        )
+    }
+}
+
+/// Checks a command-line value against its physical range: finite and
+/// inside `[lo, hi]`, the message saying why (`why`) with the unit.
+pub fn check_physical_range(flag: &str, value: f64, lo: f64, hi: f64, unit: &str, why: &str) -> anyhow::Result<()> {
+    if value.is_finite() && value >= lo && value <= hi {
+        Ok(())
+    } else {
+        anyhow::bail!(
+            "{flag} = {} is out of range: expected a finite value in [{}, {}] {unit}: {why}",
+            readable(value),
+            readable(lo),
+            readable(hi)
         )
     }
 }

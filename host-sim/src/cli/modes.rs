@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::{car_mass_kg, check_open_range, output_dir, sweep_points};
+use super::{car_mass_kg, check_open_range, output_dir, readable, sweep_points};
 use plant::modes::natural_modes;
 use plant::rope::{ChainParams, COORDINATE_NAMES, DOF};
 use plots::{line_plot, stacked_plot, Band, Level, Panel, Series};
@@ -68,7 +68,7 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     let m_car = car_mass_kg(rig, args.m_car_kg)?;
     let lw_from = args.lw_from_m.unwrap_or(0.1);
     let lw_to = args.lw_to_m.unwrap_or(total - 0.1);
-    check_open_range("--lw-from", lw_from, 0.0, total)?;
+    check_open_range("--lw-from", lw_from, 1.0e-3, total)?;
     check_open_range("--lw-to", lw_to, lw_from, total)?;
     check_open_range("--lw-step", args.lw_step_m, 0.0, total)?;
     let count = sweep_points("--lw-step", lw_from, lw_to, args.lw_step_m)?;
@@ -126,7 +126,12 @@ pub fn run(rig: &RigConfig, args: &ModesArgs) -> anyhow::Result<()> {
     )?;
     line_plot(&out.path(&band_png), &format!("{title}, 0-{band} Hz"), lw_label, "frequency [Hz]", &series(band))?;
 
-    outln!("m_car = {m_car} kg: natural frequencies at {} rope lengths from {lw_from} to {lw_to} m", lengths.len());
+    outln!(
+        "m_car = {m_car} kg: natural frequencies at {} rope lengths from {} to {} m",
+        lengths.len(),
+        readable(lw_from),
+        readable(lw_to)
+    );
     outln!("{:>8} {:>9} {:>9} {:>9} {:>9} {:>9}", "lw [m]", "f1 [Hz]", "f2 [Hz]", "f3 [Hz]", "f4 [Hz]", "f5 [Hz]");
     let stride = (lengths.len() / 12).max(1);
     for (i, (lw, m)) in lengths.iter().zip(&modes).enumerate() {

@@ -9,7 +9,7 @@ use drive_core::ripple::Strategy;
 use drive_core::Controller;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::{car_mass_kg, check_open_range, output_dir};
+use super::{car_mass_kg, check_open_range, check_physical_range, output_dir, readable};
 use closed_loop::compensation::{compensator, rig_ripple_table};
 use closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
 use dsp::{highpass_zero_phase, stft_spectrogram, Spectrogram};
@@ -99,12 +99,19 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         DirectionArg::Down => Direction::Down,
     };
     let mut spec = TravelSpec::full_travel(rig, m_car, direction);
+    let side = rig_config::MIN_ROPE_SIDE_M;
+    let why = format!(
+        "each rope side keeps at least {} m of [mechanics].rope_total_length_m = {} m (a shorter one rings too \
+         fast to simulate)",
+        readable(side),
+        readable(total)
+    );
     if let Some(lw) = args.lw_start_m {
-        check_open_range("--lw-start", lw, 0.0, total)?;
+        check_physical_range("--lw-start", lw, side, total - side, "m", &why)?;
         spec.lw_start_m = lw;
     }
     if let Some(lw) = args.lw_end_m {
-        check_open_range("--lw-end", lw, 0.0, total)?;
+        check_physical_range("--lw-end", lw, side, total - side, "m", &why)?;
         spec.lw_end_m = lw;
     }
     let mut options = SimOptions::for_rig(rig);
@@ -115,7 +122,10 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         check_open_range("--max-step", step, 1e-9, 0.5 / rig.control.current_loop_hz + 1e-15)?;
         options.max_step_s = step;
     }
-    check_open_range("--spectrogram-window", args.spectrogram_window_s, 0.0, 60.0)?;
+    // At least 16 samples of the recording: a shorter window resolves nothing.
+    let shortest = 16.0 / rig.measurement.sample_rate_hz;
+    let why = "at least 16 samples of [measurement].sample_rate_hz, at most a minute";
+    check_physical_range("--spectrogram-window", args.spectrogram_window_s, shortest, 60.0, "s", why)?;
     let stem = args
         .stem
         .clone()

@@ -94,6 +94,16 @@ pub(crate) fn check_window(window_s: f64, overlap: f64) -> Result<(), AnalysisEr
     Ok(())
 }
 
+/// `x` for a message: plain decimals for everyday magnitudes, scientific
+/// notation for the very small and very large (never 300 zeros).
+fn readable(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() || (1e-4..1e9).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
 /// The message of [`AnalysisError::TooShort`]: a count of cycles is no
 /// count of samples ("found 0 decaying cycles of the first mode", never
 /// "the signal has 0 samples").
@@ -135,7 +145,7 @@ pub enum AnalysisError {
         value: f64,
     },
     /// A parameter is out of its valid range or not finite.
-    #[error("invalid parameter `{name}` = {value}; expected {expected}")]
+    #[error("invalid parameter `{name}` = {}; expected {expected}", readable(*value))]
     InvalidParameter {
         /// Name of the parameter, as in the function signature.
         name: &'static str,
