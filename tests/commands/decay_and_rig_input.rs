@@ -195,3 +195,25 @@ fn a_flag_of_an_absurd_magnitude_is_refused_before_the_run_with_readable_numbers
         assert!(!out.exists(), "{args:?} left {out:?}");
     }
 }
+
+#[test]
+fn a_rig_of_another_pole_pair_count_than_the_recordings_machine_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let travel = ["travel", "--quiet", "--m-car", "45.5", "--lw-start", "2", "--lw-end", "5", "--stem", "up"];
+    run_ok(&[&travel[..], &["--out", s(&data)]].concat());
+    // Before: "the machine torque from the currents neither follows nor
+    // opposes the torque that the travel needs", naming no file nor field.
+    for pole_pairs in ["5", "12"] {
+        let rig = tmp.path().join(format!("p{pole_pairs}.toml"));
+        fs::write(&rig, rig_with("pole_pairs", pole_pairs)).unwrap();
+        for command in ["analyze", "identify"] {
+            let out = tmp.path().join(format!("{command}_{pole_pairs}"));
+            let err = run_err(&["--config", s(&rig), command, s(&data), "--out", s(&out)]);
+            assert!(err.contains("up.csv`, column `i_a_A, i_b_A`"), "{err}");
+            assert!(err.contains("6.00 electrical turns per shaft turn"), "{err}");
+            assert!(err.contains(&format!("[motor].pole_pairs = {pole_pairs}")), "{err}");
+        }
+    }
+    run_ok(&["analyze", s(&data), "--out", s(&tmp.path().join("right"))]);
+}

@@ -245,6 +245,7 @@ pub fn read_dataset_on(rig: &RigConfig, dir: &Path) -> anyhow::Result<Vec<(Strin
         let toml_path = dir.join(format!("{stem}.toml"));
         recording::consistency::check_travel_distance(recording, &toml_path, rig.mechanics.sheave_radius_m)?;
         recording::consistency::check_slew(recording, &toml_path.with_extension("csv"), &limits)?;
+        recording::consistency::check_pole_pairs(recording, &toml_path.with_extension("csv"), rig.motor.pole_pairs)?;
     }
     Ok(dataset)
 }

@@ -20,6 +20,9 @@
 //! * a **travel whose metadata describe another distance** than its shaft
 //!   turned on the rig's sheave ([`check_travel_distance`], which needs the
 //!   rig's sheave radius and so is called by the commands that have it);
+//! * a **pole-pair count that is not the machine's**: the phase currents
+//!   of a travel turn `p` electrical turns per shaft turn
+//!   ([`check_pole_pairs`], with the rig's `p`);
 //! * a **one-sample glitch** in a phase current or the speed: a sample
 //!   that leaves both neighbours by more than the rig's physics can move
 //!   the signal in a sample period, and comes back
@@ -32,7 +35,7 @@
 use std::path::Path;
 
 use crate::read::ReadError;
-use crate::{CarDirection, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, SPEED};
+use crate::{CarDirection, Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE, ANGLE, I_A, I_B, SPEED};
 
 /// Slack of the angle-step bound, rad: an encoder of 256 lines or more
 /// resolves far finer; a wrap jumps by about `2 pi`.
@@ -227,6 +230,75 @@ pub fn check_travel_distance(recording: &Recording, toml_path: &Path, sheave_rad
     ))
 }
 
+/// The current vector's turns are counted on samples whose current
+/// magnitude is at least this fraction of the recording's largest (below,
+/// its angle is noise) ...
+pub const POLE_PAIR_CURRENT_FRACTION: f64 = 0.2;
+/// ... over at least this much shaft rotation, rad (two turns).
+pub const POLE_PAIR_MIN_SHAFT_RAD: f64 = 4.0 * std::f64::consts::PI;
+/// Electrical turns per shaft turn further than this from the rig's pole
+/// pairs: another machine's count.
+pub const POLE_PAIR_TOLERANCE: f64 = 0.5;
+
+/// Electrical turns of the phase currents per shaft turn over a travel:
+/// the angle of the current vector (`alpha = i_a`, `beta = (i_a + 2 i_b) /
+/// sqrt 3`) turned, over the shaft angle turned (the integrated speed),
+/// both summed over consecutive samples whose current magnitude reaches
+/// [`POLE_PAIR_CURRENT_FRACTION`] of the largest. `None` for a free decay,
+/// a recording without the columns, or less than
+/// [`POLE_PAIR_MIN_SHAFT_RAD`] of shaft rotation counted.
+pub fn electrical_turns_per_shaft_turn(recording: &Recording) -> Option<f64> {
+    let RecordingKind::Travel { .. } = recording.meta.kind else { return None };
+    let (a, b, w) = (&recording.column(I_A)?.values, &recording.column(I_B)?.values, &recording.column(SPEED)?.values);
+    let dt = 1.0 / recording.meta.sample_rate_hz;
+    let vector = |k: usize| (a[k], (a[k] + 2.0 * b[k]) / 3f64.sqrt());
+    let magnitude = |k: usize| {
+        let (x, y) = vector(k);
+        x.hypot(y)
+    };
+    let n = a.len().min(b.len()).min(w.len());
+    let largest = (0..n).map(magnitude).fold(0.0, f64::max);
+    let (mut electrical, mut shaft) = (0.0, 0.0);
+    for k in 1..n {
+        if magnitude(k - 1) < POLE_PAIR_CURRENT_FRACTION * largest
+            || magnitude(k) < POLE_PAIR_CURRENT_FRACTION * largest
+        {
+            continue;
+        }
+        let ((x0, y0), (x1, y1)) = (vector(k - 1), vector(k));
+        // The turn between the two vectors, in (-pi, pi].
+        electrical += (x0 * y1 - y0 * x1).atan2(x0 * x1 + y0 * y1);
+        shaft += w[k] * dt;
+    }
+    (shaft.abs() >= POLE_PAIR_MIN_SHAFT_RAD).then(|| (electrical / shaft).abs())
+}
+
+/// Refuses a travel whose phase currents turn another number of electrical
+/// turns per shaft turn than `pole_pairs` (the rig's `[motor].pole_pairs`):
+/// a rig file of another machine would turn the currents into a torque
+/// that neither follows nor opposes the motion. Names the samples file and
+/// the rig's field. A travel with too little current or rotation to count
+/// passes.
+///
+/// # Errors
+/// [`ReadError::Inconsistent`] naming the samples file and `[motor].pole_pairs`.
+pub fn check_pole_pairs(recording: &Recording, csv_path: &Path, pole_pairs: u32) -> Result<(), ReadError> {
+    let Some(turns) = electrical_turns_per_shaft_turn(recording) else { return Ok(()) };
+    if turns < POLE_PAIR_TOLERANCE || (turns - f64::from(pole_pairs)).abs() <= POLE_PAIR_TOLERANCE {
+        return Ok(());
+    }
+    Err(inconsistent(
+        csv_path,
+        None,
+        &format!("{I_A}, {I_B}"),
+        format!(
+            "the phase currents turn {turns:.2} electrical turns per shaft turn (`{SPEED}` integrated), but the \
+             rig's [motor].pole_pairs = {pole_pairs}"
+        ),
+        "the pole pairs of the machine that made the recording (--config, [motor].pole_pairs)",
+    ))
+}
+
 /// How fast the recorded signals of a rig can change, from the rig's
 /// physics (the commands compute it from `--config`): a step between two
 /// samples beyond it is a glitch of the acquisition, not the machine.
@@ -339,6 +411,34 @@ mod tests {
 
     fn error(r: &Recording) -> String {
         check(r, Path::new("t.toml"), Path::new("t.csv")).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn currents_that_turn_another_pole_pair_count_than_the_rigs_are_refused_naming_the_field() {
+        // The travel's currents: 10 A turning 6 electrical turns per shaft turn.
+        let mut r = travel(CarDirection::Up);
+        let angle = r.column(ANGLE).unwrap().values.clone();
+        let phase = |shift: f64| -> Vec<f64> { angle.iter().map(|a| 10.0 * (6.0 * a - shift).cos()).collect() };
+        r.columns.push(Column::new(I_A, phase(0.0)));
+        r.columns.push(Column::new(I_B, phase(TAU / 3.0)));
+        let turns = electrical_turns_per_shaft_turn(&r).unwrap();
+        assert!((turns - 6.0).abs() < 1e-3, "{turns}");
+        let csv = Path::new("d/up.csv");
+        check_pole_pairs(&r, csv, 6).unwrap();
+        let err = check_pole_pairs(&r, csv, 5).unwrap_err().to_string();
+        assert!(
+            err.contains("d/up.csv") && err.contains("6.00 electrical turns") && err.contains("[motor].pole_pairs = 5"),
+            "{err}"
+        );
+        // Down, the same count; a free decay has none to count.
+        let mut down = travel(CarDirection::Down);
+        let angle = down.column(ANGLE).unwrap().values.clone();
+        let phase = |shift: f64| -> Vec<f64> { angle.iter().map(|a| 10.0 * (6.0 * a - shift).cos()).collect() };
+        down.columns.push(Column::new(I_A, phase(0.0)));
+        down.columns.push(Column::new(I_B, phase(TAU / 3.0)));
+        assert!(check_pole_pairs(&down, csv, 12).is_err() && check_pole_pairs(&down, csv, 6).is_ok());
+        r.meta.kind = RecordingKind::FreeDecay { mass_kg: 33.0, rope_length_m: 2.5 };
+        assert_eq!(electrical_turns_per_shaft_turn(&r), None);
     }
 
     #[test]
