@@ -187,7 +187,7 @@ fn main() -> ! {
     }
     drive.install_parameters(&stored.unwrap_or_else(default_parameters), &CHAIN_MODEL, status);
     drive.set_savable(true);
-    let mut record = [0u8; 3 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP + MAX_SERVICE_BYTES_PER_STEP + 5];
+    let mut record = [0u8; 3 + MAX_BYTES_PER_STEP + MAX_REPLY_PER_STEP + MAX_SERVICE_BYTES_PER_STEP + 9];
     let mut decoder = Decoder::new();
     let mut frame = [0u8; MAX_FRAME];
     defmt::info!("PIL target up: PWM {} Hz, waiting for frames on UART0", DRIVE_CONFIG.pwm_hz);
@@ -205,7 +205,10 @@ fn main() -> ! {
                     }
                     _ => 0,
                 };
-                let n = io.write_record(&mut record, period.observer_ran, observer_cost);
+                let after_end = io.after_end.unwrap_or(observer_end);
+                let after_ticks =
+                    (io.after_start.wrapping_sub(after_end) & SYSTICK_RELOAD).saturating_sub(timing_overhead_ticks);
+                let n = io.write_record(&mut record, period.observer_ran, observer_cost, after_ticks);
                 let cost_ticks = io.control_ticks;
                 dcp_uart.write_all(&record[..n]);
                 Message::Output(StepReport::new(&period.drive.control, cost_ticks))
@@ -252,6 +255,10 @@ struct ChipIo<'a> {
     control_start: u32,
     /// The control step's cost, SysTick ticks (the two reads' own cost taken off).
     control_ticks: u32,
+    /// When the outputs were handed out: the rest of the period's work starts.
+    after_start: u32,
+    /// When the rest of the period's work ended, if the observer's task ran after it.
+    after_end: Option<u32>,
     observer_start: Option<u32>,
 }
 
@@ -275,13 +282,16 @@ impl<'a> ChipIo<'a> {
             n_service: 0,
             control_start: 0,
             control_ticks: 0,
+            after_start: 0,
+            after_end: None,
             observer_start: None,
         }
     }
 
     /// The step's record: `n_in, the DCP bytes taken, n_out, the reply
-    /// bytes, n_service, the service bytes taken, observer, its cost`; its length.
-    fn write_record(&self, record: &mut [u8], observer_ran: bool, observer_ticks: u32) -> usize {
+    /// bytes, n_service, the service bytes taken, observer, its cost, the
+    /// cost of the rest of the period`; its length.
+    fn write_record(&self, record: &mut [u8], observer_ran: bool, observer_ticks: u32, after_ticks: u32) -> usize {
         let n_in = self.n_dcp;
         record[0] = n_in as u8;
         record[1..1 + n_in].copy_from_slice(&self.dcp_taken[..n_in]);
@@ -293,7 +303,8 @@ impl<'a> ChipIo<'a> {
         end += 1 + self.n_service;
         record[end] = observer_ran as u8;
         record[end + 1..end + 5].copy_from_slice(&observer_ticks.to_le_bytes());
-        end + 5
+        record[end + 5..end + 9].copy_from_slice(&after_ticks.to_le_bytes());
+        end + 9
     }
 }
 
@@ -327,6 +338,7 @@ impl PeriodIo for ChipIo<'_> {
         // SysTick counts down, modulo its 24-bit reload.
         self.control_ticks =
             (self.control_start.wrapping_sub(end) & SYSTICK_RELOAD).saturating_sub(self.timing_overhead_ticks);
+        self.after_start = SYST::get_current();
     }
 
     fn service_reply(&mut self, reply: &ServiceReply) {
@@ -346,7 +358,9 @@ impl PeriodIo for ChipIo<'_> {
     }
 
     fn observer_started(&mut self) {
-        self.observer_start = Some(SYST::get_current());
+        let now = SYST::get_current();
+        self.after_end = Some(now);
+        self.observer_start = Some(now);
     }
 }
 

@@ -771,8 +771,27 @@ impl Controller {
         }
     }
 
-    /// One PWM period.
+    /// One PWM period: [`Controller::step_to_output`], then
+    /// [`Controller::finish_step`].
     pub fn step(&mut self, frame: &SensorFrame) -> ControlOutput {
+        let output = self.step_to_output(frame);
+        self.finish_step();
+        output
+    }
+
+    /// The part of a PWM period that can wait until its outputs are
+    /// driven: the learning of the speed-loop tick's ripple compensation
+    /// (`RippleCompensator::finish_tick`; it changes only what the next
+    /// tick reads). A step that is not finished is finished by the next.
+    pub fn finish_step(&mut self) {
+        if let Some(c) = self.compensation.as_mut() {
+            c.finish_tick();
+        }
+    }
+
+    /// The part of a PWM period up to its outputs (the compares to write
+    /// before the valley); [`Controller::finish_step`] does the rest.
+    pub fn step_to_output(&mut self, frame: &SensorFrame) -> ControlOutput {
         if let Some(last) = self.last_time_us {
             // Modular difference of a wrapping microsecond timer.
             self.supervisor.check_step_interval(frame.time_us.wrapping_sub(last));

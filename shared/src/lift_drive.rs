@@ -537,7 +537,7 @@ pub trait PeriodIo {
     fn observer_input(&mut self, input: ObserverInput) {
         let _ = input;
     }
-    /// Called just before the drive runs its own observer task.
+    /// Called just before the drive runs its own observer task, if it does.
     fn observer_started(&mut self) {}
 }
 
@@ -820,6 +820,9 @@ impl LiftDrive {
         io.control_started();
         let drive = self.control_step(sensors);
         io.drive(&drive);
+        // What can wait until the outputs are driven (the learning of the
+        // ripple compensation's tick).
+        self.controller.finish_step();
         for _ in 0..MAX_SERVICE_BYTES_PER_STEP {
             let Some(byte) = io.service_byte() else { break };
             if let Some(reply) = self.service_byte(byte, io) {
@@ -882,7 +885,7 @@ impl LiftDrive {
             ),
             StartupStep::Run(codes) => {
                 let frame = SensorFrame { phase_current_codes: codes, ..*sensors };
-                (self.controller.step(&frame), true, codes, None)
+                (self.controller.step_to_output(&frame), true, codes, None)
             }
         };
         control.brake_released &= control.pwm_enabled;

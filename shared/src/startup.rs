@@ -132,6 +132,8 @@ pub struct Startup {
     /// The angle reference is given (no alignment): the controller runs
     /// right after the calibration ([`Startup::with_angle_given`]).
     angle_given: bool,
+    /// Mid-scale ADC code (zero current).
+    zero_code: u16,
 }
 
 impl Startup {
@@ -149,6 +151,7 @@ impl Startup {
             lsb_a: q16(config.current_lsb_a()),
             dc_bus_v_per_code: q16(config.dc_bus_sense_full_scale_v / config.adc_max_code() as f32),
             angle_given: false,
+            zero_code: config.adc_zero_code(),
         }
     }
 
@@ -221,6 +224,15 @@ impl Startup {
     /// One PWM period: the raw phase-current codes (with the board's sign),
     /// the DC-bus code and the encoder count.
     pub fn step(&mut self, phase_codes: [u16; 3], dc_bus_code: u16, encoder_count: u32) -> StartupStep {
+        // The running drive's path first, and without copying the phase:
+        // it is inside every control step's deadline.
+        if let Phase::Running(offsets) = &self.phase {
+            return StartupStep::Run(offsets.correct(phase_codes, self.zero_code));
+        }
+        self.step_before_running(phase_codes, dc_bus_code, encoder_count)
+    }
+
+    fn step_before_running(&mut self, phase_codes: [u16; 3], dc_bus_code: u16, encoder_count: u32) -> StartupStep {
         let zero = self.config.adc_zero_code();
         let off = |codes: [u16; 3], event: Option<StartupEvent>| {
             StartupStep::Drive(StartupOutput { compare: [0; 3], pwm_on: false, brake_released: false, codes, event })

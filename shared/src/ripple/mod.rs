@@ -222,6 +222,9 @@ pub struct RippleCompensator {
     limit_nm: [f32; MAX_HARMONICS],
     /// Whether harmonics that make things worse back off (on by default).
     back_off_enabled: bool,
+    /// The input of the latest speed-loop tick whose learning is not done
+    /// yet ([`RippleCompensator::finish_tick`]).
+    pending: Option<LearningInput>,
 }
 
 impl RippleCompensator {
@@ -248,6 +251,7 @@ impl RippleCompensator {
             lead: 0,
             limit_nm: harmonic_limits_nm(config, orders),
             back_off_enabled: true,
+            pending: None,
         }
     }
 
@@ -264,11 +268,13 @@ impl RippleCompensator {
 
     /// Switches strategy (between travels); the learned state is kept.
     pub fn set_strategy(&mut self, strategy: Strategy) {
+        self.finish_tick();
         self.strategy = strategy;
     }
 
     /// Sets the `Strategy::Table` table (N m); its orders become the compensator's.
     pub fn set_table(&mut self, table: HarmonicTable) {
+        self.finish_tick();
         self.table = table;
         self.limit_nm = harmonic_limits_nm(&self.config, &table.orders[..table.len.min(MAX_HARMONICS)]);
         self.adaptive = HarmonicTable { torque_nm: [Complex::ZERO; MAX_HARMONICS], ..table };
@@ -310,6 +316,7 @@ impl RippleCompensator {
     /// Start of a travel: back-off flags and averages cleared; the adaptive
     /// strategies start from zero, the table and the learned table are kept.
     pub fn start_travel(&mut self) {
+        self.finish_tick();
         self.backed_off = [false; MAX_HARMONICS];
         self.fade = [0.0; MAX_HARMONICS];
         self.worse_ticks = [0; MAX_HARMONICS];
@@ -323,6 +330,7 @@ impl RippleCompensator {
 
     /// End of a travel: `Strategy::Learning` learns from it.
     pub fn end_travel(&mut self) {
+        self.finish_tick();
         if self.strategy == Strategy::Learning {
             // At least a quarter revolution of samples at the learning speed.
             let rated = self.config.rated_shaft_speed_radps();
@@ -345,26 +353,49 @@ impl RippleCompensator {
         self.current.at(shaft_angle.wrapping_add(self.lead))
     }
 
-    /// One speed-loop tick of a travel: learning, back-off, and the
-    /// coefficients of the next 16 kHz period.
+    /// One speed-loop tick of a travel: the coefficients of the next
+    /// 16 kHz periods (fade, lead); the learning and the back-off of the
+    /// tick are left for [`RippleCompensator::finish_tick`], which the
+    /// controller runs once the step's outputs are out
+    /// (`Controller::finish_step`). Splitting changes no bit: the learning
+    /// of tick `k` changes only what tick `k + 1` reads (the adaptive
+    /// coefficients, the back-off flags, the averages, the responses), and
+    /// every tick, travel start or end and strategy or table change
+    /// finishes the pending learning first.
     pub fn speed_tick(&mut self, input: &LearningInput) {
+        self.finish_tick();
         let n = self.applied.len;
         if self.strategy == Strategy::Off || n == 0 {
             return;
         }
         self.update_lead(input.speed_radps);
-        self.refresh_response(input, n);
-        let tick = self.tick_learning(input, n);
         for k in 0..n {
-            let applied = self.fade_applied(k, input);
-            if !tick.learns || self.backed_off[k] {
-                continue;
-            }
-            self.learn_harmonic(k, input, &tick, applied);
+            self.fade_applied(k, input);
         }
         let c = &self.config;
         self.current =
             HarmonicCurrent::from_table(&self.applied, c.torque_constant_nm_per_a(), &[false; MAX_HARMONICS]);
+        self.pending = Some(*input);
+    }
+
+    /// The learning of the latest speed-loop tick, if not done yet: the
+    /// model response of one harmonic refreshed, then each harmonic learns
+    /// from the tick's error with the coefficient it had in force, and the
+    /// back-off judges it.
+    pub fn finish_tick(&mut self) {
+        let Some(input) = self.pending.take() else {
+            return;
+        };
+        let n = self.applied.len;
+        self.refresh_response(&input, n);
+        let tick = self.tick_learning(&input, n);
+        for k in 0..n {
+            if !tick.learns || self.backed_off[k] {
+                continue;
+            }
+            let applied = self.applied.torque_nm[k];
+            self.learn_harmonic(k, &input, &tick, applied);
+        }
     }
 
     /// The angle lead of the 16 kHz path at `speed_radps` (rad/s): the

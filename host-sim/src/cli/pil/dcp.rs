@@ -94,6 +94,10 @@ pub struct ChipStep {
     /// The chain observer's task after the step, if it ran: its cost in
     /// SysTick ticks (25 MHz clock).
     pub observer_ticks: Option<u32>,
+    /// The rest of the period's work after the outputs were handed out
+    /// (the learning of the compensation's tick, the service and DCP
+    /// bytes), before the observer's task: SysTick ticks.
+    pub after_ticks: u32,
 }
 
 /// QEMU running the PIL target with three sockets: PIL frames, DCP, service port.
@@ -201,10 +205,11 @@ impl Chip {
         let dcp_replies = read(n_out)?;
         let n_service = read(1)?[0] as usize;
         let service_taken = read(n_service)?;
-        let observer = read(5)?;
+        let observer = read(9)?;
         let observer_ticks =
             (observer[0] != 0).then(|| u32::from_le_bytes([observer[1], observer[2], observer[3], observer[4]]));
-        Ok(ChipStep { report, dcp_taken, dcp_replies, service_taken, observer_ticks })
+        let after_ticks = u32::from_le_bytes([observer[5], observer[6], observer[7], observer[8]]);
+        Ok(ChipStep { report, dcp_taken, dcp_replies, service_taken, observer_ticks, after_ticks })
     }
 
     /// `n` bytes the chip sent on the service port.
@@ -256,10 +261,14 @@ pub struct LiftStep {
     pub service_answers: Vec<u8>,
     /// The parameters a `save` of the step wrote (the shadow's view).
     pub saved: Option<DriveParameters>,
-    /// The chip's controller step, instructions (SysTick ticks of the
-    /// 25 MHz clock under `-icount shift=5`: 1.25 instructions a tick);
-    /// `None` for the host build alone.
+    /// The chip's control step up to its outputs (what must be done
+    /// before the PWM valley), instructions (SysTick ticks of the 25 MHz
+    /// clock under `-icount shift=5`: 1.25 instructions a tick); `None`
+    /// for the host build alone.
     pub instructions: Option<f64>,
+    /// The rest of the chip's period before the observer's task (the
+    /// compensation's learning, the service and DCP bytes), instructions.
+    pub after_instructions: Option<f64>,
     /// Whether the chain observer's task ran after the step (the shadow's).
     pub observer_ran: bool,
     /// The chip's observer task after the step, instructions, if it ran
@@ -384,6 +393,7 @@ impl Lift {
         let output = period.drive.control;
         let observer_ran = period.observer_ran;
         let instructions = chip.as_ref().map(|c| c.report.cost_ticks as f64 * INSTRUCTIONS_PER_TICK);
+        let after_instructions = chip.as_ref().map(|c| c.after_ticks as f64 * INSTRUCTIONS_PER_TICK);
         let observer_instructions =
             chip.as_ref().and_then(|c| c.observer_ticks).map(|t| t as f64 * INSTRUCTIONS_PER_TICK);
         if let Some(chip) = &chip {
@@ -409,7 +419,16 @@ impl Lift {
         self.plant.advance(1.0 / self.drive.current_loop_hz as f64, self.max_step_s);
         ensure!(self.plant.in_valid_range(), "step {k}: the plant left its valid range");
         self.steps += 1;
-        Ok(LiftStep { output, dcp_replies, service_answers, saved, instructions, observer_ran, observer_instructions })
+        Ok(LiftStep {
+            output,
+            dcp_replies,
+            service_answers,
+            saved,
+            instructions,
+            after_instructions,
+            observer_ran,
+            observer_instructions,
+        })
     }
 
     /// Sends the service request `line` (without its `\n`) and steps until
@@ -477,8 +496,13 @@ pub struct CpuLoad {
     pub steps: u64,
     /// Control steps' instructions, summed.
     pub control_instructions: f64,
-    /// Largest control step, instructions.
+    /// Largest control step (to the outputs), instructions.
     pub control_max: f64,
+    /// The rest of the periods' work before the observer's task, summed, instructions.
+    pub after_instructions: f64,
+    /// Largest whole period without the observer's task (control step and
+    /// the rest), instructions.
+    pub period_max: f64,
     /// Observer runs counted.
     pub observer_runs: u64,
     /// Observer runs' instructions, summed.
@@ -516,10 +540,13 @@ impl CpuLoad {
             self.recent.clear();
             return;
         }
+        let after = step.after_instructions.unwrap_or(0.0);
         self.steps += 1;
         self.control_instructions += control;
         self.control_max = self.control_max.max(control);
-        self.recent.push_back(control);
+        self.after_instructions += after;
+        self.period_max = self.period_max.max(control + after);
+        self.recent.push_back(control + after);
         if self.recent.len() > self.divider {
             self.recent.pop_front();
         }
@@ -544,7 +571,7 @@ impl CpuLoad {
     /// Mean load, % of a 170 MHz core: the instructions of the control
     /// steps and the observer runs over the cycles of the steps counted.
     pub fn mean_percent(&self) -> f64 {
-        100.0 * (self.control_instructions + self.observer_instructions)
+        100.0 * (self.control_instructions + self.after_instructions + self.observer_instructions)
             / (self.steps.max(1) as f64 * self.cycles_per_period())
     }
 
@@ -564,9 +591,11 @@ impl CpuLoad {
             line += &format!(", {:.1} % in the busiest speed-loop period", self.worst_period_percent());
         }
         line += &format!(
-            "; control interrupt {:.0} instructions a step (max {:.0})",
+            "; control interrupt {:.0} instructions a step to the outputs (max {:.0}), {:.0} a whole period (max {:.0})",
             self.control_mean(),
-            self.control_max
+            self.control_max,
+            (self.control_instructions + self.after_instructions) / self.steps.max(1) as f64,
+            self.period_max
         );
         if self.observer_runs > 0 {
             line += &format!(
