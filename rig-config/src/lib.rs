@@ -321,6 +321,25 @@ pub fn readable(x: f64) -> String {
     }
 }
 
+/// `message` with every number written digit by digit (the TOML parser
+/// quotes `1e300` as 301 digits) rewritten by [`readable`].
+pub fn readable_numbers(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    let mut rest = message;
+    while let Some(start) = rest.find(|c: char| c.is_ascii_digit()) {
+        out.push_str(&rest[..start]);
+        let len = rest[start..].find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(rest.len() - start);
+        let token = &rest[start..start + len];
+        match token.parse::<f64>() {
+            Ok(v) if token.len() > 20 => out.push_str(&readable(v)),
+            _ => out.push_str(token),
+        }
+        rest = &rest[start + len..];
+    }
+    out.push_str(rest);
+    out
+}
+
 /// Fastest rate of the rig's mechanics that a run accepts, rad/s (about
 /// 160 kHz): the simulation steps at least once per `1 / omega` of the
 /// fastest mode, so a faster one makes a 20 s travel take hours. The
@@ -387,7 +406,7 @@ impl RigConfig {
     /// Parses and validates rig TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let config: RigConfig = toml::from_str(text)
-            .map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.to_string() })?;
+            .map_err(|e| ConfigError::Parse { path: origin.to_string(), message: readable_numbers(&e.to_string()) })?;
         config.validate(origin)?;
         Ok(config)
     }
@@ -1033,6 +1052,13 @@ mod tests {
         let text = text.replace("rated_speed_mps = 0.4 ", "rated_speed_mps = 0.05 ");
         let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
         assert!(err.contains("[travel].rated_speed_mps") && err.contains("600 s"), "{err}");
+    }
+
+    #[test]
+    fn a_number_the_parser_quotes_digit_by_digit_is_written_readably() {
+        let err = RigConfig::from_toml_str(&rig_with("name", "1e300"), "bad.toml").unwrap_err().to_string();
+        assert!(err.contains("1e300") && !err.contains("0000000000"), "{err}");
+        assert_eq!(readable_numbers("a 12 b 0.5 c 1000000000000000000000000"), "a 12 b 0.5 c 1e24");
     }
 
     #[test]

@@ -6,7 +6,10 @@
 //! `tests/commands/recording_read.rs` fuzzes the samples reader. Recordings
 //! that contradict themselves or their metadata are generated here by class
 //! (wrapped or glitched angle, dead accelerometer, direction or distance
-//! against the samples, a spike in a current or the speed) and must be refused naming the column or field.
+//! against the samples, a spike in a current or the speed) and must be refused naming the column or field;
+//! so are absurd but positive rig values (accepted only where a run
+//! finishes), free decays `identify` cannot use (each with its own cause)
+//! and inputs that are not regular files.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -104,8 +107,19 @@ fn check_rig(text: &str) {
             assert!(rig.travel.lw_low_m < rig.travel.lw_high_m && rig.travel.lw_high_m < m.rope_total_length_m);
             let _ = rig.drive_config();
             let _ = rig.observer_model();
+            // What the whole-rig bounds promise: a run finishes.
+            let (rate, field, _) = rig.fastest_mechanical_rate();
+            assert!(rate <= rig_config::MAX_MECHANICAL_RATE_RADPS, "{field}: {rate} rad/s");
+            assert!(rig.reference_travel_s() <= rig_config::MAX_TRAVEL_S, "{}", rig.reference_travel_s());
+            assert!(m.m_car_kg.iter().chain([&m.m_cw_kg]).all(|v| (1.0..=1.0e5).contains(v)), "{m:?}");
+            let side = rig.travel.lw_low_m.min(m.rope_total_length_m - rig.travel.lw_high_m);
+            assert!(side >= rig_config::MIN_ROPE_SIDE_M, "{side}");
         }
-        Err(e) => assert!(e.to_string().starts_with("fuzz.toml"), "{e}"),
+        Err(e) => {
+            let e = e.to_string();
+            assert!(e.starts_with("fuzz.toml"), "{e}");
+            assert!(!e.contains("0000000000"), "a number written digit by digit: {e}");
+        }
     }
 }
 
@@ -444,5 +458,170 @@ proptest! {
         };
         let err = read.expect_err("a contradiction was accepted").to_string();
         prop_assert!(err.contains(needle), "{defect:?}: {err}");
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Absurd but positive rig values: accepted only where a run finishes,
+// else refused naming a field with its range and why.
+
+/// A positive value of any magnitude, 1e-12 to 1e12 (log-uniform).
+fn magnitude() -> impl Strategy<Value = f64> {
+    (-12.0..12.0f64).prop_map(|e| 10f64.powf(e))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: CASES, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn a_rig_value_of_any_magnitude_is_accepted_only_where_a_run_finishes(
+        line in any::<prop::sample::Index>(),
+        value in magnitude(),
+        second in any::<prop::sample::Index>(),
+        other in magnitude(),
+    ) {
+        // One or two numeric values of the embedded rig replaced.
+        let text = rig_config::EMBEDDED_RIG_TOML;
+        let mut lines: Vec<String> = text.lines().map(String::from).collect();
+        let numeric: Vec<usize> = (0..lines.len())
+            .filter(|&i| {
+                let v = lines[i].split(" = ").nth(1).unwrap_or("").split('#').next().unwrap().trim();
+                v.parse::<f64>().is_ok() && !lines[i].starts_with('#')
+            })
+            .collect();
+        for (at, v) in [(line, value), (second, other)] {
+            let i = numeric[at.index(numeric.len())];
+            let key = lines[i].split(" = ").next().unwrap().to_string();
+            let integer = lines[i].split(" = ").nth(1).unwrap().split('#').next().unwrap().trim().parse::<i64>().is_ok();
+            lines[i] = if integer { format!("{key} = {}", v.round() as i64) } else { format!("{key} = {v:e}") };
+        }
+        let text = lines.join("\n");
+        check_rig(&text);
+        if let Err(e) = RigConfig::from_toml_str(&text, "fuzz.toml") {
+            let e = e.to_string();
+            prop_assert!(e.contains("field `") || e.contains("TOML parse error at line"), "{}", e);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Free decays `identify` cannot use: each class refused with its cause.
+
+#[derive(Debug, Clone)]
+enum DecayDefect {
+    None,
+    Growing,
+    Step,
+    Short { n: usize },
+    RateClaimed,
+    BandBelow { factor: f64 },
+}
+
+fn decay_defect() -> impl Strategy<Value = DecayDefect> {
+    prop_oneof![
+        Just(DecayDefect::None),
+        Just(DecayDefect::Growing),
+        Just(DecayDefect::Step),
+        (2..64usize).prop_map(|n| DecayDefect::Short { n }),
+        Just(DecayDefect::RateClaimed),
+        (0.4..0.8f64).prop_map(|factor| DecayDefect::BandBelow { factor }),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn a_free_decay_identify_cannot_use_is_refused_with_its_own_cause(
+        f in 3.0..60.0f64,
+        zeta in 0.005..0.05f64,
+        fs in prop::sample::select(vec![1024.0, 4096.0, 16384.0]),
+        seconds in 2.0..5.0f64,
+        rest in 0.0..0.5f64,
+        defect in decay_defect(),
+    ) {
+        use host_sim::cli::identify_screen::{decay_refusal, MaxFrequency, DEFAULT_MAX_FREQUENCY_HZ};
+        let rig = RigConfig::embedded_default().unwrap();
+        let mut acc: Vec<f64> = (0..(seconds * fs) as usize)
+            .map(|i| {
+                let t = i as f64 / fs - rest;
+                if t < 0.0 { 1e-4 * (i as f64 * 0.7).sin() } else {
+                    (-zeta * std::f64::consts::TAU * f * t).exp() * (std::f64::consts::TAU * f * t).sin()
+                }
+            })
+            .collect();
+        let (mut rate, mut band) = (fs, MaxFrequency { hz: DEFAULT_MAX_FREQUENCY_HZ, given: false });
+        let needle = match defect {
+            DecayDefect::None => "",
+            DecayDefect::Growing => { acc.reverse(); "does not decay" }
+            DecayDefect::Step => {
+                let n = acc.len();
+                acc.iter_mut().enumerate().for_each(|(i, v)| *v = if i < n / 2 { 0.0 } else { 1.0 });
+                "no oscillation"
+            }
+            DecayDefect::Short { n } => { acc.truncate(n); "samples" }
+            DecayDefect::RateClaimed => { rate = 1000.0 * fs; "the decay lasts" }
+            DecayDefect::BandBelow { factor } => {
+                band = MaxFrequency { hz: (factor * f).max(1.1), given: true };
+                "--max-frequency = "
+            }
+        };
+        let csv = Path::new("data/decay.csv");
+        let refusal = decay_refusal(&rig, csv, &acc, rate, band);
+        if needle.is_empty() {
+            prop_assert!(refusal.is_none(), "a sound decay refused: {:?}", refusal);
+        } else {
+            let e = refusal.expect("an unusable decay was accepted");
+            prop_assert!(e.contains(needle) && e.contains("data/decay."), "{:?}: {}", defect, e);
+            prop_assert!(!e.contains("max_frequency_hz") && !e.contains("0000000000"), "{}", e);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Inputs that are not regular files: refused at open, naming the path.
+
+#[derive(Debug, Clone, Copy)]
+enum OddFile {
+    Folder,
+    NamedPipe,
+    DanglingLink,
+    LinkToFolder,
+    Empty,
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[cfg(unix)]
+    #[test]
+    fn an_input_that_is_no_regular_file_is_refused_naming_it(
+        odd in prop::sample::select(vec![OddFile::Folder, OddFile::NamedPipe, OddFile::DanglingLink, OddFile::LinkToFolder, OddFile::Empty]),
+        samples in any::<bool>(),
+        stem in "[a-z]{1,8}",
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let meta = "format = \"elevator-measurement/1\"\nkind = \"free_decay\"\nsample_rate_hz = 1000.0\nmass_kg = 33.0\nrope_length_m = 2.5\n";
+        let (toml, csv) = (dir.path().join(format!("{stem}.toml")), dir.path().join(format!("{stem}.csv")));
+        let (odd_path, other) = if samples { (&csv, &toml) } else { (&toml, &csv) };
+        fs::write(other, if samples { meta.to_string() } else { "time_s,acc_car_mps2\n0,0.1\n0.001,0.2\n".to_string() }).unwrap();
+        match odd {
+            OddFile::Folder => fs::create_dir(odd_path).unwrap(),
+            OddFile::NamedPipe => prop_assert!(std::process::Command::new("mkfifo").arg(odd_path).status().unwrap().success()),
+            OddFile::DanglingLink => std::os::unix::fs::symlink(dir.path().join("missing"), odd_path).unwrap(),
+            OddFile::LinkToFolder => std::os::unix::fs::symlink(dir.path(), odd_path).unwrap(),
+            OddFile::Empty => fs::write(odd_path, "").unwrap(),
+        }
+        // In a thread: a reader that waited on the pipe would hang the test.
+        let path = dir.path().to_path_buf();
+        let (send, receive) = std::sync::mpsc::channel();
+        std::thread::spawn(move || send.send(recording::read_dataset(&path, ROPE_TOTAL_M).map(|d| d.len())));
+        let read = receive.recv_timeout(std::time::Duration::from_secs(10)).expect("the reader hung");
+        let file = odd_path.file_name().unwrap().to_str().unwrap();
+        let e = read.expect_err("an odd file was read").to_string();
+        prop_assert!(e.contains(file), "{:?} {}: {}", odd, file, e);
+        // The dataset given as a file.
+        let e = recording::read_dataset(other, ROPE_TOTAL_M).expect_err("a file read as a dataset").to_string();
+        prop_assert!(e.contains(other.file_name().unwrap().to_str().unwrap()), "{}", e);
     }
 }

@@ -134,7 +134,7 @@ pub fn decay_refusal(rig: &RigConfig, csv: &Path, acc: &[f64], fs: f64, band: Ma
     if let Some(reason) = mode_above_band(rig, acc, fs, band) {
         return Some(format!("{at}: {reason}"));
     }
-    grows(released).map(|reason| format!("{at}: {reason}"))
+    grows(released, release, fs).map(|reason| format!("{at}: {reason}"))
 }
 
 /// A released record (from sample `release`) that stays where it is: a
@@ -179,19 +179,24 @@ fn mode_above_band(rig: &RigConfig, acc: &[f64], fs: f64, band: MaxFrequency) ->
     })
 }
 
-/// A released record whose oscillation grows: the root mean square of its
-/// last quarter at least that of its first.
-fn grows(released: &[f64]) -> Option<String> {
-    let quarter = released.len() / 4;
-    let rms = |s: &[f64]| {
-        let mean = s.iter().sum::<f64>() / s.len() as f64;
-        (s.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / s.len() as f64).sqrt()
-    };
-    let (first, last) = (rms(&released[..quarter]), rms(&released[released.len() - quarter..]));
-    (last >= first).then(|| {
+/// A released record that grows: at least as much of its energy (the sum
+/// of its squared samples) before its largest swing as after it. A free
+/// decay swings largest within a cycle of its release and spends its energy
+/// dying away.
+fn grows(released: &[f64], release: usize, fs: f64) -> Option<String> {
+    let peak =
+        released.iter().enumerate().fold((0, 0.0f64), |m, (i, v)| if v.abs() > m.1 { (i, v.abs()) } else { m }).0;
+    let energy = |s: &[f64]| s.iter().map(|v| v * v).sum::<f64>();
+    let (before, after) = (energy(&released[..peak]), energy(&released[peak..]));
+    (before >= after).then(|| {
         format!(
-            "the oscillation does not decay: root mean square {first:.4} m/s^2 over the first quarter after the \
-             release, {last:.4} m/s^2 over the last; expected a free decay (a negative damping is not physical)"
+            "the oscillation does not decay: its largest swing comes at line {} (t = {} s), {} s after the release, \
+             with {:.0} % of the record's energy before it; expected a free decay, largest at its release and dying \
+             away (a negative damping is not physical)",
+            release + peak + 2,
+            readable((release + peak) as f64 / fs),
+            readable(peak as f64 / fs),
+            100.0 * before / (before + after)
         )
     })
 }

@@ -613,10 +613,11 @@ fn read_dataset_with(
         if path.extension().is_none_or(|e| e != "toml") {
             continue;
         }
-        let is_file = fs::metadata(&path).map_err(|source| ReadError::Io { path: path.clone(), source })?.is_file();
-        if !is_file {
-            continue;
-        }
+        // A `<stem>.toml` that is a folder, a pipe or a link to one is
+        // refused naming it, not skipped: the dataset would lose a
+        // recording without a word.
+        fs::metadata(&path).map_err(|source| ReadError::Io { path: path.clone(), source })?;
+        refuse_special_file(&path)?;
         let stem =
             path.file_stem().and_then(|s| s.to_str()).ok_or(ReadError::NonUtf8FileName { path: path.clone() })?;
         stems.push((stem.to_string(), path));
