@@ -565,6 +565,21 @@ fn a_car_observer_travel_on_the_emulated_chip_rides_as_on_the_host_and_fits_the_
     // of a 170 MHz core (instructions counted under -icount, not time).
     println!("{}", on_chip.load.summary());
     assert!(on_chip.load.mean_percent() < 60.0, "{}", on_chip.load.summary());
+    // Every step's compares (the learning of the strategy's ticks left for
+    // after them) within the real deadline, the valley half a PWM period
+    // after the sample, one cycle counted per instruction and 255 cycles
+    // for the conversions; the whole period's work within the period.
+    let half_period_cycles = rig.pwm_period_counts() as u32;
+    assert!(
+        drive_core::pwm_timing::compares_in_time(true, 255 + on_chip.load.control_max as u32, half_period_cycles),
+        "a step of {} instructions to its outputs misses the valley",
+        on_chip.load.control_max
+    );
+    assert!(
+        255.0 + on_chip.load.period_max < 2.0 * half_period_cycles as f64,
+        "a period's work of {} instructions overruns the period",
+        on_chip.load.period_max
+    );
 }
 
 #[test]

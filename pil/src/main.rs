@@ -1,34 +1,41 @@
-//! Processor-in-the-loop target: the drive core of `shared`, compiled for
-//! the Cortex-M4F exactly as for the STM32G474, on QEMU's `mps2-an386`.
+//! Processor-in-the-loop target: the drive's application layer
+//! (`drive_core::lift_drive::LiftDrive`, the type the firmware's control
+//! interrupt runs), compiled for the Cortex-M4F exactly as for the
+//! STM32G474, on QEMU's `mps2-an386`.
 //!
 //! The host (`host-sim pil`) sends one [`Message::Sense`] frame per PWM
-//! period over UART0; the target steps the controller and answers with a
-//! [`Message::Output`] frame that carries the outputs, a digest of the
-//! telemetry and the cost of the step in SysTick ticks (processor clock, 25 MHz on this machine; under
-//! `qemu -icount shift=N` each instruction advances time by 2^N ns, so the
-//! host converts ticks to instructions). Travel and reset commands are
-//! acknowledged with [`Message::Ack`]. The frame codec is `drive_core::frame`,
-//! the same code the host uses.
+//! period over UART0; the target runs one `LiftDrive::period` on it and
+//! answers with a [`Message::Output`] frame that carries the outputs, a
+//! digest of the telemetry and the cost of the control step up to its
+//! outputs (the start-up sequence or the controller: what the firmware
+//! must finish before the PWM valley) in SysTick ticks (processor clock,
+//! 25 MHz on this machine; under `qemu -icount shift=N` each instruction
+//! advances time by 2^N ns, so the host converts ticks to instructions).
+//! The drive starts as after any reset: settling and the current-offset
+//! calibration with gates off and the brake applied, then, its angle
+//! reference given (`AngleReference::Given`: the simulated rotor starts at
+//! electrical zero), idle until a travel is commanded. Travel and reset
+//! commands (the controller-level test messages) are acknowledged with
+//! [`Message::Ack`]. The frame codec is `drive_core::frame`, the same code
+//! the host uses.
 //!
-//! The lift controller's DCP line is UART1: at every `Sense` frame the
-//! target takes the DCP bytes that have arrived (at most
-//! `drive_core::lift_drive::MAX_BYTES_PER_STEP`), runs the drive's
-//! application layer (`drive_core::lift_drive::LiftDrive`: the DCP slave,
-//! the commands it gives the controller, then the controller step) with the
-//! frame's time stamp as the DCP clock, and writes one record per step on
-//! UART1: `n_in, the bytes taken, n_out, the reply bytes, n_service, the
-//! service bytes taken, observer, its cost` (`observer` 1 when the chain
-//! observer's task ran after the step, then its cost in SysTick ticks as
-//! four little-endian bytes, 0 otherwise). The host's lift controller reads its replies from
-//! the records, and the host shadow replays the same bytes at the same
-//! steps, so the chip and the host run the same application layer bit for
-//! bit whatever the emulator's timing of the bytes.
-//!
-//! The service port (`drive_core::service`, one ASCII line per request) is
-//! UART2: before the DCP bytes of a step the target takes the service bytes
-//! that have arrived, up to the end of one line (at most
-//! `drive_core::lift_drive::MAX_SERVICE_BYTES_PER_STEP`), and writes the
-//! answer to a finished line on UART2.
+//! The lift controller's DCP line is UART1 and the service port
+//! (`drive_core::service`, one ASCII line per request) UART2: the period
+//! takes, after the control step, the service bytes that have arrived up
+//! to the end of one line (at most
+//! `drive_core::lift_drive::MAX_SERVICE_BYTES_PER_STEP`) and writes the
+//! answer to a finished line on UART2, then the DCP bytes (at most
+//! `drive_core::lift_drive::MAX_BYTES_PER_STEP`) with the frame's time
+//! stamp as the DCP clock. One record per period goes out on UART1:
+//! `n_in, the DCP bytes taken, n_out, the reply bytes, n_service, the
+//! service bytes taken, observer, its cost, the rest` (`observer` 1 when
+//! the chain observer's task ran after the period's work, then its cost in
+//! SysTick ticks as four little-endian bytes, 0 otherwise; `the rest` the
+//! ticks of the period's work after the outputs and before the observer's
+//! task, four little-endian bytes). The host's lift controller reads its
+//! replies from the records, and the host shadow replays the same bytes at
+//! the same periods, so the chip and the host run the same application
+//! layer bit for bit whatever the emulator's timing of the bytes.
 //!
 //! Parameters: the drive's parameter record (`drive_core::param_store`)
 //! under key 0 of a `sequential-storage` map, as the firmware keeps it,
@@ -42,9 +49,8 @@
 //!
 //! The chain observer: with a strategy that uses it, the controller
 //! publishes the observer's input at each speed-loop tick and the
-//! observer's task (`drive_core::observer::ObserverTask`, through
-//! `LiftDrive::observer_step`) runs after the control step, before the
-//! next frame: a task below the control interrupt that finishes within the
+//! observer's task (`drive_core::observer::ObserverTask`, kept by the
+//! drive) runs at the end of the period, before the next frame: a task below the control interrupt that finishes within the
 //! PWM period, on the schedule of `drive_core::observer::task` (the
 //! estimate of tick `k`'s input used at tick `k + 1`), the firmware's.
 //!

@@ -1,14 +1,17 @@
-//! The lift drive's application layer between the DCP line and the
-//! controller: bytes in, replies out, and the controller commands that the
-//! master's requests become. No hardware: the firmware, the PIL target and
-//! the host run this same code.
+//! The lift drive's application layer: [`LiftDrive`], the start-up
+//! sequence ([`crate::startup`]), the controller, the DCP port, the service
+//! port ([`crate::service`]), the chain observer's mailbox and the faults
+//! the hardware reports, one [`LiftDrive::period`] per PWM period with its
+//! messages through [`PeriodIo`]. No hardware: the firmware (its control
+//! interrupt), the PIL target and the host run this same code; only their
+//! [`PeriodIo`] differs.
 //!
 //! - [`DcpPort`] takes the received bytes with their time stamps, delimits
 //!   the messages ([`crate::dcp::FrameReceiver`]), runs the slave
 //!   ([`crate::dcp::Slave`]) and returns the reply to send and the command
 //!   for the controller.
-//! - [`drive_status`] is what the slave is told about the drive, from the
-//!   controller's state and speed.
+//! - [`output_status`] is what the slave is told about the drive: the
+//!   state, the outputs driven, any latched fault.
 //! - [`apply`] applies a [`ControllerCommand`] to a [`Controller`].
 //!
 //! A distance travel (DCP4) becomes [`Controller::command_travel`]; a

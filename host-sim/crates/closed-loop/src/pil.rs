@@ -8,14 +8,22 @@
 //! 25 MHz processor clock of the machine, so a step's instructions are its
 //! ticks times `40 ns / 2^N ns`.
 //!
-//! Every step is checked as it happens: a host build of the same controller
-//! (the shadow) takes the same inputs, and the target's outputs and
-//! telemetry digest must equal the shadow's bit for bit, or the run stops at
-//! that step with both printed. The telemetry the closed loop records is the
-//! shadow's, which the digest has shown to be the target's. With a strategy
-//! that uses the chain observer, the target runs the observer's task after
-//! each control step (`drive_core::lift_drive::LiftDrive::observer_step`)
-//! and the shadow does the same, on the schedule of `drive_core::observer::task`.
+//! The target runs the drive's application layer
+//! (`drive_core::lift_drive::LiftDrive`, as the firmware does); only UART0
+//! is connected here, so its DCP line and service port hear nothing. It
+//! starts as after any reset: [`PilTarget::launch`] first runs its
+//! start-up sequence (settling and the current-offset calibration, gates
+//! off and brake applied) on frames of the machine at rest, then the
+//! controller is idle until a travel is commanded.
+//!
+//! Every step is checked as it happens: a host build of the same
+//! application layer (the shadow) takes the same inputs, and the target's
+//! outputs and telemetry digest must equal the shadow's bit for bit, or the
+//! run stops at that step with both printed. The telemetry the closed loop
+//! records is the shadow's, which the digest has shown to be the target's.
+//! With a strategy that uses the chain observer, the target runs the
+//! observer's task at the end of each period (kept by its `LiftDrive`) and
+//! the shadow does the same, on the schedule of `drive_core::observer::task`.
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};

@@ -1,7 +1,8 @@
 //! The processor in the loop with a lift controller on the DCP line: the
 //! emulated chip (QEMU mps2-an386, the `pil/` target) runs the drive's
-//! application layer (`drive_core::lift_drive::LiftDrive`: the service
-//! port, the DCP slave, the commands it gives, the controller) with the PIL
+//! application layer (`drive_core::lift_drive::LiftDrive`: the start-up
+//! sequence, the controller, the service port, the DCP slave and the
+//! commands it gives, the observer's task, the code the firmware runs) with the PIL
 //! frames on UART0, the DCP line on UART1 and the service port on UART2;
 //! this side plays the lift controller ([`Master`]) and closes the loop
 //! around the plant ([`Lift`]). A host build of the same application layer
