@@ -229,6 +229,10 @@ pub struct DrivenTravel<'a> {
     /// The torque lines of the rig drive's current transducers over the
     /// constant-speed stage (none where the direct-axis current shows none).
     pub transducer_lines: &'a [TransducerTorqueLine],
+    /// The series that give the machine's true torque from the recorded
+    /// currents under a transducer error (`current_sensor_error`), when
+    /// the recorded currents are the drive's own transducer signals.
+    pub transducer: Option<&'a crate::transducer::TransducerSeries>,
 }
 
 /// An angle-locked line of the torque that the rig drive's current
@@ -410,15 +414,17 @@ fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_
 }
 
 /// The effects of the library the torque-driven model can hold: the
-/// mechanical ones of [`Line`] while the rig moves, and the encoder's angle
-/// error (the model reads the true angle from the recorded one). Not:
-/// effects that act through the drive's currents (`dead_time`,
-/// `current_sensor_error`: the recorded currents, and so the torque that
-/// drives the model, already carry them), and `brake_stop`, which acts
-/// while the brake holds, where another drive's start and stop sequence is
-/// not compared.
+/// mechanical ones of [`Line`] while the rig moves, the encoder's angle
+/// error (the model reads the true angle from the recorded one) and the
+/// current transducers' errors (the model takes the true torque from the
+/// recorded currents, read as the drive's transducer signals:
+/// [`crate::transducer`]; recorded by independent clamps, the currents
+/// carry the error themselves and the direct-axis lines show it). Not:
+/// `dead_time` (the recorded currents, and so the torque that drives the
+/// model, carry it), and `brake_stop`, which acts while the brake holds,
+/// where another drive's start and stop sequence is not compared.
 pub fn holds_effect(kind: EffectKind) -> bool {
-    !matches!(kind, EffectKind::DeadTime | EffectKind::CurrentSensorError | EffectKind::BrakeStop)
+    !matches!(kind, EffectKind::DeadTime | EffectKind::BrakeStop)
 }
 
 /// Car and counterweight accelerations (m/s^2, positive up) of the chain
@@ -453,7 +459,12 @@ fn torque_driven_accelerations_with(
     max_rate_per_step: f64,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let corrected = true_shaft_angle_rad(travel.shaft_angle_rad, effects);
+    let true_torque = match (&effects.current_sensor_error, travel.transducer) {
+        (Some(error), Some(series)) => Some(series.true_torque_nm(travel.torque_nm, error)),
+        _ => None,
+    };
     let travel = &DrivenTravel {
+        torque_nm: true_torque.as_deref().unwrap_or(travel.torque_nm),
         shaft_angle_rad: corrected.as_deref().unwrap_or(travel.shaft_angle_rad),
         motion: travel.motion.clone(),
         constant_speed: travel.constant_speed.clone(),
@@ -709,6 +720,7 @@ mod tests {
             constant_speed: 0..torque_nm.len(),
             sample_rate_hz,
             transducer_lines: &[],
+            transducer: None,
         }
     }
 

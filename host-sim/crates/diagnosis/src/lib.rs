@@ -49,6 +49,7 @@ pub mod screen;
 pub mod signals;
 pub mod simulate;
 pub mod spectra;
+pub mod transducer;
 pub mod travel_signals;
 
 use std::time::Instant;
@@ -627,6 +628,28 @@ fn decide_drive(
 }
 
 /// The model's counterpart of a measured recording, with its two
+/// The series that give a travel's true torque under a current-transducer
+/// error ([`transducer`]), on the grid of its chain signals `measured`;
+/// none when the currents cannot be read again (the torque itself was).
+fn transducer_series(
+    rig: &RigConfig,
+    recording: &Recording,
+    stem: &str,
+    measured: &ChainSignals,
+) -> Option<transducer::TransducerSeries> {
+    let torque = travel_signals::travel_torque(rig, recording, stem).ok()?;
+    let factor = (recording.meta.sample_rate_hz / measured.sample_rate_hz).round().max(1.0) as usize;
+    transducer::TransducerSeries::of(
+        rig,
+        recording,
+        stem,
+        &torque.shaft_angle_rad,
+        torque.electrical_offset_rad,
+        factor,
+    )
+    .ok()
+}
+
 /// perturbations: the closed loop (the project's drive) or, for travels
 /// under another drive, the torque-driven mechanics ([`driven`]); the
 /// measured signals reduced to the channels the counterpart has.
@@ -658,11 +681,13 @@ fn counterpart(
         Some(Ok(lines)) => electrical_lines::transducer_torque_lines(&models[0].motor, lines),
         _ => Vec::new(),
     };
+    let transducer = if driven { transducer_series(models[0], recording, stem, &measured) } else { None };
     let drive_record = DriveRecord {
         torque_nm: &torque,
         speed_estimate_radps: &speed,
         controller,
         transducer_lines: &transducer_lines,
+        transducer: transducer.as_ref(),
     };
     let none = Effects::none();
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
@@ -686,6 +711,7 @@ fn counterpart(
             speed_estimate_radps: speed.clone(),
             controller,
             transducer_lines: transducer_lines.clone(),
+            transducer: transducer.clone(),
         };
         // The nominal run made as the attribution makes every effect's.
         let how = Counterpart::Driven(std::sync::Arc::new(inputs));
@@ -1042,8 +1068,10 @@ fn gap_after(model: &RigConfig, effects: &Effects, c: &Compared, recordings: &mu
 
 /// The verdict from the nominal model's gap (`is_nominal`) with the best
 /// candidate of the attribution, and the direct-axis lines when present
-/// with theirs: `nominal` when neither shows a gap, `explained` when every
-/// gap shown is explained (held-out shrink at least the option's).
+/// with theirs: `explained` when a named candidate removes the held-out
+/// gap (shrink at least the option's) and the lines' gap is explained
+/// too, whatever the nominal gap's size; otherwise `nominal` when neither
+/// shows a gap, `explained` when every gap shown is explained.
 fn verdict_of(
     is_nominal: bool,
     best: Option<&Candidate>,
@@ -1052,7 +1080,13 @@ fn verdict_of(
 ) -> Verdict {
     let explains =
         |c: Option<&Candidate>| c.is_some_and(|b| b.naming.named && b.held_out_shrink >= options.explained_shrink);
-    if is_nominal && electrical.is_none() {
+    let lines_explained = electrical.is_none_or(|e| explains(e.ranking.first()));
+    if explains(best) && lines_explained {
+        // A named effect that removes the held-out gap wins over the
+        // nominal model, however small that gap: the same machinery
+        // compares both on the same held-out recordings.
+        Verdict::Explained
+    } else if is_nominal && electrical.is_none() {
         Verdict::Nominal
     } else if (is_nominal || explains(best)) && electrical.is_none_or(|e| explains(e.ranking.first())) {
         Verdict::Explained
@@ -1120,9 +1154,9 @@ pub fn diagnose(
         let names: Vec<&str> = not_fitted.iter().map(|k| k.name()).collect();
         format!(
             "the rig's drive is another, so the effects are fitted with the mechanics driven by its measured torque; \
-             not fitted to the mechanics: {} (the dead time and current-sensor errors act through the currents, \
-             which the measured torque already carries: they are fitted to the direct-axis current's lines instead; \
-             the brake clamp acts at standstill, where another drive's start and stop are not compared)",
+             not fitted to the mechanics: {} (the dead time acts through the currents, which the measured torque \
+             already carries: it is fitted to the direct-axis current's lines instead; the brake clamp acts at \
+             standstill, where another drive's start and stop are not compared)",
             names.join(", ")
         )
     });

@@ -163,6 +163,8 @@ pub struct DrivenInputs {
     pub controller: Option<drive_law::SpeedController>,
     /// The torque lines of the rig drive's current transducers.
     pub transducer_lines: Vec<driven::TransducerTorqueLine>,
+    /// The series that give the true torque under a transducer error.
+    pub transducer: Option<crate::transducer::TransducerSeries>,
 }
 
 impl DrivenInputs {
@@ -173,6 +175,7 @@ impl DrivenInputs {
             speed_estimate_radps: &self.speed_estimate_radps,
             controller: self.controller,
             transducer_lines: &self.transducer_lines,
+            transducer: self.transducer.as_ref(),
         }
     }
 }
@@ -188,6 +191,8 @@ pub struct DriveRecord<'a> {
     pub controller: Option<drive_law::SpeedController>,
     /// The torque lines of the rig drive's current transducers.
     pub transducer_lines: &'a [driven::TransducerTorqueLine],
+    /// The series that give the true torque under a transducer error.
+    pub transducer: Option<&'a crate::transducer::TransducerSeries>,
 }
 
 impl Counterpart {
@@ -249,6 +254,7 @@ pub fn driven_counterpart(
         constant_speed: constant,
         sample_rate_hz: measured.sample_rate_hz,
         transducer_lines: drive.transducer_lines,
+        transducer: drive.transducer,
     };
     let (car, cw) = driven::torque_driven_accelerations(model, &travel, settings, effects)?;
     // The rig's accelerometers high-pass what they record; the model's

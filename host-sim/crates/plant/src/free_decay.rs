@@ -123,9 +123,13 @@ pub fn simulate_free_decay_with(
     };
     // Tension change (N) of spring i stretched by `stretch` (m) beyond its
     // static stretch: linear, or following the instantaneous tension.
+    let segments: Vec<_> = match &stiffening {
+        None => Vec::new(),
+        Some(e) => static_tensions.iter().map(|&t| e.segment(spec.rope_ea_n, t, segment_length)).collect(),
+    };
     let tension_change = |i: usize, stretch: f64| match &stiffening {
         None => springs[i] * stretch,
-        Some(e) => e.tension_change_n(spec.rope_ea_n, static_tensions[i], stretch, segment_length),
+        Some(_) => segments[i].tension_change_n(stretch),
     };
     let segment = mu * spec.rope_length_m / n as f64;
     let frame = effects.car_frame_mode;

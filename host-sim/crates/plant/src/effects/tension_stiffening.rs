@@ -36,17 +36,30 @@ impl TensionStiffening {
     /// rises as the amplitude decays. (An exponent at or above 1 has no
     /// finite closed form; it falls back to the linear spring.)
     pub fn tension_change_n(&self, ea0_n: f64, static_tension_n: f64, stretch_change_m: f64, length_m: f64) -> f64 {
+        self.segment(ea0_n, static_tension_n, length_m).tension_change_n(stretch_change_m)
+    }
+
+    /// A rope segment of unstretched length `length_m` (m) at static
+    /// tension `static_tension_n` (N), `ea0_n` (N) the rig's EA, with what
+    /// [`TensionStiffening::tension_change_n`] needs worked out once.
+    pub fn segment(&self, ea0_n: f64, static_tension_n: f64, length_m: f64) -> StiffeningSegment {
         let beta = 1.0 - self.alpha;
         let t_s = static_tension_n.max(f64::MIN_POSITIVE);
         if beta <= 1e-6 || self.alpha == 0.0 {
-            return self.ea_n(ea0_n, t_s) / length_m * stretch_change_m;
+            return StiffeningSegment {
+                static_tension_n: t_s,
+                linear_n_per_m: self.ea_n(ea0_n, t_s) / length_m,
+                ..Default::default()
+            };
         }
         let s = ea0_n * self.reference_tension_n.powf(-self.alpha) / length_m;
-        let base = t_s.powf(beta) + beta * s * stretch_change_m;
-        if base <= 0.0 {
-            return -t_s;
+        StiffeningSegment {
+            static_tension_n: t_s,
+            linear_n_per_m: 0.0,
+            static_power: t_s.powf(beta),
+            slope: beta * s,
+            inverse_beta: 1.0 / beta,
         }
-        base.powf(1.0 / beta) - t_s
     }
 
     /// The stretch change (m) that changes a segment's tension by
@@ -62,6 +75,39 @@ impl TensionStiffening {
         let s = ea0_n * self.reference_tension_n.powf(-self.alpha) / length_m;
         let t = (t_s + tension_change_n).max(0.0);
         (t.powf(beta) - t_s.powf(beta)) / (beta * s)
+    }
+}
+
+/// A rope segment under tension stiffening ([`TensionStiffening::segment`]):
+/// `T = (T_s^beta + beta s dx)^(1/beta)`, or a linear spring where the
+/// exponent has no closed form.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StiffeningSegment {
+    /// Static tension `T_s`, N.
+    pub static_tension_n: f64,
+    /// Stiffness of the linear fallback, N/m (0 when the law applies).
+    pub linear_n_per_m: f64,
+    /// `T_s^beta`, N^beta.
+    pub static_power: f64,
+    /// `beta s`, N^beta/m.
+    pub slope: f64,
+    /// `1 / beta`, dimensionless.
+    pub inverse_beta: f64,
+}
+
+impl StiffeningSegment {
+    /// Tension change (N) for a stretch `stretch_change_m` (m) beyond the
+    /// static one; `-T_s` once the segment is slack.
+    #[inline]
+    pub fn tension_change_n(&self, stretch_change_m: f64) -> f64 {
+        if self.linear_n_per_m != 0.0 {
+            return self.linear_n_per_m * stretch_change_m;
+        }
+        let base = self.static_power + self.slope * stretch_change_m;
+        if base <= 0.0 {
+            return -self.static_tension_n;
+        }
+        base.powf(self.inverse_beta) - self.static_tension_n
     }
 }
 
