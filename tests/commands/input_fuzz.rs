@@ -15,11 +15,16 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
+use proptest::test_runner::RngSeed;
 use recording::evimp::EVIMP_BOUNDS;
 use recording::{
     read_evimp, read_meta, RecordingKind, MAX_MASS_KG, MAX_ROPE_LENGTH_M, MAX_SAMPLE_RATE_HZ, META_FIELDS,
 };
 use rig_config::RigConfig;
+
+/// Seed of every target: each CI run tries the same cases (a failure
+/// reproduces; `PROPTEST_CASES` and another seed explore further by hand).
+const SEED: u64 = 0x5eed_1e1f_b0a7;
 
 /// Cases per target: enough to cover the strategies' shapes, small enough
 /// for every CI run.
@@ -230,7 +235,7 @@ fn evimp_text() -> impl Strategy<Value = String> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: CASES, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: CASES, failure_persistence: None, rng_seed: RngSeed::Fixed(SEED), ..ProptestConfig::default() })]
 
     #[test]
     fn rig_config_mutated_parses_or_is_refused(edits in prop::collection::vec(edit(), 0..6)) {
@@ -418,7 +423,7 @@ fn apply_defect(r: &mut recording::Recording, defect: &Defect) {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 96, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 96, failure_persistence: None, rng_seed: RngSeed::Fixed(SEED), ..ProptestConfig::default() })]
 
     #[test]
     fn a_recording_that_contradicts_itself_or_its_metadata_is_refused_naming_the_column(
@@ -471,7 +476,7 @@ fn magnitude() -> impl Strategy<Value = f64> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: CASES, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: CASES, failure_persistence: None, rng_seed: RngSeed::Fixed(SEED), ..ProptestConfig::default() })]
 
     #[test]
     fn a_rig_value_of_any_magnitude_is_accepted_only_where_a_run_finishes(
@@ -529,7 +534,7 @@ fn decay_defect() -> impl Strategy<Value = DecayDefect> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 48, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 48, failure_persistence: None, rng_seed: RngSeed::Fixed(SEED), ..ProptestConfig::default() })]
 
     #[test]
     fn a_free_decay_identify_cannot_use_is_refused_with_its_own_cause(
@@ -541,7 +546,6 @@ proptest! {
         defect in decay_defect(),
     ) {
         use host_sim::cli::identify_screen::{decay_refusal, MaxFrequency, DEFAULT_MAX_FREQUENCY_HZ};
-        let rig = RigConfig::embedded_default().unwrap();
         let mut acc: Vec<f64> = (0..(seconds * fs) as usize)
             .map(|i| {
                 let t = i as f64 / fs - rest;
@@ -567,9 +571,14 @@ proptest! {
             }
         };
         let csv = Path::new("data/decay.csv");
-        let refusal = decay_refusal(&rig, csv, &acc, rate, band);
+        let refusal = decay_refusal(csv, &acc, rate, band);
         if needle.is_empty() {
             prop_assert!(refusal.is_none(), "a sound decay refused: {:?}", refusal);
+        } else if let (DecayDefect::BandBelow { .. }, None) = (&defect, &refusal) {
+            // Passed on: the identification in the band must then refuse it
+            // (a mode at the band's top), never give an EA of another line.
+            let id = diagnosis::identify::identify_free_decay(&acc, rate, 33.0, 2.5, 0.095, 9.81, band.hz);
+            prop_assert!(id.is_err(), "a band below the mode gave {:?}", id);
         } else {
             let e = refusal.expect("an unusable decay was accepted");
             prop_assert!(e.contains(needle) && e.contains("data/decay."), "{:?}: {}", defect, e);
@@ -591,7 +600,7 @@ enum OddFile {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, rng_seed: RngSeed::Fixed(SEED), ..ProptestConfig::default() })]
 
     #[cfg(unix)]
     #[test]
@@ -619,7 +628,13 @@ proptest! {
         let read = receive.recv_timeout(std::time::Duration::from_secs(10)).expect("the reader hung");
         let file = odd_path.file_name().unwrap().to_str().unwrap();
         let e = read.expect_err("an odd file was read").to_string();
-        prop_assert!(e.contains(file), "{:?} {}: {}", odd, file, e);
+        if !samples && matches!(odd, OddFile::Folder | OddFile::LinkToFolder) {
+            // A folder named `<stem>.toml` is no recording (a dataset may hold
+            // one, `plots.toml/`): the dataset holds none.
+            prop_assert!(e.contains("holds no recording"), "{:?} {}: {}", odd, file, e);
+        } else {
+            prop_assert!(e.contains(file), "{:?} {}: {}", odd, file, e);
+        }
         // The dataset given as a file.
         let e = recording::read_dataset(other, ROPE_TOTAL_M).expect_err("a file read as a dataset").to_string();
         prop_assert!(e.contains(other.file_name().unwrap().to_str().unwrap()), "{}", e);

@@ -343,9 +343,9 @@ pub fn run(rig: &RigConfig, args: &IdentifyArgs) -> anyhow::Result<()> {
     let out = super::output_dir_reading(&args.out, args.force, &[&args.dataset])?;
     out.refuse_existing(OUTPUTS)?;
     let kinds: Vec<(String, RecordingKind)> = dataset.iter().map(|(s, r)| (s.clone(), r.meta.kind.clone())).collect();
-    let (dataset, screened_out) = screen_decays(rig, &args.dataset, dataset, band);
+    let (dataset, screened_out) = screen_decays(&args.dataset, dataset, band);
     let mut id = identify_dataset(rig, &dataset, band.hz);
-    name_decay_files(&args.dataset, &kinds, &mut id.left_out);
+    name_decay_files(&args.dataset, &kinds, band, &mut id.left_out);
     id.left_out.splice(0..0, screened_out);
     refuse_empty_results(rig, &args.dataset, band, &kinds, &id)?;
     let points = ea_points(rig, &dataset, &id);

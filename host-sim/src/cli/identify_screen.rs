@@ -8,10 +8,9 @@
 
 use std::path::Path;
 
-use diagnosis::identify::{identify_free_decay, release_index};
+use diagnosis::identify::release_index;
 use diagnosis::identify_dataset::LeftOut;
 use recording::{Recording, RecordingKind, ACC_CAR};
-use rig_config::RigConfig;
 
 use super::readable;
 
@@ -56,7 +55,6 @@ impl MaxFrequency {
 /// every free decay that passes [`decay_refusal`]) and the free decays
 /// left out with their reason. `dir` is the dataset's folder.
 pub fn screen_decays(
-    rig: &RigConfig,
     dir: &Path,
     dataset: Vec<(String, Recording)>,
     band: MaxFrequency,
@@ -67,7 +65,7 @@ pub fn screen_decays(
         let refusal = match (&rec.meta.kind, rec.column(ACC_CAR)) {
             (RecordingKind::FreeDecay { .. }, Some(acc)) => {
                 let csv = dir.join(format!("{stem}.csv"));
-                decay_refusal(rig, &csv, &acc.values, rec.meta.sample_rate_hz, band)
+                decay_refusal(&csv, &acc.values, rec.meta.sample_rate_hz, band)
             }
             _ => None,
         };
@@ -86,7 +84,7 @@ pub fn screen_decays(
 /// oscillation after the release (a step), a mode above `band` (the line
 /// the decay rings at, found over the whole band up to the Nyquist
 /// frequency, lies above `--max-frequency`), an oscillation that grows.
-pub fn decay_refusal(rig: &RigConfig, csv: &Path, acc: &[f64], fs: f64, band: MaxFrequency) -> Option<String> {
+pub fn decay_refusal(csv: &Path, acc: &[f64], fs: f64, band: MaxFrequency) -> Option<String> {
     let at = format!("`{}`, column `{ACC_CAR}`", csv.display());
     let meta = csv.with_extension("toml");
     let n = acc.len();
@@ -131,7 +129,7 @@ pub fn decay_refusal(rig: &RigConfig, csv: &Path, acc: &[f64], fs: f64, band: Ma
     if let Some(reason) = no_oscillation(released, release, fs) {
         return Some(format!("{at}: {reason}"));
     }
-    if let Some(reason) = mode_above_band(rig, acc, fs, band) {
+    if let Some(reason) = mode_above_band(released, fs, band) {
         return Some(format!("{at}: {reason}"));
     }
     grows(released, release, fs).map(|reason| format!("{at}: {reason}"))
@@ -154,29 +152,48 @@ fn no_oscillation(released: &[f64], release: usize, fs: f64) -> Option<String> {
     })
 }
 
-/// The decay's own first mode, found as the identification finds it but
-/// over the whole band up to [`WHOLE_BAND_FRACTION`] of the Nyquist
-/// frequency, when it lies above `band`: the band then holds only another
-/// line, whose EA would be no rope's.
-fn mode_above_band(rig: &RigConfig, acc: &[f64], fs: f64, band: MaxFrequency) -> Option<String> {
+/// Share of the record's spectral power (up to [`WHOLE_BAND_FRACTION`] of
+/// the Nyquist frequency) below which the band holds no mode of the decay,
+/// only leakage and noise (a first mode carries most of a decay's power).
+const BAND_POWER_FRACTION: f64 = 0.1;
+
+/// The decay's strongest spectral line (acceleration amplitude, over the
+/// released record up to [`WHOLE_BAND_FRACTION`] of the Nyquist frequency)
+/// when it lies above `band` and the band holds less than
+/// [`BAND_POWER_FRACTION`] of the record's power: whatever the
+/// identification found there would be leakage or noise, its EA no rope's.
+/// A first mode inside the band with a higher rope mode ringing harder
+/// passes.
+fn mode_above_band(released: &[f64], fs: f64, band: MaxFrequency) -> Option<String> {
     let whole = WHOLE_BAND_FRACTION * 0.5 * fs;
     if band.hz >= whole {
         return None;
     }
-    let m = &rig.mechanics;
-    let own = identify_free_decay(acc, fs, 1.0, 1.0, m.rope_mass_per_length_kg_per_m, m.gravity_mps2, whole).ok()?;
-    let f1 = own.first_frequency_hz;
-    (f1 > band.hz).then(|| {
-        format!(
-            "the decay rings at {:.2} Hz (its first mode, searched up to {} Hz), above {}: the mode lies above \
-             the band searched, whose lines would give another oscillation's EA and damping; expected \
-             --max-frequency above {:.1} Hz",
-            f1,
-            readable(whole.round()),
-            band.describe(),
-            1.2 * f1
-        )
-    })
+    let spectrum = dsp::amplitude_spectrum(released, fs, 4).ok()?;
+    let (f, a) = (&spectrum.frequency_hz, &spectrum.amplitude);
+    let lines = |hi: f64| (0..f.len()).filter(move |&i| f[i] >= LOWEST_MODE_HZ && f[i] <= hi);
+    let top = lines(whole).fold(None, |m: Option<usize>, i| match m {
+        Some(j) if a[j] >= a[i] => Some(j),
+        _ => Some(i),
+    })?;
+    if f[top] <= band.hz {
+        return None;
+    }
+    let power = |hi: f64| lines(hi).map(|i| a[i] * a[i]).sum::<f64>();
+    let share = power(band.hz) / power(whole);
+    if share >= BAND_POWER_FRACTION {
+        return None;
+    }
+    let f1 = spectrum.peak_near(f[top], 0.05).map_or(f[top], |p| p.frequency_hz);
+    Some(format!(
+        "the decay rings at {f1:.2} Hz (its strongest line, searched up to {} Hz), above {}, which holds {:.1} % of \
+         its power: the mode lies above the band searched, whose lines would give another oscillation's EA and \
+         damping; expected --max-frequency above {:.1} Hz",
+        readable(whole.round()),
+        band.describe(),
+        100.0 * share,
+        1.2 * f1
+    ))
 }
 
 /// A released record that grows: at least as much of its energy (the sum
@@ -216,12 +233,18 @@ pub struct EaEstimate {
 /// Prefixes the reason of each free decay that the identification left
 /// out with its samples file and column (`dir` the dataset's folder):
 /// the identification knows the signal only.
-pub fn name_decay_files(dir: &Path, kinds: &[(String, RecordingKind)], left_out: &mut [LeftOut]) {
+/// A reason about the search band also names the flag that sets it.
+pub fn name_decay_files(dir: &Path, kinds: &[(String, RecordingKind)], band: MaxFrequency, left_out: &mut [LeftOut]) {
     for l in left_out {
         let decay = kinds.iter().any(|(s, k)| *s == l.recording && matches!(k, RecordingKind::FreeDecay { .. }));
         if decay {
             let csv = dir.join(format!("{}.csv", l.recording));
-            l.reason = format!("`{}`, column `{ACC_CAR}`: {}", csv.display(), l.reason);
+            let flag = if l.reason.contains("search band") {
+                format!(" (the band's top: {})", band.describe())
+            } else {
+                String::new()
+            };
+            l.reason = format!("`{}`, column `{ACC_CAR}`: {}{flag}", csv.display(), l.reason);
         }
     }
 }
@@ -278,8 +301,7 @@ mod tests {
     }
 
     fn refusal(acc: &[f64], fs: f64, hz: f64, given: bool) -> Option<String> {
-        let rig = RigConfig::embedded_default().unwrap();
-        decay_refusal(&rig, Path::new("d/decay.csv"), acc, fs, MaxFrequency { hz, given })
+        decay_refusal(Path::new("d/decay.csv"), acc, fs, MaxFrequency { hz, given })
     }
 
     #[test]

@@ -613,10 +613,12 @@ fn read_dataset_with(
         if path.extension().is_none_or(|e| e != "toml") {
             continue;
         }
-        // A `<stem>.toml` that is a folder, a pipe or a link to one is
-        // refused naming it, not skipped: the dataset would lose a
-        // recording without a word.
-        fs::metadata(&path).map_err(|source| ReadError::Io { path: path.clone(), source })?;
+        // A folder named `<stem>.toml` (`plots.toml/`) is no recording; a
+        // named pipe, a device or a socket so named is refused naming it.
+        let meta = fs::metadata(&path).map_err(|source| ReadError::Io { path: path.clone(), source })?;
+        if meta.is_dir() {
+            continue;
+        }
         refuse_special_file(&path)?;
         let stem =
             path.file_stem().and_then(|s| s.to_str()).ok_or(ReadError::NonUtf8FileName { path: path.clone() })?;
