@@ -259,7 +259,7 @@ pub fn electrical_turns_per_shaft_turn(recording: &Recording) -> Option<f64> {
     let n = a.len().min(b.len()).min(w.len());
     let largest = (0..n).map(magnitude).fold(0.0, f64::max);
     let (mut electrical, mut shaft) = (0.0, 0.0);
-    for k in 1..n {
+    for (k, speed) in w.iter().enumerate().take(n).skip(1) {
         if magnitude(k - 1) < POLE_PAIR_CURRENT_FRACTION * largest
             || magnitude(k) < POLE_PAIR_CURRENT_FRACTION * largest
         {
@@ -268,7 +268,7 @@ pub fn electrical_turns_per_shaft_turn(recording: &Recording) -> Option<f64> {
         let ((x0, y0), (x1, y1)) = (vector(k - 1), vector(k));
         // The turn between the two vectors, in (-pi, pi].
         electrical += (x0 * y1 - y0 * x1).atan2(x0 * x1 + y0 * y1);
-        shaft += w[k] * dt;
+        shaft += speed * dt;
     }
     (shaft.abs() >= POLE_PAIR_MIN_SHAFT_RAD).then(|| (electrical / shaft).abs())
 }
