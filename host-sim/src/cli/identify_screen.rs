@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use diagnosis::identify::release_index;
+use diagnosis::identify::{identify_free_decay, release_index};
 use diagnosis::identify_dataset::LeftOut;
 use recording::{Recording, RecordingKind, ACC_CAR};
 
@@ -184,11 +184,19 @@ fn mode_above_band(released: &[f64], fs: f64, band: MaxFrequency) -> Option<Stri
     if share >= BAND_POWER_FRACTION {
         return None;
     }
-    let f1 = spectrum.peak_near(f[top], 0.05).map_or(f[top], |p| p.frequency_hz);
+    // The mode to name: the first mode as the identification finds it over
+    // the whole band (the largest displacement among the clear lines; the
+    // strongest acceleration line may be a rope's own mode), else the
+    // strongest line.
+    let first = identify_free_decay(released, fs, 1.0, 1.0, 0.0, 9.81, whole).ok().map(|id| id.first_frequency_hz);
+    let (f1, what) = match first {
+        Some(f1) if f1 > band.hz => (f1, "its first mode, found as the identification finds it"),
+        _ => (spectrum.peak_near(f[top], 0.05).map_or(f[top], |p| p.frequency_hz), "its strongest line"),
+    };
     Some(format!(
-        "the decay rings at {f1:.2} Hz (its strongest line, searched up to {} Hz), above {}, which holds {:.1} % of \
-         its power: the mode lies above the band searched, whose lines would give another oscillation's EA and \
-         damping; expected --max-frequency above {:.1} Hz",
+        "the decay rings at {f1:.2} Hz ({what}, searched up to {} Hz), above {}, which holds {:.1} % of its power: \
+         the mode lies above the band searched, whose lines would give another oscillation's EA and damping; \
+         expected --max-frequency above {:.1} Hz",
         readable(whole.round()),
         band.describe(),
         100.0 * share,
