@@ -96,6 +96,13 @@ fn a_power_cycle_restores_the_saved_parameters_and_a_corrupt_record_is_refused()
     let mut lift = power_on(dir.path(), &defaults, ParamsStatus::None, 1000.0);
     assert_eq!(ask(&mut lift, "get params"), "params none");
     assert_eq!(ask(&mut lift, "set strategy adaptive"), "ok strategy adaptive");
+    // The firmware installs the strategy in its control interrupt, in the
+    // period that takes the request: that period's work must fit the PWM
+    // period (10 624 cycles; 255 for the conversions), one cycle counted
+    // per instruction.
+    let install = lift.last_period_instructions().expect("the chip's cost");
+    println!("the period that installs the strategy: {install:.0} instructions");
+    assert!(255.0 + install < 2.0 * rig.pwm_period_counts() as f64, "{install} instructions");
     assert_eq!(ask(&mut lift, "set mass 70"), "ok mass 70.0");
     let offline_table = ask(&mut lift, "get table");
     let landed = travel(&mut lift, 1600, 120_000).expect("the learning travel lands");

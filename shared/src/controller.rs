@@ -404,18 +404,23 @@ impl Controller {
     /// (the `Strategy::Table` table, N m) on the drive's chain model `chain`, with the
     /// link to the chain observer's task when the strategy is
     /// [`Strategy::CarObserver`] (the caller runs the task:
-    /// [`crate::observer::ObserverTask`]); [`Strategy::Off`] removes both.
-    /// The one setup the chip (PIL) and the host share.
+    /// [`crate::observer::ObserverTask`]). [`Strategy::Off`] removes the
+    /// link and leaves a compensator that does nothing (no current, no
+    /// learning), kept for the next installation. The one setup the chip
+    /// (PIL) and the host share. A compensator already there is installed
+    /// again in place ([`RippleCompensator::reinstall`]: the same state as
+    /// a new one, without building a second 8 KB copy), so that the
+    /// firmware's control interrupt can do it within a PWM period.
     pub fn install_compensation(&mut self, strategy: Strategy, table: &HarmonicTable, chain: &ChainModel) {
-        if strategy == Strategy::Off {
-            self.compensation = None;
-            self.observer = None;
-            return;
-        }
-        let mut compensator = RippleCompensator::new(&self.config, chain, &table.orders[..table.len], strategy);
-        compensator.set_table(*table);
-        self.compensation = Some(compensator);
         self.observer = (strategy == Strategy::CarObserver).then(ObserverLink::default);
+        match self.compensation.as_mut() {
+            Some(compensator) => compensator.reinstall(chain, table, strategy),
+            None => {
+                let mut compensator = RippleCompensator::new(&self.config, chain, &table.orders[..table.len], strategy);
+                compensator.set_table(*table);
+                self.compensation = Some(compensator);
+            }
+        }
     }
 
     /// Uses the chain observer, or stops using it (between travels): with

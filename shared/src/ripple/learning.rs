@@ -51,6 +51,16 @@ impl Default for LearningTable {
     }
 }
 
+impl LearningTable {
+    /// Back to [`LearningTable::default`], in place.
+    pub fn clear(&mut self) {
+        self.torque_nm = [[Complex::ZERO; MAX_HARMONICS]; BINS];
+        self.weighted_sum = [[Complex::ZERO; MAX_HARMONICS]; BINS];
+        self.weight_sum = [[0.0; MAX_HARMONICS]; BINS];
+        self.samples = [0; BINS];
+    }
+}
+
 /// Bin index and the fraction of the way to the next bin centre, for a
 /// position in counts from power-up.
 fn locate(position_counts: i64, counts_per_rev: u32) -> (usize, usize, f32) {

@@ -255,6 +255,32 @@ impl RippleCompensator {
         }
     }
 
+    /// Makes this compensator what `new(config, chain, orders of table,
+    /// strategy)` and then [`RippleCompensator::set_table`] of `table`
+    /// would make it, on the same drive configuration, in place: no
+    /// second copy of its 8 KB (the learning table) is built, so the
+    /// firmware can install a strategy inside its control interrupt.
+    pub fn reinstall(&mut self, chain: &ChainModel, table: &HarmonicTable, strategy: Strategy) {
+        self.pending = None;
+        self.chain = *chain;
+        self.strategy = strategy;
+        self.current = HarmonicCurrent::default();
+        self.response = [Complex::ZERO; MAX_HARMONICS];
+        self.demodulated = [Complex::ZERO; MAX_HARMONICS];
+        self.residual_nm = [Complex::ZERO; MAX_HARMONICS];
+        self.worse_ticks = [0; MAX_HARMONICS];
+        self.backed_off = [false; MAX_HARMONICS];
+        self.fade = [0.0; MAX_HARMONICS];
+        self.ticks = 0;
+        self.lead = 0;
+        self.back_off_enabled = true;
+        self.table = *table;
+        self.limit_nm = harmonic_limits_nm(&self.config, &table.orders[..table.len.min(MAX_HARMONICS)]);
+        self.adaptive = HarmonicTable { torque_nm: [Complex::ZERO; MAX_HARMONICS], ..*table };
+        self.applied = self.adaptive;
+        self.learning.clear();
+    }
+
     /// Enables or disables the back-off (disable only to measure, e.g. a
     /// response to a known injected table on a plant without ripple).
     pub fn set_back_off(&mut self, enabled: bool) {
@@ -602,5 +628,43 @@ mod tests {
         let peak = (0..1000u32).map(|i| c.iq_a(i * 4_294_967).to_num::<f64>()).fold(0.0f64, |m, v| m.max(v.abs()));
         let expected = 1.0 / config.torque_constant_nm_per_a() as f64;
         assert!((peak - expected).abs() < 1e-3 * expected, "{peak} vs {expected}");
+    }
+
+    #[test]
+    fn a_reinstalled_compensator_is_a_new_one() {
+        let config = rig();
+        let mut first = HarmonicTable::default();
+        first.push_cosine(12, 1.0, 1.0, 0.0);
+        first.push_cosine(36, 0.2, 0.0, 1.0);
+        let mut c = RippleCompensator::new(&config, &chain(), &first.orders[..first.len], Strategy::Adaptive);
+        c.set_table(first);
+        c.set_back_off(false);
+        c.start_travel();
+        // Learn something: fast enough, with a speed error.
+        for k in 0..2000u32 {
+            c.speed_tick(&LearningInput {
+                shaft_angle: k.wrapping_mul(97_000_000),
+                position_counts: k as i64 * 40,
+                speed_radps: 6.0,
+                speed_error_radps: 0.01 * ((k % 7) as f32 - 3.0),
+                car_acceleration_mps2: None,
+                rope_ea_n: None,
+                m_car_kg: 70.5,
+                lw_m: 4.0,
+                inertia_kg_m2: 1.0,
+            });
+        }
+        assert_ne!(
+            c.learned_table(),
+            RippleCompensator::new(&config, &chain(), &[12, 36], Strategy::Adaptive).learned_table()
+        );
+        let mut second = HarmonicTable::default();
+        second.push_cosine(6, 0.5, 0.0, 1.0);
+        let mut other_chain = chain();
+        other_chain.rope_ea_n *= 0.9;
+        c.reinstall(&other_chain, &second, Strategy::Learning);
+        let mut fresh = RippleCompensator::new(&config, &other_chain, &second.orders[..second.len], Strategy::Learning);
+        fresh.set_table(second);
+        assert_eq!(c, fresh);
     }
 }

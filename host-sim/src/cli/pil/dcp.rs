@@ -289,6 +289,9 @@ pub struct Lift {
     max_step_s: f64,
     lw_lowest_landing_m: f64,
     steps: u64,
+    /// The chip's latest period, instructions (the step to its outputs and
+    /// the rest before the observer's task).
+    last_period_instructions: Option<f64>,
 }
 
 impl Lift {
@@ -322,6 +325,7 @@ impl Lift {
             max_step_s: closed_loop::SimOptions::for_rig(rig).max_step_s,
             lw_lowest_landing_m: lw_low,
             steps: 0,
+            last_period_instructions: None,
         })
     }
 
@@ -333,6 +337,13 @@ impl Lift {
     /// Steps run.
     pub fn steps(&self) -> u64 {
         self.steps
+    }
+
+    /// The chip's latest period up to the observer's task, instructions
+    /// (`None` for the host build alone): after [`Lift::ask`], the period
+    /// that carried the request out.
+    pub fn last_period_instructions(&self) -> Option<f64> {
+        self.last_period_instructions
     }
 
     /// The shadow (state, parameters, DCP port).
@@ -395,6 +406,7 @@ impl Lift {
         let observer_ran = period.observer_ran;
         let instructions = chip.as_ref().map(|c| c.report.cost_ticks as f64 * INSTRUCTIONS_PER_TICK);
         let after_instructions = chip.as_ref().map(|c| c.after_ticks as f64 * INSTRUCTIONS_PER_TICK);
+        self.last_period_instructions = instructions.zip(after_instructions).map(|(a, b)| a + b);
         let observer_instructions =
             chip.as_ref().and_then(|c| c.observer_ticks).map(|t| t as f64 * INSTRUCTIONS_PER_TICK);
         if let Some(chip) = &chip {
