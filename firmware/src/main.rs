@@ -11,16 +11,20 @@
 //! - TIM4 (`encoder.rs`): quadrature encoder; TIM2 (`timebase.rs`): 1 MHz
 //!   time stamps; TIM8 on PC8: brake (idle = applied); IWDG (`watchdog.rs`).
 //!
-//! The control interrupt (`control.rs`, highest priority) runs
-//! `drive_core::Controller::step` once per PWM period with the measured values;
-//! the speed loop, the profile and the speed observer run inside it. With
-//! the strategy `car-observer`, the chain observer runs in a task of its own
-//! (`observer.rs`: an interrupt executor below the control interrupt), fed
-//! by the controller at each speed-loop tick and read back at the next.
-//! Three thread-mode Embassy tasks: `telemetry.rs` logs what the interrupt queues and feeds
-//! the watchdog while the interrupt is alive; `dcp.rs` answers the lift
-//! controller and submits its commands; `service.rs` answers the service
-//! port.
+//! The control interrupt (`control.rs`, highest priority) runs the drive's
+//! application layer, `drive_core::lift_drive::LiftDrive` (the code the
+//! processor-in-the-loop target and the host run), once per PWM period with
+//! the measured values: the start-up sequence, the controller (its speed
+//! loop, profile and speed observer inside), the service port's requests
+//! and the DCP slave. With the strategy `car-observer`, the chain observer
+//! runs in a task of its own (`observer.rs`: an interrupt executor below
+//! the control interrupt), fed by the controller at each speed-loop tick
+//! and read back at the next. Five thread-mode Embassy tasks only move
+//! bytes and log, through the channels of `edges.rs`: `telemetry.rs` logs
+//! what the interrupt queues and feeds the watchdog while the interrupt is
+//! alive; `dcp.rs` receives and sends the DCP line's bytes; `service.rs`
+//! receives the service port's bytes, formats and sends the answers and
+//! writes the parameter record of a `save`.
 //!
 //! Start-up: clocks, then the peripherals with the inverter off (MOE = 0,
 //! brake applied), then the control interrupt, which waits 10 ms for the
@@ -53,7 +57,7 @@
 //!
 //! Service port (`service.rs`): LPUART1 on the ST-LINK virtual COM port,
 //! the line protocol of `drive_core::service` (`host-sim drive --port`):
-//! strategy, table, car mass (settable), DCP variant (settable), fault
+//! strategy (settable), table, car mass (settable), DCP variant (settable), fault
 //! log, state, the stored record's status, and `save` (writes the record
 //! with the drive idle).
 //!
