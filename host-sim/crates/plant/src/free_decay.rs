@@ -195,6 +195,9 @@ pub fn simulate_free_decay_with(
     }
     let c = spec.damping_kg_per_s;
     let acceleration = |y: &[f64], out: &mut [f64]| {
+        // Stiffening: the tension change of the spring above node i, carried
+        // from node i - 1 (each spring's law evaluated once).
+        let mut upper = if stiffening.is_some() { tension_change(0, -y[0]) } else { 0.0 };
         for i in 0..n {
             let below = if i == 0 { 0.0 } else { y[i - 1] };
             let mut f = if stiffening.is_none() {
@@ -202,7 +205,9 @@ pub fn simulate_free_decay_with(
                 -springs[i] * (y[i] - below) + k_above * (above - y[i])
             } else {
                 let lower = if i + 1 < n { tension_change(i + 1, y[i] - y[i + 1]) } else { 0.0 };
-                tension_change(i, below - y[i]) - lower
+                let f = upper - lower;
+                upper = lower;
+                f
             };
             if i == n - 1 {
                 f -= c * y[nodes + i];
@@ -281,4 +286,59 @@ pub fn eqn9_fundamental_gamma_l(rope_mass_kg: f64, hanging_mass_kg: f64) -> f64 
 pub fn eqn9_first_frequency_hz(ea_n: f64, mu_kg_per_m: f64, length_m: f64, mass_kg: f64) -> f64 {
     let gamma = eqn9_fundamental_gamma_l(mu_kg_per_m * length_m, mass_kg) / length_m;
     gamma * (ea_n / mu_kg_per_m).sqrt() / std::f64::consts::TAU
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::TensionStiffening;
+
+    fn spec(initial_acceleration_mps2: f64) -> FreeDecaySpec {
+        FreeDecaySpec {
+            mass_kg: 33.0,
+            rope_length_m: 2.5,
+            rope_ea_n: 1.0e6,
+            rope_mass_per_length_kg_per_m: 0.0,
+            damping_kg_per_s: 20.0,
+            initial_acceleration_mps2,
+            elements: 1,
+        }
+    }
+
+    /// Amplitude (m/s^2) of the line at `f_hz` in `x` sampled at `fs`.
+    fn line(x: &[f64], fs: f64, f_hz: f64) -> f64 {
+        let (mut re, mut im) = (0.0, 0.0);
+        let n = x.len() as f64;
+        for (k, v) in x.iter().enumerate() {
+            let ph = std::f64::consts::TAU * f_hz * k as f64 / fs;
+            // Hann window: the decay's leakage stays off the harmonic.
+            let w = 0.5 - 0.5 * (std::f64::consts::TAU * k as f64 / n).cos();
+            re += w * v * ph.cos();
+            im -= w * v * ph.sin();
+        }
+        2.0 * re.hypot(im) / x.len() as f64
+    }
+
+    /// With the reference tension at the static one, a small release gives
+    /// the linear chain's decay; a large one (a swing about the static
+    /// tension) gives the first mode's second harmonic, which the linear
+    /// chain has not.
+    #[test]
+    fn a_stiffening_rope_is_linear_when_small_and_makes_harmonics_when_large() {
+        let fs = 4096.0;
+        let t_static = 33.0 * DECAY_GRAVITY_MPS2;
+        let mut effects = Effects::none();
+        effects.tension_stiffening = Some(TensionStiffening { alpha: 0.45, reference_tension_n: t_static });
+        let small = simulate_free_decay_with(&spec(0.01), &effects, fs, 1.0).unwrap();
+        let linear = simulate_free_decay(&spec(0.01), fs, 1.0).unwrap();
+        let worst = small.iter().zip(&linear).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-4 * 0.01 * 10.0, "small release departs from the linear chain by {worst} m/s^2");
+        // First frequency of the single spring: sqrt(k / m) / 2 pi.
+        let f1 = (1.0e6 / 2.5 / 33.0f64).sqrt() / std::f64::consts::TAU;
+        let second = |x: &[f64]| line(&x[..2048], fs, 2.0 * f1) / line(&x[..2048], fs, f1);
+        let large = simulate_free_decay_with(&spec(12.0), &effects, fs, 1.0).unwrap();
+        let large_linear = simulate_free_decay(&spec(12.0), fs, 1.0).unwrap();
+        assert!(second(&large) > 0.05, "second harmonic {} of the first", second(&large));
+        assert!(second(&large) > 10.0 * second(&large_linear), "{} against {}", second(&large), second(&large_linear));
+    }
 }
