@@ -217,3 +217,18 @@ fn a_rig_of_another_pole_pair_count_than_the_recordings_machine_is_named() {
     }
     run_ok(&["analyze", s(&data), "--out", s(&tmp.path().join("right"))]);
 }
+
+#[test]
+fn modes_and_faults_simulate_the_rigs_only_car_not_the_counterweight() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = tmp.path().join("light.toml");
+    fs::write(&rig, rig_with("m_car_kg", "[20.0]")).unwrap();
+    // Before: both simulated 33 kg, the counterweight's mass.
+    let modes = run_ok(&["--config", s(&rig), "modes", "--out", s(&tmp.path().join("modes"))]).stdout;
+    assert!(String::from_utf8_lossy(&modes).starts_with("m_car = 20 kg:"), "{}", String::from_utf8_lossy(&modes));
+    let out = tmp.path().join("faults");
+    let args = ["--config", s(&rig), "faults", "--quiet", "--direction", "up", "--fault", "current-stuck@5"];
+    run_ok(&[&args[..], &["--out", s(&out)]].concat());
+    let report = fs::read_to_string(out.join("faults.json")).unwrap();
+    assert!(report.contains("\"m_car_kg\": 20.0") && !report.contains("\"m_car_kg\": 33.0"), "{report}");
+}
