@@ -397,6 +397,24 @@ impl Checker<'_> {
         ))
     }
 
+    /// [`Self::check`] of a field with a default (`default`): when the value
+    /// refused is the default, the message says so (the file may never have
+    /// given the field).
+    fn check_defaulted(&self, field: &str, value: f64, default: f64, b: Bound) -> Result<(), ConfigError> {
+        self.check(field, value, b).map_err(|e| match e {
+            ConfigError::OutOfRange { path, field, value, expected } if value == default => ConfigError::OutOfRange {
+                path,
+                field,
+                value,
+                expected: format!(
+                    "{expected} ({} is the field's default, in force when the file does not give it: give the field)",
+                    readable(default)
+                ),
+            },
+            e => e,
+        })
+    }
+
     fn out_of_range(&self, field: &str, value: f64, expected: String) -> ConfigError {
         ConfigError::OutOfRange { path: self.path.to_string(), field: field.to_string(), value, expected }
     }
@@ -668,15 +686,17 @@ impl RigConfig {
             Bound::closed(4.0, 1.0e8, "", counts),
         )?;
         let bus_sense = "above the DC bus, which the sensor must read";
-        c.check(
+        c.check_defaulted(
             "[inverter].dc_bus_sense_full_scale_v",
             inv.dc_bus_sense_full_scale_v,
+            default_dc_bus_sense_full_scale_v(),
             Bound::above(inv.dc_bus_v, 1.0e4, "V", bus_sense),
         )?;
         let clock = "at least 100 counts a half PWM period";
-        c.check(
+        c.check_defaulted(
             "[inverter].pwm_timer_clock_hz",
             inv.pwm_timer_clock_hz,
+            default_pwm_timer_clock_hz(),
             Bound::closed(2.0 * inv.pwm_hz * 100.0, 1.0e9, "Hz", clock),
         )
     }
@@ -697,19 +717,22 @@ impl RigConfig {
         }
         let bandwidth =
             |of: &str, over: u32| format!("at most the loop rate over {over} ({of}): a sampled loop's limit");
-        c.check(
+        c.check_defaulted(
             "[control].current_loop_bandwidth_hz",
             co.current_loop_bandwidth_hz,
+            default_current_bandwidth_hz(),
             Bound::above(0.0, co.current_loop_hz / 8.0, "Hz", &bandwidth("current_loop_hz", 8)),
         )?;
-        c.check(
+        c.check_defaulted(
             "[control].speed_loop_bandwidth_hz",
             co.speed_loop_bandwidth_hz,
+            default_speed_bandwidth_hz(),
             Bound::above(0.0, co.speed_loop_hz / 20.0, "Hz", &bandwidth("speed_loop_hz", 20)),
         )?;
-        c.check(
+        c.check_defaulted(
             "[control].speed_estimator_bandwidth_hz",
             co.speed_estimator_bandwidth_hz,
+            default_estimator_bandwidth_hz(),
             Bound::above(0.0, co.speed_loop_hz / 10.0, "Hz", &bandwidth("speed_loop_hz", 10)),
         )?;
         let over = "a trip above the rated speed, at most 10 times it";
@@ -727,9 +750,10 @@ impl RigConfig {
             Bound::above(1.0, 10.0, "", over),
         )?;
         let sum = "within the current sensor's full scale";
-        c.check(
+        c.check_defaulted(
             "[control].current_sum_limit_a",
             co.current_sum_limit_a,
+            default_current_sum_limit_a(),
             Bound::above(0.0, inv.current_sense_full_scale_a, "A", sum),
         )
     }
@@ -1027,6 +1051,20 @@ mod tests {
             assert!(reason.contains(": "), "{key} = {value}: no reason in {err}");
             assert!(!err.contains("0.0000000"), "{err}");
         }
+    }
+
+    #[test]
+    fn a_default_refused_because_of_another_field_says_it_is_the_default() {
+        // The file never gives dc_bus_sense_full_scale_v: its 200 V default
+        // cannot read a 10 kV bus.
+        let err = RigConfig::from_toml_str(&rig_with("dc_bus_v", "1e4"), "bad.toml").unwrap_err().to_string();
+        assert!(err.contains("[inverter].dc_bus_sense_full_scale_v` = 200"), "{err}");
+        assert!(err.contains("200 is the field's default, in force when the file does not give it"), "{err}");
+        // A value the file gives is not called a default.
+        let text =
+            rig_with("dc_bus_v", "300.0").replace("[inverter]\n", "[inverter]\ndc_bus_sense_full_scale_v = 250.0\n");
+        let err = RigConfig::from_toml_str(&text, "bad.toml").unwrap_err().to_string();
+        assert!(err.contains("= 250 is out of range") && !err.contains("default"), "{err}");
     }
 
     #[test]
