@@ -526,7 +526,7 @@ fn measure_and_run_closed_loop(
 /// closed loop's torque lies from the measured: the drive's own start and
 /// stop sequence (brake timing, pre-torque, torque ramps), which any other
 /// drive does its own way.
-fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> f64 {
+fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> Option<f64> {
     let (mut measured, mut closed) = (measured.clone(), closed.clone());
     align_phases(&mut measured, &mut closed);
     let seg = Segmentation::of(&measured);
@@ -541,11 +541,7 @@ fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> f
         })
         .map(|c| c.d_db * c.d_db)
         .collect();
-    if d.is_empty() {
-        0.0
-    } else {
-        (d.iter().sum::<f64>() / d.len() as f64).sqrt()
-    }
+    (!d.is_empty()).then(|| (d.iter().sum::<f64>() / d.len() as f64).sqrt())
 }
 
 /// Largest relative difference between the mean speed of a travel's
@@ -597,13 +593,19 @@ fn decide_drive(
         }
         DriveAssumption::Auto => {}
     }
+    let (mut count, mut at_standstill, mut at_speed) = (0, 0, 0);
     for (i, measured, closed) in travels {
         let stem = &dataset[*i].0;
+        count += 1;
         let reason = match closed {
             Err(e) => format!("the project's drive cannot run travel `{stem}` ({e:#})"),
             Ok(closed) => {
                 let d = start_stop_torque_gap_db(measured, closed);
-                if d > DRIVE_MISMATCH_DB {
+                at_standstill += usize::from(d.is_some());
+                at_speed += usize::from(
+                    constant_stage_speed_radps(measured).is_some() && constant_stage_speed_radps(closed).is_some(),
+                );
+                if let Some(d) = d.filter(|d| *d > DRIVE_MISMATCH_DB) {
                     format!(
                         "the torque of travel `{stem}` at standstill (start and stop) lies {d:.1} dB (RMS) from the \
                          project's drive (more than {DRIVE_MISMATCH_DB} dB): another start and stop sequence"
@@ -617,17 +619,43 @@ fn decide_drive(
         };
         return DriveFinding { drive: DriveModel::Foreign, reason };
     }
-    DriveFinding {
-        drive: DriveModel::Project,
-        reason: format!(
-            "the project's drive reproduces every travel's torque at standstill within {DRIVE_MISMATCH_DB} dB \
-             and its speed at constant speed within {:.0} %",
-            100.0 * PROFILE_SPEED_TOLERANCE
-        ),
-    }
+    DriveFinding { drive: DriveModel::Project, reason: project_drive_evidence(count, at_standstill, at_speed) }
 }
 
-/// The model's counterpart of a measured recording, with its two
+/// What the dataset shows for the project's drive, in words: of `count`
+/// travels, `at_standstill` compared at their start and stop, `at_speed`
+/// at constant speed; a claim only for what was compared.
+fn project_drive_evidence(count: usize, at_standstill: usize, at_speed: usize) -> String {
+    if count == 0 {
+        return "no travel in the dataset: which drive ran the rig is not decided (free decays run none); \
+                the project's is assumed"
+            .into();
+    }
+    if at_standstill == 0 && at_speed == 0 {
+        return format!(
+            "none of the {count} travels has a standstill or a constant-speed stage to compare: the project's \
+             drive is assumed, not shown"
+        );
+    }
+    let mut shown = Vec::new();
+    if at_standstill > 0 {
+        shown.push(format!(
+            "the torque at standstill of {at_standstill} of {count} travels within {DRIVE_MISMATCH_DB} dB"
+        ));
+    }
+    if at_speed > 0 {
+        shown.push(format!(
+            "the constant speed of {at_speed} of {count} travels within {:.0} %",
+            100.0 * PROFILE_SPEED_TOLERANCE
+        ));
+    }
+    let mut reason = format!("the project's drive reproduces {}", shown.join(" and "));
+    if at_standstill < count || at_speed < count {
+        reason.push_str(" (the others have no such stage to compare)");
+    }
+    reason
+}
+
 /// The series that give a travel's true torque under a current-transducer
 /// error ([`transducer`]), on the grid of its chain signals `measured`;
 /// none when the currents cannot be read again (the torque itself was).
@@ -650,6 +678,7 @@ fn transducer_series(
     .ok()
 }
 
+/// The model's counterpart of a measured recording, with its two
 /// perturbations: the closed loop (the project's drive) or, for travels
 /// under another drive, the torque-driven mechanics ([`driven`]); the
 /// measured signals reduced to the channels the counterpart has.
@@ -1238,6 +1267,23 @@ pub fn diagnose(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The drive's finding claims only what was compared: nothing about
+    /// travels in a dataset of decays, nothing about standstill in travels
+    /// cut from the constant-speed stage.
+    #[test]
+    fn the_drive_evidence_names_only_what_was_compared() {
+        let none = project_drive_evidence(0, 0, 0);
+        assert!(none.contains("no travel") && !none.contains("reproduces"), "{none}");
+        let cut = project_drive_evidence(2, 0, 2);
+        assert!(!cut.contains("standstill"), "{cut}");
+        assert!(cut.contains("constant speed of 2 of 2"), "{cut}");
+        let bare = project_drive_evidence(3, 0, 0);
+        assert!(bare.contains("assumed, not shown"), "{bare}");
+        let all = project_drive_evidence(4, 4, 4);
+        assert!(all.contains("standstill of 4 of 4") && !all.contains("others"), "{all}");
+        assert!(project_drive_evidence(4, 3, 4).contains("others have no such stage"));
+    }
 
     fn candidate(shrink: f64) -> Candidate {
         Candidate {
