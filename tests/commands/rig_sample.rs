@@ -181,3 +181,21 @@ fn an_angle_that_lags_the_currents_is_put_back_on_their_time_and_the_rig_stays_n
     assert!(report.left_out.is_empty(), "{:?}", report.left_out);
     assert_eq!(report.verdict, Verdict::Nominal, "excess {:.3} dB", report.nominal_excess_db);
 }
+
+/// The sample's free decays alone: the report says nothing about travels
+/// it does not have (which drive ran the rig is not decided), and the
+/// decays still get their verdict.
+#[test]
+fn a_dataset_of_decays_alone_claims_nothing_about_travels() {
+    let rig = rig();
+    let decays: Vec<(String, Recording)> =
+        sample().into_iter().filter(|(_, r)| matches!(r.meta.kind, RecordingKind::FreeDecay { .. })).collect();
+    assert!(!decays.is_empty());
+    // The drive's finding comes before the attribution: one effect keeps the run short.
+    let options = GapOptions { effects: vec![plant::effects::EffectKind::TensionStiffening], ..GapOptions::default() };
+    let report = diagnose(&rig, "decays", &decays, &options, &|_, _, _| {}).expect("a verdict");
+    let reason = &report.drive.reason;
+    assert!(reason.contains("no travel"), "{reason}");
+    assert!(!reason.contains("reproduces"), "a claim about travels the dataset has not: {reason}");
+    assert_eq!(report.recordings.len(), decays.len());
+}
