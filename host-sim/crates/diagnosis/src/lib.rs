@@ -1117,7 +1117,7 @@ fn verdict_of(
         Verdict::Explained
     } else if is_nominal && electrical.is_none() {
         Verdict::Nominal
-    } else if (is_nominal || explains(best)) && electrical.is_none_or(|e| explains(e.ranking.first())) {
+    } else if is_nominal && lines_explained {
         Verdict::Explained
     } else {
         Verdict::Unexplained

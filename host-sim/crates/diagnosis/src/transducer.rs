@@ -32,7 +32,7 @@ pub struct TransducerSeries {
     pub q_per_phase: [Vec<f64>; 2],
     /// `c_a i_a`, `c_b i_b`: the q current the recorded phase currents
     /// carry, A.
-    pub q_of_phase_a: [Vec<f64>; 2],
+    pub recorded_q_by_phase: [Vec<f64>; 2],
 }
 
 impl TransducerSeries {
@@ -78,7 +78,7 @@ impl TransducerSeries {
         Ok(Self {
             torque_per_q_amp: 1.5 * p * rig.motor.flux_linkage_wb,
             q_per_phase: [decimated(c_a)?, decimated(c_b)?],
-            q_of_phase_a: [decimated(ci_a)?, decimated(ci_b)?],
+            recorded_q_by_phase: [decimated(ci_a)?, decimated(ci_b)?],
         })
     }
 
@@ -93,7 +93,7 @@ impl TransducerSeries {
             .map(|(k, &t)| {
                 let mut dq = 0.0;
                 for x in 0..2 {
-                    let (c, ci) = (self.q_per_phase[x].get(k), self.q_of_phase_a[x].get(k));
+                    let (c, ci) = (self.q_per_phase[x].get(k), self.recorded_q_by_phase[x].get(k));
                     if let (Some(c), Some(ci)) = (c, ci) {
                         dq -= (offsets[x] * c + gains[x] * ci) / (1.0 + gains[x]);
                     }

@@ -121,15 +121,11 @@ pub fn simulate_free_decay_with(
         None => vec![k; n],
         Some(e) => static_tensions.iter().map(|&t| e.ea_n(spec.rope_ea_n, t) / segment_length).collect(),
     };
-    // Tension change (N) of spring i stretched by `stretch` (m) beyond its
-    // static stretch: linear, or following the instantaneous tension.
+    // Under stiffening, each spring's tension follows its instantaneous
+    // stretch beyond the static one.
     let segments: Vec<_> = match &stiffening {
         None => Vec::new(),
         Some(e) => static_tensions.iter().map(|&t| e.segment(spec.rope_ea_n, t, segment_length)).collect(),
-    };
-    let tension_change = |i: usize, stretch: f64| match &stiffening {
-        None => springs[i] * stretch,
-        Some(_) => segments[i].tension_change_n(stretch),
     };
     let segment = mu * spec.rope_length_m / n as f64;
     let frame = effects.car_frame_mode;
@@ -181,10 +177,10 @@ pub fn simulate_free_decay_with(
                 *u = -force * (i + 1) as f64 / k;
             }
         }
-        Some(e) => {
+        Some(_) => {
             let mut u = 0.0;
-            for i in 0..n {
-                u -= e.stretch_change_m(spec.rope_ea_n, static_tensions[i], force, segment_length);
+            for (i, segment) in segments.iter().enumerate() {
+                u -= segment.stretch_change_m(force);
                 state[i] = u;
             }
         }
@@ -197,14 +193,14 @@ pub fn simulate_free_decay_with(
     let acceleration = |y: &[f64], out: &mut [f64]| {
         // Stiffening: the tension change of the spring above node i, carried
         // from node i - 1 (each spring's law evaluated once).
-        let mut upper = if stiffening.is_some() { tension_change(0, -y[0]) } else { 0.0 };
+        let mut upper = segments.first().map_or(0.0, |s| s.tension_change_n(-y[0]));
         for i in 0..n {
             let below = if i == 0 { 0.0 } else { y[i - 1] };
             let mut f = if stiffening.is_none() {
                 let (above, k_above) = if i + 1 < n { (y[i + 1], springs[i + 1]) } else { (y[i], springs[i]) };
                 -springs[i] * (y[i] - below) + k_above * (above - y[i])
             } else {
-                let lower = if i + 1 < n { tension_change(i + 1, y[i] - y[i + 1]) } else { 0.0 };
+                let lower = if i + 1 < n { segments[i + 1].tension_change_n(y[i] - y[i + 1]) } else { 0.0 };
                 let f = upper - lower;
                 upper = lower;
                 f

@@ -67,14 +67,7 @@ impl TensionStiffening {
     /// [`TensionStiffening::tension_change_n`] (a tension at or below zero
     /// gives the stretch at which the segment goes slack).
     pub fn stretch_change_m(&self, ea0_n: f64, static_tension_n: f64, tension_change_n: f64, length_m: f64) -> f64 {
-        let beta = 1.0 - self.alpha;
-        let t_s = static_tension_n.max(f64::MIN_POSITIVE);
-        if beta <= 1e-6 || self.alpha == 0.0 {
-            return tension_change_n * length_m / self.ea_n(ea0_n, t_s);
-        }
-        let s = ea0_n * self.reference_tension_n.powf(-self.alpha) / length_m;
-        let t = (t_s + tension_change_n).max(0.0);
-        (t.powf(beta) - t_s.powf(beta)) / (beta * s)
+        self.segment(ea0_n, static_tension_n, length_m).stretch_change_m(tension_change_n)
     }
 }
 
@@ -108,6 +101,18 @@ impl StiffeningSegment {
             return -self.static_tension_n;
         }
         base.powf(self.inverse_beta) - self.static_tension_n
+    }
+
+    /// The stretch change (m) that changes the tension by
+    /// `tension_change_n` (N): the inverse of
+    /// [`StiffeningSegment::tension_change_n`] (a tension at or below zero
+    /// gives the stretch at which the segment goes slack).
+    pub fn stretch_change_m(&self, tension_change_n: f64) -> f64 {
+        if self.linear_n_per_m != 0.0 {
+            return tension_change_n / self.linear_n_per_m;
+        }
+        let t = (self.static_tension_n + tension_change_n).max(0.0);
+        (t.powf(1.0 / self.inverse_beta) - self.static_power) / self.slope
     }
 }
 
