@@ -19,25 +19,30 @@
 //!
 //! On the IHM08M1 (facts and sources in the table):
 //! - Gates: high sides PA8/PA9/PA10 (TIM1_CH1-CH3), low sides PA7/PB0/PB1
-//!   (TIM1_CH1N-CH3N, AF6). The L6398's HIN is active high and its LIN
-//!   active low (datasheet truth table), so the timer's complementary
-//!   outputs are active low (CCxNP = 1) with an idle level high (OISxN = 1):
-//!   with MOE = 0 every gate input is at its off level (`pwm.rs`). Before
-//!   `pwm::init` the pins are high-impedance and the L6398's own input
-//!   bias keeps the switches off (HIN pull-down, LIN pull-up: datasheet
-//!   table 8, the input bias currents).
-//! - TIM1_BKIN on PA6, active low (UM1996: the over-current circuit pulls
-//!   BKIN to ground).
+//!   (TIM1_CH1N-CH3N, AF6; NuttX's IHM08M1 table, oxifoc's transcription
+//!   of UM1996 tables 3/4). The L6398's HIN is active high and its LIN
+//!   active low (its truth table), so the timer's complementary outputs
+//!   are active low (CCxNP = 1) with an idle level high (OISxN = 1): with
+//!   MOE = 0 and OSSI = 1 every gate input is at its off level (RM0440
+//!   table 265, `pwm.rs`). Before `pwm::init` the pins are high-impedance
+//!   and the L6398's own input bias keeps the switches off (HIN pull-down,
+//!   LIN pull-up: datasheet table 8, the input bias currents).
+//! - TIM1_BKIN on PA6, active low. The shield also routes its BKIN net to
+//!   PA11 and PB14, and the U low-side input to PB15 (solder resistors
+//!   R73, R74, R86), and its over-current reference CURRENT_REF to PB4:
+//!   the firmware never configures those pins (reset state, analog).
 //! - Brake on PC8 as TIM8_CH3 in forced-output mode ([`Brake`]): released
 //!   only while TIM8's MOE is set and the channel is forced active; idle,
 //!   a debug halt (DBG_TIM8_STOP: the outputs go to their idle level as if
 //!   MOE were 0, RM0440 advanced-control timers, debug mode), a reset
 //!   (pin high-impedance, the brake driver's pull-down) and
 //!   [`force_safe_state`] all apply it.
-//! - The DCP transceiver on UART5 (PC12 TX, PD2 RX, PB4 DE): not on PB14,
-//!   USART3's only DE pin on this package, reported on the shield's
-//!   break/over-current net. Not on PA12 (the shield's comparator output
-//!   CPOUT) nor PC13 (the user button B1): no output of the firmware is.
+//! - The DCP transceiver on UART5 (PC12 TX, PD2 RX) with its driver enable
+//!   on PC10, a plain GPIO `dcp.rs` drives around each reply: UART5's own
+//!   DE pin is PB4 (CURRENT_REF), and every other UART's DE pin of this
+//!   package is a shield signal too. Not on PA12 (the shield's comparator
+//!   output CPOUT) nor PC13 (the user button B1): no output of the
+//!   firmware is.
 //! - The phase currents on PA0 (ADC1_IN1), PC1 (ADC2_IN7), PC0 (ADC1_IN6),
 //!   the bus on PA1 (ADC2_IN2): each injected sequence (two ranks,
 //!   triggered together by TIM1_TRGO2) samples two phase currents at the
@@ -56,14 +61,14 @@
 //! drive core sees a current into the machine above mid-scale.
 //!
 //! Not verified without the boards (also in `docs/firmware.md`): the
-//! IHM08M1's solder bridges and jumpers for three shunts (J5/J6) and for
-//! BKIN on PA6, that PB4, PB6, PB7, PC8, PC12 and PD2 are free on the
-//! shield, the brake driver's pull-down, the sign of the encoder count.
-//! The RM0440 facts used here and in `pwm.rs` (a debug-halted advanced
-//! timer disables its outputs as if MOE were 0; OISx/OISxN are pin levels;
-//! the TIM1 LOCK levels) are quoted from the manual as remembered, not
-//! re-read against it: check them with a scope on the first power-up,
-//! bridge supply off.
+//! IHM08M1's solder bridges and jumpers for three shunts (J5/J6), BKIN's
+//! active-low level, that PB6, PB7, PC8, PC10, PC12 and PD2 are free on
+//! the shield, the brake driver's pull-down, the sign of the encoder count.
+//! Of the RM0440 facts used here and in `pwm.rs`, table 265 (MOE = 0 with
+//! OSSI = 1: outputs at their idle levels OISx/OISxN) was read; that a
+//! debug-halted advanced timer disables its outputs as if MOE were 0 and
+//! the TIM1 LOCK levels are quoted as remembered: check them with a scope
+//! on the first power-up, bridge supply off.
 //!
 //! - TIM4 is a 16-bit timer: `encoder.rs` extends its count to the `u32` of
 //!   `drive_core::SensorFrame` in software.
@@ -220,7 +225,7 @@ const _: () = {
     use embassy_stm32::adc::AdcChannel;
     use embassy_stm32::timer::{BkIn1, BreakInputPin, Ch1, Ch2};
     use embassy_stm32::timer::{TimerChannel, TimerComplementaryPin};
-    use embassy_stm32::usart::{DePin, RxPin, TxPin};
+    use embassy_stm32::usart::{RxPin, TxPin};
 
     // Each compiles only if pin P carries the signal on the G474RE.
     const fn pwm<P: TimerPin<PwmTimer, C>, C: TimerChannel>() {}
@@ -229,7 +234,8 @@ const _: () = {
     const fn encoder<P: TimerPin<EncoderTimer, C>, C: TimerChannel>() {}
     const fn brake<P: TimerPin<BrakeTimer, Ch3>>() {}
     const fn analog<P: AdcChannel<A>, A: embassy_stm32::adc::Instance>() {}
-    const fn dcp<Tx: TxPin<DcpUart>, Rx: RxPin<DcpUart>, De: DePin<DcpUart>>() {}
+    const fn dcp<Tx: TxPin<DcpUart>, Rx: RxPin<DcpUart>>() {}
+    const fn gpio<P: embassy_stm32::gpio::Pin>() {}
 
     pwm::<PwmUHigh, Ch1>();
     pwm::<PwmVHigh, Ch2>();
@@ -245,7 +251,9 @@ const _: () = {
     analog::<Peri<'static, CurrentWPin>, AdcUw>();
     analog::<Peri<'static, CurrentVPin>, AdcVBus>();
     analog::<Peri<'static, DcBusPin>, AdcVBus>();
-    dcp::<DcpTx, DcpRx, DcpDe>();
+    dcp::<DcpTx, DcpRx>();
+    gpio::<DcpDe>();
+    assert!(DCP_DE_AF == -1, "the driver enable is a plain GPIO output, not the UART's DE");
 
     // The gate polarity the L6398 needs: high sides active high, low sides
     // active low (the description's rows; pwm.rs programs CCxP/CCxNP and
@@ -255,5 +263,6 @@ const _: () = {
     assert!(BREAK_IN_ACTIVE_LOW, "pwm.rs programs TIM1's break input active low");
 };
 
-/// The UART of the DCP line (the description's `DcpTx`/`DcpRx`/`DcpDe` pins).
+/// The UART of the DCP line (the description's `DcpTx`/`DcpRx` pins; its
+/// driver enable `DcpDe` is a GPIO).
 pub type DcpUart = peripherals::UART5;

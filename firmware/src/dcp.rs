@@ -4,12 +4,15 @@
 //!
 //! Pins (the board description, `board.rs`): PC12 UART5_TX (AF5) to the
 //! transceiver's DI, PD2 UART5_RX (AF5, pull-up: the transceiver's RO floats
-//! while it drives) from RO, PB4 UART5_DE (AF8) to DE and /RE tied together
-//! (not PB14, USART3's DE, reported on the IHM08M1's break net). The UART drives DE
-//! itself around every transmission (assertion and de-assertion times of one
-//! bit), so the line is released as soon as the reply's stop bit is out; the
-//! receiver is disabled while the drive talks, so its own reply is never
-//! read back.
+//! while it drives) from RO, PC10 a plain GPIO output to DE and /RE tied
+//! together. Not the UART's own DE: UART5_DE is PB4 only, the IHM08M1's
+//! over-current reference CURRENT_REF, and every other hardware DE pin of
+//! this package is a shield signal too (`docs/firmware.md`, the DcpDe row).
+//! [`send`] raises DE before the first byte of a reply and lowers it when
+//! the UART reports the last stop bit out (transmission complete, the
+//! buffered UART's `flush`), a few microseconds of interrupt latency after
+//! it; with /RE tied to DE the receiver is off while the drive talks, so
+//! its own reply is never read back.
 //!
 //! Two tasks only move bytes: [`receive`] puts every byte received into
 //! `edges::DCP_RX` (the control interrupt takes up to 8 a PWM period and
@@ -21,14 +24,14 @@
 //! `drive_core`.
 
 use defmt::{error, info, warn};
+use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::usart::{self, BufferedUartRx, BufferedUartTx};
 use embedded_io_async::{Read, Write};
 
 use crate::edges;
 
 /// The USART settings of DCP: 38 400 baud, 8 data bits, no parity, one stop
-/// bit; DE asserted one bit time before the start bit and released one bit
-/// time after the stop bit (16 sixteenths).
+/// bit.
 pub fn uart_config() -> usart::Config {
     let mut config = usart::Config::default();
     config.baudrate = drive_core::dcp::frame::BAUD;
@@ -37,8 +40,6 @@ pub fn uart_config() -> usart::Config {
     config.stop_bits = usart::StopBits::STOP1;
     config.rx_pull = embassy_stm32::gpio::Pull::Up;
     config.eager_reads = Some(1);
-    config.de_assertion_time = 16;
-    config.de_deassertion_time = 16;
     config
 }
 
@@ -62,16 +63,26 @@ pub async fn receive(mut rx: BufferedUartRx<'static>) {
     }
 }
 
-/// Sends the drive's replies.
+/// The pin level of the driver enable [`send`] drives while a reply goes
+/// out (the description's active level of `DcpDe`).
+pub const DE_ASSERTED: Level = if crate::board::DCP_DE_ACTIVE_LOW { Level::Low } else { Level::High };
+
+/// The pin level of the driver enable while the drive listens.
+pub const DE_RELEASED: Level = if crate::board::DCP_DE_ACTIVE_LOW { Level::High } else { Level::Low };
+
+/// Sends the drive's replies, driving the transceiver's DE around each.
 #[embassy_executor::task]
-pub async fn send(mut tx: BufferedUartTx<'static>) {
+pub async fn send(mut tx: BufferedUartTx<'static>, mut de: Output<'static>) {
     loop {
         let reply = edges::DCP_TX.receive().await;
+        de.set_level(DE_ASSERTED);
         if let Err(e) = tx.write_all(&reply).await {
             error!("DCP reply not sent: {}", e);
         }
+        // Transmission complete: the stop bit of the last byte is out.
         if let Err(e) = tx.flush().await {
             error!("DCP reply not flushed: {}", e);
         }
+        de.set_level(DE_RELEASED);
     }
 }

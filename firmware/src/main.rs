@@ -103,6 +103,7 @@ use drive_core::ripple::harmonics::HarmonicTable;
 use drive_core::ripple::Strategy;
 use drive_core::Controller;
 use embassy_executor::Spawner;
+use embassy_stm32::gpio::{Output, Speed};
 use embassy_stm32::peripherals::{LPUART1, UART5};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::{bind_interrupts, usart};
@@ -238,20 +239,21 @@ async fn main(spawner: Spawner) {
     }
     let tx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 32] = [0; 32]));
     let rx_buffer = defmt::unwrap!(cortex_m::singleton!(: [u8; 64] = [0; 64]));
-    match usart::BufferedUart::new_with_de(
+    // The transceiver's driver enable: released (listening) from here on.
+    let dcp_de = Output::new(board_pin!(p, DcpDe), dcp::DE_RELEASED, Speed::Low);
+    match usart::BufferedUart::new(
         p.UART5,
         board_pin!(p, DcpRx),
         board_pin!(p, DcpTx),
-        board_pin!(p, DcpDe),
-        Irqs,
         tx_buffer,
         rx_buffer,
+        Irqs,
         dcp::uart_config(),
     ) {
         Ok(uart) => {
             let (tx, rx) = uart.split();
             spawner.spawn(defmt::unwrap!(dcp::receive(rx)));
-            spawner.spawn(defmt::unwrap!(dcp::send(tx)));
+            spawner.spawn(defmt::unwrap!(dcp::send(tx, dcp_de)));
         }
         Err(e) => error!("UART5 (DCP) setup failed ({}): no lift controller link, the drive stays idle", e),
     }

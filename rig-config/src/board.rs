@@ -33,7 +33,9 @@ pub struct Pin {
     pub pin: String,
     /// The peripheral signal (`TIM1_CH1N`, `ADC1_IN1`).
     pub signal: String,
-    /// Alternate-function number; -1 for an analog input.
+    /// Alternate-function number; -1 for none: an analog input (signal
+    /// `ADCn_INm`) or a plain GPIO the firmware drives itself (signal
+    /// `GPIO_OUTPUT`).
     pub af: i8,
     /// Pin level of the asserted function: `high`, `low`, or `-`.
     pub active: String,
@@ -267,7 +269,7 @@ impl Board {
                 p.function, p.pin, p.signal, p.af, p.active, p.name, p.pin
             );
             s += &format!(
-                "/// Alternate function of [`{}`] in the description (-1: analog).\n#[allow(dead_code)]\npub const {upper}_AF: i8 = {};\n",
+                "/// Alternate function of [`{}`] in the description (-1: none, analog or plain GPIO).\n#[allow(dead_code)]\npub const {upper}_AF: i8 = {};\n",
                 p.name, p.af
             );
             s += &format!(
@@ -363,7 +365,14 @@ mod tests {
                 .unwrap_or_else(|| panic!("{} ({}) not in the doc table", p.name, p.pin));
             assert_eq!(row[0], p.function, "{}", p.pin);
             assert_eq!(row[2], p.signal, "{}", p.pin);
-            let af = if p.af < 0 { "an".to_string() } else { p.af.to_string() };
+            let af = match (p.af, p.signal.as_str()) {
+                (af, "GPIO_OUTPUT") => {
+                    assert_eq!(af, -1, "{}: a plain GPIO has no alternate function", p.pin);
+                    "io".to_string()
+                }
+                (af, _) if af < 0 => "an".to_string(),
+                (af, _) => af.to_string(),
+            };
             assert_eq!(row[3], af, "{}", p.pin);
             assert_eq!(row[4], p.active, "{}", p.pin);
             assert!(!row[5].is_empty(), "{}: the doc row names no source", p.pin);
@@ -377,9 +386,14 @@ mod tests {
     /// The facts of the manuals, transcribed: the L6398's LIN is active low
     /// (datasheet truth table), HIN active high; the IHM08M1's low-side
     /// inputs sit on PA7/PB0/PB1 (TIM1_CH1N-CH3N, AF6 on the G474RE); BKIN
-    /// is active low (UM1996); the amplifiers invert (gain -5.18, NuttX's
-    /// IHM08M1 board support); no pin the shield drives (PA12 CPOUT, PC13
-    /// user button, PB14) is an output of the firmware.
+    /// is active low; the amplifiers invert (gain -5.18, NuttX's IHM08M1
+    /// board parameters). No pin the firmware uses is on a shield signal it
+    /// must not drive (the sources in the description): PA12 CPOUT, PA11
+    /// and PB14 (the BKIN net), PB15 (the U low-side net), PB4 (the
+    /// over-current reference CURRENT_REF), PC13 (the user button B1), nor
+    /// on one of the shield's other inputs or outputs (PA15/PB3/PB10
+    /// encoder/Hall, PC9/PC3/PB11/PC4/PC5 back-EMF, PC2 temperature, PA4
+    /// potentiometer, PB2 LED, PA5/PB5 debug connector).
     #[test]
     fn board_description_agrees_with_the_cited_manuals() {
         let b = Board::embedded_default().unwrap();
@@ -395,8 +409,25 @@ mod tests {
         }
         assert!(b.active_low("BreakIn"));
         assert!(!b.active_low("BrakePin"), "brake released by a high level, applied by reset and idle");
+        let shield_signals = [
+            "PA12", "PA11", "PB14", "PB15", "PB4", "PC13", "PA15", "PB3", "PB10", "PC9", "PC3", "PB11", "PC4", "PC5",
+            "PC2", "PA4", "PB2", "PA5", "PB5",
+        ];
         for p in &b.pin {
-            assert!(!["PA12", "PC13", "PB14"].contains(&p.pin.as_str()), "{} on {}", p.name, p.pin);
+            assert!(!shield_signals.contains(&p.pin.as_str()), "{} on {}, a shield signal", p.name, p.pin);
+        }
+        // The pins the shield's sources name for the functions the firmware uses.
+        for (name, pin) in [
+            ("PwmUHigh", "PA8"),
+            ("PwmVHigh", "PA9"),
+            ("PwmWHigh", "PA10"),
+            ("BreakIn", "PA6"),
+            ("CurrentUPin", "PA0"),
+            ("CurrentVPin", "PC1"),
+            ("CurrentWPin", "PC0"),
+            ("DcBusPin", "PA1"),
+        ] {
+            assert_eq!(b.pin(name).unwrap().pin, pin, "{name}");
         }
         assert!(b.current_sense_inverted());
         assert!((b.current_full_scale_a() - 31.85).abs() < 0.01, "{}", b.current_full_scale_a());
