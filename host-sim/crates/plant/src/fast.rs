@@ -16,7 +16,7 @@
 //!   `[f64; 12]` state, spring tensions instead of the general line's
 //!   loops, no allocation, no dynamic dispatch.
 
-use super::line::{BrakeAction, Lumped};
+use super::line::Lumped;
 use super::pmsm::phase_currents_cs_a;
 use super::rope::{CAR, DOF, SHEAVE};
 use super::{rk4_step, Plant, PlantObservation, Rk4Scratch, MAX_STATE_LEN, STATE_LEN};
@@ -66,19 +66,16 @@ impl<'a> NominalStep<'a> {
     /// m/s, `i_d`, `i_q` A).
     fn derivative(&self, y: &[f64; STATE_LEN]) -> [f64; STATE_LEN] {
         let plant = self.plant;
-        let m = &plant.pmsm;
-        let pole_pairs = m.pole_pairs;
+        let pole_pairs = plant.pmsm.pole_pairs;
         let theta = y[SHEAVE] * self.inv_r;
         let (ripple, c, s) = plant.angle.eval(theta, &plant.ripple, pole_pairs);
-        let (id, iq) = (y[2 * DOF], y[2 * DOF + 1]);
         let mut dy = [0.0; STATE_LEN];
-        if plant.inputs.pwm_enabled {
-            let (va, vb) = plant.v_alpha_beta;
-            let (vd, vq) = (va * c + vb * s, -va * s + vb * c);
-            let omega_e = pole_pairs * y[DOF + SHEAVE] * self.inv_r;
-            (dy[2 * DOF], dy[2 * DOF + 1]) = m.current_derivative(id, iq, vd, vq, omega_e);
-        }
-        let torque = m.torque_nm(id, iq) + ripple;
+        // The nominal path has no dead time: the inverter's voltages.
+        let (va, vb) = plant.v_alpha_beta;
+        let omega_e = pole_pairs * y[DOF + SHEAVE] * self.inv_r;
+        let (torque, _) = plant.motor_and_brake(y, &mut dy, pole_pairs * theta, omega_e, ripple, |_, _| {
+            (va * c + vb * s, -va * s + vb * c)
+        });
         let (u, v) = (&y[..DOF], &y[DOF..2 * DOF]);
         // Spring tensions (extension times stiffness), N.
         let k = &self.spring;
@@ -91,11 +88,9 @@ impl<'a> NominalStep<'a> {
             -t[3] + plant.faults.car_extra_force_n,
         ];
         for i in 0..DOF {
-            dy[i] = v[i];
             dy[DOF + i] = (force[i] - self.damping[i] * v[i]) * self.inv_mass[i];
         }
         if self.held {
-            dy[SHEAVE] = 0.0;
             dy[DOF + SHEAVE] = 0.0;
         }
         dy
@@ -168,35 +163,18 @@ impl Plant {
     fn line_derivative(&self, lumped: &Lumped, y: &[f64], dy: &mut [f64]) {
         let n = self.nodes();
         let sheave = self.line.layout.sheave;
-        let (id, iq) = (y[2 * n], y[2 * n + 1]);
         let r = self.chain.params.sheave_radius_m;
         let theta_m = y[sheave] / r;
         let omega_m = y[n + sheave] / r;
         let p = self.pmsm.pole_pairs;
         let (ripple, c, s) = self.angle.eval(theta_m, &self.ripple, p);
-        let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
-            (false, _) => (0.0, 0.0),
-            (true, None) => {
-                let (va, vb) = self.machine_v_alpha_beta_cs(id, iq, c, s);
-                self.pmsm.current_derivative(id, iq, va * c + vb * s, -va * s + vb * c, p * omega_m)
-            }
-            (true, Some(phase)) => self.open_phase_current_derivative(phase, id, iq, p * theta_m, p * omega_m),
-        };
-        let torque = self.pmsm.torque_nm(id, iq) + ripple;
-        let brake = match (self.inputs.brake_engaged, self.effects.brake_stop.is_some()) {
-            (false, _) => BrakeAction::Released,
-            (true, false) => BrakeAction::Held,
-            (true, true) => BrakeAction::Clamped { angle_rad: self.clamp_angle_rad },
-        };
-        dy[..n].copy_from_slice(&y[n..2 * n]);
-        if brake == BrakeAction::Held {
-            dy[sheave] = 0.0;
-        }
+        let (torque, brake) = self.motor_and_brake(y, dy, p * theta_m, p * omega_m, ripple, |id, iq| {
+            let (va, vb) = self.machine_v_alpha_beta_cs(id, iq, c, s);
+            (va * c + vb * s, -va * s + vb * c)
+        });
         let (position, velocity) = (&y[..n], &y[n..2 * n]);
         let extra = self.faults.car_extra_force_n;
         self.line.accelerations_of(&self.chain, lumped, position, velocity, torque, brake, extra, &mut dy[n..2 * n]);
-        dy[2 * n] = did;
-        dy[2 * n + 1] = diq;
     }
 
     /// [`Plant::observe`] with [`super::Integrator::Fast`]: masses and springs at

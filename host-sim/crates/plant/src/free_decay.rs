@@ -9,6 +9,7 @@
 
 use super::effects::tension_stiffening::static_tension_n;
 use super::effects::Effects;
+use super::Rk4;
 
 /// One free-decay test.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -224,11 +225,12 @@ pub fn simulate_free_decay_with(
     let samples = (duration_s * sample_rate_hz).round() as usize;
     let mut record = Vec::with_capacity(samples);
     let mut accel = vec![0.0; nodes];
+    let mut rk4 = Rk4::new();
     for _ in 0..samples {
         acceleration(&state, &mut accel);
         record.push(accel[nodes - 1]);
         for _ in 0..substeps {
-            state = rk4_vec(&state, h, |y, dy| {
+            rk4.step(&mut state, h, |y, dy| {
                 dy[..nodes].copy_from_slice(&y[nodes..]);
                 acceleration(y, &mut dy[nodes..]);
             });
@@ -239,27 +241,6 @@ pub fn simulate_free_decay_with(
 
 /// Gravity of the decay rig (tension stiffening's static tensions), m/s^2.
 pub const DECAY_GRAVITY_MPS2: f64 = 9.81;
-
-/// RK4 on a heap state (the chain's length is chosen at run time).
-fn rk4_vec(y: &[f64], h: f64, f: impl Fn(&[f64], &mut [f64])) -> Vec<f64> {
-    let len = y.len();
-    let (mut k1, mut k2, mut k3, mut k4) = (vec![0.0; len], vec![0.0; len], vec![0.0; len], vec![0.0; len]);
-    let mut tmp = vec![0.0; len];
-    f(y, &mut k1);
-    for i in 0..len {
-        tmp[i] = y[i] + 0.5 * h * k1[i];
-    }
-    f(&tmp, &mut k2);
-    for i in 0..len {
-        tmp[i] = y[i] + 0.5 * h * k2[i];
-    }
-    f(&tmp, &mut k3);
-    for i in 0..len {
-        tmp[i] = y[i] + h * k3[i];
-    }
-    f(&tmp, &mut k4);
-    (0..len).map(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])).collect()
-}
 
 /// Eqn 9 for the fundamental: `x tan x = mu l / m` with `x = gamma l` in
 /// (0, pi/2), by bisection; returns `gamma l` (dimensionless).

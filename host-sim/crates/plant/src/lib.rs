@@ -427,7 +427,6 @@ impl Plant {
     fn derivative(&self, y: &[f64], dy: &mut [f64]) {
         let n = self.nodes();
         let sheave = self.line.layout.sheave;
-        let (id, iq) = (y[2 * n], y[2 * n + 1]);
         let r = self.chain.params.sheave_radius_m;
         let theta_m = y[sheave] / r;
         let omega_m = y[n + sheave] / r;
@@ -435,30 +434,16 @@ impl Plant {
         // One sin_cos of the shaft angle serves the ripple harmonics and,
         // for a whole number of pole pairs, the Park transform.
         let (s_m, c_m) = theta_m.sin_cos();
-        let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
-            (false, _) => (0.0, 0.0),
-            (true, None) => {
-                let (va, vb) = self.machine_v_alpha_beta(id, iq, p * theta_m);
-                let (vd, vq) = if p.fract() == 0.0 && p > 0.0 && p <= 64.0 {
-                    let (c, s) = ripple::unit_power(c_m, s_m, p as u32);
-                    (va * c + vb * s, -va * s + vb * c)
-                } else {
-                    park_v(va, vb, p * theta_m)
-                };
-                self.pmsm.current_derivative(id, iq, vd, vq, p * omega_m)
+        let ripple_nm = self.ripple.torque_at(theta_m, s_m, c_m);
+        let (torque, brake) = self.motor_and_brake(y, dy, p * theta_m, p * omega_m, ripple_nm, |id, iq| {
+            let (va, vb) = self.machine_v_alpha_beta(id, iq, p * theta_m);
+            if p.fract() == 0.0 && p > 0.0 && p <= 64.0 {
+                let (c, s) = ripple::unit_power(c_m, s_m, p as u32);
+                (va * c + vb * s, -va * s + vb * c)
+            } else {
+                park_v(va, vb, p * theta_m)
             }
-            (true, Some(phase)) => self.open_phase_current_derivative(phase, id, iq, p * theta_m, p * omega_m),
-        };
-        let torque = self.pmsm.torque_nm(id, iq) + self.ripple.torque_at(theta_m, s_m, c_m);
-        let brake = match (self.inputs.brake_engaged, self.effects.brake_stop.is_some()) {
-            (false, _) => BrakeAction::Released,
-            (true, false) => BrakeAction::Held,
-            (true, true) => BrakeAction::Clamped { angle_rad: self.clamp_angle_rad },
-        };
-        dy[..n].copy_from_slice(&y[n..2 * n]);
-        if brake == BrakeAction::Held {
-            dy[sheave] = 0.0;
-        }
+        });
         self.line.accelerations(
             &self.chain,
             &y[..n],
@@ -468,8 +453,49 @@ impl Plant {
             self.faults.car_extra_force_n,
             &mut dy[n..2 * n],
         );
+    }
+
+    /// The motor-and-brake part of the plant's derivative, one place for
+    /// the reference integrator ([`Self::derivative`]) and the fast one:
+    /// writes the nodes' velocities into `dy[..n]` (the sheave's zeroed
+    /// when the brake holds it rigidly) and `d/dt (i_d, i_q)` into
+    /// `dy[2n..2n + 2]`, and returns the shaft torque (the machine's plus
+    /// `ripple_nm`, N m) and the brake's action, for the line's
+    /// accelerations. `theta_e`, `omega_e`: the electrical angle (rad) and
+    /// speed (rad/s); `vdq(i_d, i_q)`: the machine's d-q voltages (V) with
+    /// the PWM on and every phase connected.
+    pub(crate) fn motor_and_brake(
+        &self,
+        y: &[f64],
+        dy: &mut [f64],
+        theta_e: f64,
+        omega_e: f64,
+        ripple_nm: f64,
+        vdq: impl FnOnce(f64, f64) -> (f64, f64),
+    ) -> (f64, BrakeAction) {
+        let n = self.nodes();
+        let (id, iq) = (y[2 * n], y[2 * n + 1]);
+        let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
+            (false, _) => (0.0, 0.0),
+            (true, None) => {
+                let (vd, vq) = vdq(id, iq);
+                self.pmsm.current_derivative(id, iq, vd, vq, omega_e)
+            }
+            (true, Some(phase)) => self.open_phase_current_derivative(phase, id, iq, theta_e, omega_e),
+        };
+        let torque = self.pmsm.torque_nm(id, iq) + ripple_nm;
+        let brake = match (self.inputs.brake_engaged, self.effects.brake_stop.is_some()) {
+            (false, _) => BrakeAction::Released,
+            (true, false) => BrakeAction::Held,
+            (true, true) => BrakeAction::Clamped { angle_rad: self.clamp_angle_rad },
+        };
+        dy[..n].copy_from_slice(&y[n..2 * n]);
+        if brake == BrakeAction::Held {
+            dy[self.line.layout.sheave] = 0.0;
+        }
         dy[2 * n] = did;
         dy[2 * n + 1] = diq;
+        (torque, brake)
     }
 
     /// `(d/dt i_d, d/dt i_q)` (A/s) with phase `phase` open: the current is
@@ -662,64 +688,107 @@ fn open_phase_direction(phase: usize) -> (f64, f64) {
     }
 }
 
-/// One classical fourth-order Runge-Kutta step of `y' = f(y)` over `h`,
-/// in place, for a state of at most [`MAX_STATE_LEN`] values; `f(y, dy)`
-/// writes the derivative of `y` into `dy`.
-pub fn rk4_step_slice(y: &mut [f64], h: f64, f: impl Fn(&[f64], &mut [f64])) {
+/// The plant's one ODE integrator: a classical fourth-order Runge-Kutta
+/// step of `y' = f(y)` over `h`, in place; `f(y, dy)` writes the
+/// derivative of `y` into `dy` (both of `y.len()` values). `work` is the
+/// step's work space, at least `5 * y.len()` values (four stages and the
+/// shifted state), reused from step to step by the callers: [`Rk4`] on the
+/// heap, [`Rk4Scratch`] in a fixed array, [`rk4_step`] for a fixed-size state.
+pub fn rk4_step_in(y: &mut [f64], h: f64, work: &mut [f64], mut f: impl FnMut(&[f64], &mut [f64])) {
+    let len = y.len();
+    assert!(
+        work.len() >= 5 * len,
+        "RK4 work space of {} values for a state of {len}: at least {}",
+        work.len(),
+        5 * len
+    );
+    let (k1, rest) = work.split_at_mut(len);
+    let (k2, rest) = rest.split_at_mut(len);
+    let (k3, rest) = rest.split_at_mut(len);
+    let (k4, rest) = rest.split_at_mut(len);
+    let tmp = &mut rest[..len];
+    f(y, k1);
+    for i in 0..len {
+        tmp[i] = y[i] + h / 2.0 * k1[i];
+    }
+    f(tmp, k2);
+    for i in 0..len {
+        tmp[i] = y[i] + h / 2.0 * k2[i];
+    }
+    f(tmp, k3);
+    for i in 0..len {
+        tmp[i] = y[i] + h * k3[i];
+    }
+    f(tmp, k4);
+    for i in 0..len {
+        y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+}
+
+/// [`rk4_step_in`] with its work space on the heap, for a state of any
+/// length chosen at run time (the free decay's chain); the work space grows
+/// to the longest state stepped and is reused.
+#[derive(Clone, Debug, Default)]
+pub struct Rk4 {
+    work: Vec<f64>,
+}
+
+impl Rk4 {
+    /// An integrator with no work space yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// One step of `y' = f(y)` over `h`, in place ([`rk4_step_in`]).
+    pub fn step(&mut self, y: &mut [f64], h: f64, f: impl FnMut(&[f64], &mut [f64])) {
+        if self.work.len() < 5 * y.len() {
+            self.work.resize(5 * y.len(), 0.0);
+        }
+        rk4_step_in(y, h, &mut self.work, f);
+    }
+}
+
+/// One step of [`rk4_step_in`] for a state of at most [`MAX_STATE_LEN`]
+/// values, its work space on the stack.
+pub fn rk4_step_slice(y: &mut [f64], h: f64, f: impl FnMut(&[f64], &mut [f64])) {
     Rk4Scratch::new().step(y, h, f);
 }
 
-/// Work space of [`rk4_step_slice`], reused over many steps.
-struct Rk4Scratch {
-    k: [[f64; MAX_STATE_LEN]; 4],
-    tmp: [f64; MAX_STATE_LEN],
+/// [`rk4_step_in`]'s work space for a plant state (at most
+/// [`MAX_STATE_LEN`] values) in a fixed array, reused over many steps.
+pub struct Rk4Scratch {
+    work: [f64; 5 * MAX_STATE_LEN],
+}
+
+impl Default for Rk4Scratch {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl Rk4Scratch {
-    fn new() -> Self {
-        Self { k: [[0.0; MAX_STATE_LEN]; 4], tmp: [0.0; MAX_STATE_LEN] }
+    /// A zeroed work space.
+    pub fn new() -> Self {
+        Self { work: [0.0; 5 * MAX_STATE_LEN] }
     }
 
-    fn step(&mut self, y: &mut [f64], h: f64, f: impl Fn(&[f64], &mut [f64])) {
+    /// One step of `y' = f(y)` over `h`, in place ([`rk4_step_in`]); `y`
+    /// of at most [`MAX_STATE_LEN`] values.
+    pub fn step(&mut self, y: &mut [f64], h: f64, f: impl FnMut(&[f64], &mut [f64])) {
         let len = y.len();
         assert!(len <= MAX_STATE_LEN, "state of {len} values: at most {MAX_STATE_LEN}");
-        let [k1, k2, k3, k4] = &mut self.k;
-        let tmp = &mut self.tmp;
-        f(y, &mut k1[..len]);
-        for i in 0..len {
-            tmp[i] = y[i] + h / 2.0 * k1[i];
-        }
-        f(&tmp[..len], &mut k2[..len]);
-        for i in 0..len {
-            tmp[i] = y[i] + h / 2.0 * k2[i];
-        }
-        f(&tmp[..len], &mut k3[..len]);
-        for i in 0..len {
-            tmp[i] = y[i] + h * k3[i];
-        }
-        f(&tmp[..len], &mut k4[..len]);
-        for i in 0..len {
-            y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
+        rk4_step_in(y, h, &mut self.work, f);
     }
 }
 
-/// One classical fourth-order Runge-Kutta step of `y' = f(y)` over `h`.
+/// [`rk4_step_in`] for a fixed-size state whose derivative `f` returns an
+/// array: the new state.
 pub fn rk4_step<const N: usize>(y: &[f64; N], h: f64, f: impl Fn(&[f64; N]) -> [f64; N]) -> [f64; N] {
-    let shifted = |base: &[f64; N], k: &[f64; N], scale: f64| -> [f64; N] {
-        let mut out = *base;
-        for i in 0..N {
-            out[i] += scale * k[i];
-        }
-        out
-    };
-    let k1 = f(y);
-    let k2 = f(&shifted(y, &k1, h / 2.0));
-    let k3 = f(&shifted(y, &k2, h / 2.0));
-    let k4 = f(&shifted(y, &k3, h));
     let mut out = *y;
-    for i in 0..N {
-        out[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    }
+    let mut work = [[0.0; N]; 5];
+    rk4_step_in(&mut out, h, work.as_flattened_mut(), |x, dx| {
+        let x: &[f64; N] = x.try_into().expect("a state of N values");
+        dx.copy_from_slice(&f(x));
+    });
     out
 }
