@@ -7,7 +7,7 @@
 //! same application layer (the shadow) takes the DCP and service bytes the
 //! chip reports it took at each step, and every step's outputs, telemetry
 //! digest, DCP replies and service answers must be equal bit for bit. The
-//! harness is `host_sim::cli::pil::dcp` (also behind `host-sim pil --dcp`).
+//! harness is `closed_loop::pil::dcp` (also behind `host-sim pil --dcp`).
 //!
 //! Needs `qemu-system-arm` and the PIL ELF (`scripts/test.sh` builds both;
 //! `PIL_ELF` overrides the path).
@@ -15,6 +15,9 @@
 use std::path::Path;
 use std::time::Instant;
 
+use closed_loop::pil::dcp::{
+    default_elf, default_parameters, geometry, Chip, CpuLoad, Lift, Master, Phase, Trip, CYCLE_STEPS,
+};
 use drive_core::dcp::channel::position_message;
 use drive_core::dcp::command::{command_byte, Kind, Mode, Speed};
 use drive_core::dcp::slave::{S1_TRAVEL, S5_ACCEPTED, S7_MESSAGE_ERROR};
@@ -22,9 +25,6 @@ use drive_core::dcp::{MasterFrame, SlaveFrame};
 use drive_core::lift_drive::LiftDrive;
 use drive_core::service::ParamsStatus;
 use drive_core::DriveState;
-use host_sim::cli::pil::dcp::{
-    default_elf, default_parameters, geometry, Chip, CpuLoad, Lift, Master, Phase, Trip, CYCLE_STEPS,
-};
 use rig_config::RigConfig;
 
 fn rig() -> RigConfig {
@@ -536,7 +536,7 @@ fn a_car_observer_travel_on_the_emulated_chip_rides_as_on_the_host_and_fits_the_
         let task = drive_core::observer::ObserverTask::for_model(&rig.observer_model()).unwrap();
         let mut observed = closed_loop::ObservedController { controller: &mut controller, task };
         let spec = closed_loop::TravelSpec {
-            m_car_kg: host_sim::cli::pil::dcp::geometry(&rig).1 as f64,
+            m_car_kg: closed_loop::pil::dcp::geometry(&rig).1 as f64,
             direction: drive_core::config::Direction::Up,
             lw_start_m: lw_start,
             lw_end_m: lw_start + 2.0,

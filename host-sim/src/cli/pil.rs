@@ -2,9 +2,12 @@
 //! emulated Cortex-M4F; every step checked bit for bit against the host
 //! build, and the cost of each step measured in instructions. With
 //! `--dcp`, the chip runs the drive's application layer and this side
-//! plays the lift controller on its DCP line ([`dcp`]).
+//! plays the lift controller on its DCP line ([`dcp`], the harness in the
+//! `closed-loop` library).
 
-pub mod dcp;
+/// The lift-controller harness (`closed_loop::pil::dcp`), also reachable
+/// as `host_sim::cli::pil::dcp`.
+pub use closed_loop::pil::dcp;
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -284,11 +287,9 @@ pub fn check_landings(landings: &[i32], start_mm: f64, shaft_mm: u32) -> anyhow:
     Ok(())
 }
 
-/// Runs `pil --dcp`.
+/// Runs `pil --dcp`: the chip started with the car mass and strategy set,
+/// the travels to each landing, their summary printed and written.
 fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
-    use drive_core::dcp::command::{Mode, Speed};
-    use drive_core::service::ParamsStatus;
-
     let (geometry, _) = dcp::geometry(rig);
     check_landings(&args.landings, args.start_mm, geometry.shaft_travel_mm)?;
     let out = output_dir(&args.out, args.force)?;
@@ -297,8 +298,53 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
     // fresh, so the chip starts with no stored parameters.
     let chip_dir = out.path("chip");
     std::fs::create_dir_all(&chip_dir).with_context(|| format!("cannot create {}", chip_dir.display()))?;
+    let mut lift = start_dcp_lift(rig, args, m_car, &chip_dir)?;
+    let drive = rig.drive_config();
+    let started = Instant::now();
+    let (k, master, peaks, load) = run_dcp_travels(args, &drive, &mut lift)?;
+    let wall = started.elapsed().as_secs_f64();
+    let summaries = travel_summaries(args.start_mm, &master.arrivals, &peaks);
+    outln!(
+        "{k} control steps ({:.2} s) of DCP4 travels on the emulated Cortex-M4F in {wall:.1} s, m_car = {m_car} kg, \
+         compensation {}: every output, DCP reply and service answer bit-identical to the host build",
+        k as f64 / drive.current_loop_hz as f64,
+        args.compensation.strategy().name()
+    );
+    outln!("{}", load.summary());
+    let missed = lift.shadow().controller().observer_missed_deadlines();
+    if lift.shadow().controller().uses_observer() {
+        outln!("chain observer: {missed} missed deadlines");
+    }
+    let loop_hz = drive.current_loop_hz as f64;
+    print_travel_table(&summaries, loop_hz);
+    let mut csv = out.writer("dcp_travels.csv")?;
+    writeln!(csv, "{}", TravelSummary::COLUMNS.join(","))?;
+    for (i, s) in summaries.iter().enumerate() {
+        writeln!(csv, "{}", s.row(i + 1, loop_hz).map(|v| v.to_string()).join(","))?;
+    }
+    csv.flush()?;
+    drop(csv);
+    drop(lift);
+    std::fs::remove_dir(&chip_dir).ok();
+    out.commit()?;
+    outln!("per travel: {}", args.out.join("dcp_travels.csv").display());
+    Ok(())
+}
+
+/// The chip started in `chip_dir` with the car at `--start-mm`, the car
+/// mass `m_car` set on its service port and `--compensation` (if not off)
+/// as its strategy.
+fn start_dcp_lift(
+    rig: &RigConfig,
+    args: &PilArgs,
+    m_car: f64,
+    chip_dir: &std::path::Path,
+) -> anyhow::Result<dcp::Lift> {
+    use drive_core::service::ParamsStatus;
+
+    let (geometry, _) = dcp::geometry(rig);
     let elf = args.elf.clone().unwrap_or_else(dcp::default_elf);
-    let chip = dcp::Chip::launch(&elf, &args.qemu, &chip_dir)?;
+    let chip = dcp::Chip::launch(&elf, &args.qemu, chip_dir)?;
     let lw_start = geometry.lw_lowest_landing_m as f64 + args.start_mm / 1000.0;
     let mut lift = dcp::Lift::new(rig, Some(chip), &dcp::default_parameters(rig), ParamsStatus::None, m_car, lw_start)?;
     let (answer, _) = lift.ask(&format!("set mass {}", m_car as f32), 2_000)?;
@@ -308,10 +354,21 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
         let (answer, _) = lift.ask(&format!("set strategy {}", strategy.name()), 2_000)?;
         anyhow::ensure!(answer.starts_with("ok strategy"), "the drive refused the strategy: {answer}");
     }
+    Ok(lift)
+}
 
-    let drive = rig.drive_config();
+/// The DCP4 travels to each of `--landings` in turn: the steps run, the
+/// lift controller (its arrivals), each travel's peak car speed (m/s) and
+/// the CPU load.
+fn run_dcp_travels(
+    args: &PilArgs,
+    drive: &drive_core::DriveConfig,
+    lift: &mut dcp::Lift,
+) -> anyhow::Result<(u64, dcp::Master, Vec<f64>, dcp::CpuLoad)> {
+    use drive_core::dcp::command::{Mode, Speed};
+
     let trips = args.landings.iter().map(|&target_mm| dcp::Trip { target_mm, speed: Speed::V4 }).collect();
-    let mut master = dcp::Master::new(Mode::Dcp4, trips, &drive);
+    let mut master = dcp::Master::new(Mode::Dcp4, trips, drive);
     // Each travel within its time at rated speed plus 10 s of sequence.
     let mut budget = 0.0;
     let mut from = args.start_mm;
@@ -323,10 +380,9 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
     let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(max_steps) };
     bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos} steps {elapsed_precise}")?);
     bar.set_message("PIL, DCP");
-    let started = Instant::now();
     let mut peak = 0.0f64;
     let mut peaks = Vec::new();
-    let mut load = dcp::CpuLoad::new(&drive);
+    let mut load = dcp::CpuLoad::new(drive);
     let mut k = 0;
     while master.phase() != dcp::Phase::Done {
         anyhow::ensure!(k < max_steps, "the travels did not finish within {max_steps} steps");
@@ -345,12 +401,15 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
         }
     }
     bar.finish_and_clear();
-    let wall = started.elapsed().as_secs_f64();
-    let mut from = args.start_mm;
-    let summaries: Vec<TravelSummary> = master
-        .arrivals
+    Ok((k, master, peaks, load))
+}
+
+/// One [`TravelSummary`] per arrival, the first travel from `start_mm`.
+fn travel_summaries(start_mm: f64, arrivals: &[dcp::Arrival], peaks: &[f64]) -> Vec<TravelSummary> {
+    let mut from = start_mm;
+    arrivals
         .iter()
-        .zip(&peaks)
+        .zip(peaks)
         .map(|(a, &peak_speed_mps)| {
             let s = TravelSummary {
                 from_mm: from,
@@ -362,18 +421,11 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
             from = a.position_mm;
             s
         })
-        .collect();
-    outln!(
-        "{k} control steps ({:.2} s) of DCP4 travels on the emulated Cortex-M4F in {wall:.1} s, m_car = {m_car} kg, \
-         compensation {}: every output, DCP reply and service answer bit-identical to the host build",
-        k as f64 / drive.current_loop_hz as f64,
-        strategy.name()
-    );
-    outln!("{}", load.summary());
-    let missed = lift.shadow().controller().observer_missed_deadlines();
-    if lift.shadow().controller().uses_observer() {
-        outln!("chain observer: {missed} missed deadlines");
-    }
+        .collect()
+}
+
+/// Prints one row per travel.
+fn print_travel_table(summaries: &[TravelSummary], loop_hz: f64) {
     outln!(
         "{:>7} {:>9} {:>9} {:>10} {:>9} {:>8} {:>8} {:>10}",
         "travel",
@@ -385,23 +437,10 @@ fn run_dcp(rig: &RigConfig, args: &PilArgs, m_car: f64) -> anyhow::Result<()> {
         "time s",
         "peak m/s"
     );
-    let loop_hz = drive.current_loop_hz as f64;
     for (i, s) in summaries.iter().enumerate() {
         let [travel, from, to, landed, error, steps, time, peak] = s.row(i + 1, loop_hz);
         outln!("{travel:>7} {from:>9.1} {to:>9} {landed:>10.2} {error:>+9.2} {steps:>8} {time:>8.2} {peak:>10.3}");
     }
-    let mut csv = out.writer("dcp_travels.csv")?;
-    writeln!(csv, "{}", TravelSummary::COLUMNS.join(","))?;
-    for (i, s) in summaries.iter().enumerate() {
-        writeln!(csv, "{}", s.row(i + 1, loop_hz).map(|v| v.to_string()).join(","))?;
-    }
-    csv.flush()?;
-    drop(csv);
-    drop(lift);
-    std::fs::remove_dir(&chip_dir).ok();
-    out.commit()?;
-    outln!("per travel: {}", args.out.join("dcp_travels.csv").display());
-    Ok(())
 }
 
 #[cfg(test)]

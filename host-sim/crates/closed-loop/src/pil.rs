@@ -29,6 +29,7 @@ use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+
 use std::time::{Duration, Instant};
 
 use drive_core::dcp::{Mode, SlaveConfig};
@@ -43,6 +44,8 @@ use drive_core::service::ParamsStatus;
 use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame, TravelCommand};
 
 use crate::{corrupted_frame, DriveController, SimError};
+
+pub mod dcp;
 
 /// Processor clock of the MPS2 board in QEMU, which SysTick counts, Hz.
 pub const MPS2_SYSCLK_HZ: f64 = 25.0e6;
@@ -67,6 +70,9 @@ pub struct PilOptions {
     /// File for QEMU's standard output and error (the defmt semihosting
     /// stream and any emulator message); none discards them.
     pub log: Option<PathBuf>,
+    /// QEMU's working directory (where the target keeps its emulated flash
+    /// file); none: the caller's.
+    pub working_dir: Option<PathBuf>,
 }
 
 impl Default for PilOptions {
@@ -77,6 +83,7 @@ impl Default for PilOptions {
             icount_shift: 5,
             timeout: Duration::from_secs(20),
             log: None,
+            working_dir: None,
         }
     }
 }
@@ -123,29 +130,54 @@ impl From<PilError> for SimError {
     }
 }
 
-/// The running target.
-pub struct PilTarget {
-    qemu: Child,
-    stream: TcpStream,
-    decoder: Decoder,
-    timeout: Duration,
-    icount_shift: u32,
-    reports: Vec<StepReport>,
-    /// The host build of the target's application layer.
-    shadow: LiftDrive,
+/// QEMU running the PIL target (`mps2-an386`, `-icount`, semihosting),
+/// its first UARTs on TCP sockets of 127.0.0.1; killed when dropped. The
+/// one launcher of the target: [`PilTarget`] connects UART0 (the PIL
+/// frames), [`dcp::Chip`] UART0 to UART2 (the frames, the DCP line, the
+/// service port).
+pub struct Qemu {
+    child: Child,
 }
 
-impl PilTarget {
-    /// Starts QEMU with the target and waits for its UART to connect; the
-    /// target is built for `drive` (the rig's parameters), which the host
-    /// shadow uses too.
-    pub fn launch(options: &PilOptions, drive: &DriveConfig) -> Result<Self, PilError> {
+impl Qemu {
+    /// Starts QEMU on `options.elf` (in `options.working_dir` if given) with
+    /// UART0 to UART`uarts - 1` on sockets, and waits for each to connect
+    /// (at most `options.timeout` each); the streams in UART order, each
+    /// without Nagle's delay and with `options.timeout` as read timeout.
+    pub fn launch(options: &PilOptions, uarts: usize) -> Result<(Self, Vec<TcpStream>), PilError> {
         if !options.elf.is_file() {
             return Err(PilError::ElfMissing(options.elf.clone()));
         }
-        let listener =
-            TcpListener::bind("127.0.0.1:0").map_err(|source| PilError::Io { context: "bind 127.0.0.1", source })?;
-        let port = listener.local_addr().map_err(|source| PilError::Io { context: "local address", source })?.port();
+        let elf = options.elf.canonicalize().map_err(|source| PilError::Io { context: "resolve the ELF", source })?;
+        let listeners = (0..uarts)
+            .map(|_| {
+                TcpListener::bind("127.0.0.1:0").map_err(|source| PilError::Io { context: "bind 127.0.0.1", source })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut command = Command::new(&options.qemu);
+        command.args(["-M", "mps2-an386", "-nographic", "-monitor", "none"]);
+        for (i, listener) in listeners.iter().enumerate() {
+            let port =
+                listener.local_addr().map_err(|source| PilError::Io { context: "local address", source })?.port();
+            command
+                .arg("-chardev")
+                .arg(format!("socket,id=uart{i},host=127.0.0.1,port={port},nodelay=on"))
+                .arg("-serial")
+                .arg(format!("chardev:uart{i}"));
+        }
+        command
+            .args(["-icount", &format!("shift={}", options.icount_shift)])
+            .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+            .arg(&elf);
+        if let Some(dir) = &options.working_dir {
+            if !dir.is_dir() {
+                return Err(PilError::Io {
+                    context: "QEMU's working directory",
+                    source: std::io::Error::other(format!("{} is not a directory", dir.display())),
+                });
+            }
+            command.current_dir(dir);
+        }
         let (stdout, stderr) = match &options.log {
             Some(path) => {
                 let file =
@@ -155,29 +187,30 @@ impl PilTarget {
             }
             None => (Stdio::null(), Stdio::null()),
         };
-        let qemu = Command::new(&options.qemu)
-            .args(["-M", "mps2-an386", "-nographic", "-monitor", "none", "-chardev"])
-            .arg(format!("socket,id=uart0,host=127.0.0.1,port={port},nodelay=on"))
-            .args(["-serial", "chardev:uart0"])
-            .args(["-icount", &format!("shift={}", options.icount_shift)])
-            .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
-            .arg(&options.elf)
+        let child = command
             .stdin(Stdio::null())
             .stdout(stdout)
             .stderr(stderr)
             .spawn()
             .map_err(|source| PilError::QemuMissing { qemu: options.qemu.clone(), source })?;
-        let mut target = PilTargetStarting { qemu: Some(qemu) };
+        let mut qemu = Self { child };
+        let streams =
+            listeners.iter().map(|listener| qemu.accept(listener, options.timeout)).collect::<Result<Vec<_>, _>>()?;
+        Ok((qemu, streams))
+    }
+
+    /// Waits for QEMU to connect to `listener` (at most `timeout`).
+    fn accept(&mut self, listener: &TcpListener, timeout: Duration) -> Result<TcpStream, PilError> {
         listener.set_nonblocking(true).map_err(|source| PilError::Io { context: "listen", source })?;
         let started = Instant::now();
         let stream = loop {
             match listener.accept() {
                 Ok((stream, _)) => break stream,
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                    if started.elapsed() > options.timeout {
+                    if started.elapsed() > timeout {
                         return Err(PilError::Timeout("UART connection"));
                     }
-                    if let Some(Ok(Some(status))) = target.qemu.as_mut().map(|q| q.try_wait()) {
+                    if let Ok(Some(status)) = self.child.try_wait() {
                         return Err(PilError::Io {
                             context: "QEMU exited before connecting",
                             source: std::io::Error::other(status.to_string()),
@@ -190,9 +223,40 @@ impl PilTarget {
         };
         stream.set_nonblocking(false).map_err(|source| PilError::Io { context: "socket", source })?;
         stream.set_nodelay(true).map_err(|source| PilError::Io { context: "socket", source })?;
-        stream.set_read_timeout(Some(options.timeout)).map_err(|source| PilError::Io { context: "socket", source })?;
+        stream.set_read_timeout(Some(timeout)).map_err(|source| PilError::Io { context: "socket", source })?;
+        Ok(stream)
+    }
+}
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The running target.
+pub struct PilTarget {
+    /// Kept for its drop, which ends QEMU.
+    _qemu: Qemu,
+    stream: TcpStream,
+    decoder: Decoder,
+    timeout: Duration,
+    icount_shift: u32,
+    reports: Vec<StepReport>,
+    /// The host build of the target's application layer.
+    shadow: LiftDrive,
+}
+
+impl PilTarget {
+    /// Starts QEMU with the target ([`Qemu::launch`], UART0) and waits for
+    /// its UART to connect; the target is built for `drive` (the rig's
+    /// parameters), which the host shadow uses too.
+    pub fn launch(options: &PilOptions, drive: &DriveConfig) -> Result<Self, PilError> {
+        let (qemu, mut streams) = Qemu::launch(options, 1)?;
+        let stream = streams.pop().expect("one UART");
         let mut target = Self {
-            qemu: target.qemu.take().expect("set above"),
+            _qemu: qemu,
             stream,
             decoder: Decoder::new(),
             timeout: options.timeout,
@@ -390,13 +454,6 @@ impl PilTarget {
     }
 }
 
-impl Drop for PilTarget {
-    fn drop(&mut self) {
-        let _ = self.qemu.kill();
-        let _ = self.qemu.wait();
-    }
-}
-
 /// The shadow: the target's application layer built for the host, the
 /// angle reference given (the plant's rotor starts at electrical zero), as
 /// the target's. Its DCP port and service port hear nothing here, as the
@@ -425,18 +482,4 @@ impl PeriodIo for Unconnected {
     fn service_reply(&mut self, _reply: &ServiceReply) {}
 
     fn dcp_reply(&mut self, _reply: &[u8; 6]) {}
-}
-
-/// QEMU while the target has not connected yet: killed if launching fails.
-struct PilTargetStarting {
-    qemu: Option<Child>,
-}
-
-impl Drop for PilTargetStarting {
-    fn drop(&mut self) {
-        if let Some(mut qemu) = self.qemu.take() {
-            let _ = qemu.kill();
-            let _ = qemu.wait();
-        }
-    }
 }

@@ -12,15 +12,14 @@
 //! printed.
 //!
 //! Used by `host-sim pil --dcp` and by the integration tests
-//! (`tests/pil_dcp.rs`).
+//! (`tests/pil_dcp.rs`, `tests/pil_params.rs`, `tests/pil_faults.rs`); QEMU
+//! is started by the one launcher of the target, [`super::Qemu`].
 
 use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use anyhow::{bail, ensure, Context};
 use drive_core::dcp::channel::position_message;
 use drive_core::dcp::command::{command_byte, Kind, Mode, Speed};
 use drive_core::dcp::slave::{S1_TRAVEL, S6_BRAKE_OPEN};
@@ -35,6 +34,35 @@ use drive_core::service::ParamsStatus;
 use drive_core::{ControlOutput, Controller, DriveConfig, SensorFrame};
 use plant::{Plant, PlantInputs};
 use rig_config::RigConfig;
+
+use super::{PilError, PilOptions, Qemu};
+
+/// Why the lift, the chip or the lift controller stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum DcpError {
+    /// The link to the chip: QEMU, its sockets, a frame.
+    #[error(transparent)]
+    Link(#[from] PilError),
+    /// A check failed: the chip and its host shadow differ, the plant left
+    /// its valid range, the car is outside the shaft, an answer did not
+    /// come, a DCP reply is bad.
+    #[error("{0}")]
+    Check(String),
+}
+
+/// Returns [`DcpError::Check`] with the formatted message unless `cond`.
+macro_rules! ensure {
+    ($cond:expr, $($arg:tt)+) => {
+        if !$cond {
+            return Err(DcpError::Check(format!($($arg)+)));
+        }
+    };
+}
+
+/// An I/O error on the link, with what was being done.
+fn io(context: &'static str) -> impl FnOnce(std::io::Error) -> DcpError {
+    move |source| DcpError::Link(PilError::Io { context, source })
+}
 
 /// Instructions per SysTick tick: the 25 MHz tick is 40 ns, an instruction
 /// 2^5 ns under `-icount shift=5`.
@@ -58,7 +86,7 @@ pub fn geometry(rig: &RigConfig) -> (LiftGeometry, f32) {
 pub fn default_parameters(rig: &RigConfig) -> DriveParameters {
     DriveParameters {
         strategy: Strategy::Off,
-        table: closed_loop::compensation::rig_ripple_table(rig).negated(),
+        table: crate::compensation::rig_ripple_table(rig).negated(),
         m_car_kg: geometry(rig).1,
         encoder_offset_counts: 0,
         dcp_mode: Mode::Dcp4,
@@ -103,101 +131,56 @@ pub struct ChipStep {
 
 /// QEMU running the PIL target with three sockets: PIL frames, DCP, service port.
 pub struct Chip {
-    qemu: Child,
     frames: TcpStream,
     dcp: TcpStream,
     service: TcpStream,
     decoder: Decoder,
-}
-
-impl Drop for Chip {
-    fn drop(&mut self) {
-        let _ = self.qemu.kill();
-        let _ = self.qemu.wait();
-    }
-}
-
-fn accept(listener: &TcpListener, qemu: &mut Child) -> anyhow::Result<TcpStream> {
-    listener.set_nonblocking(true)?;
-    let started = Instant::now();
-    loop {
-        match listener.accept() {
-            Ok((stream, _)) => {
-                stream.set_nonblocking(false)?;
-                stream.set_nodelay(true)?;
-                stream.set_read_timeout(Some(TIMEOUT))?;
-                return Ok(stream);
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                if let Some(status) = qemu.try_wait()? {
-                    bail!("QEMU exited before connecting: {status}");
-                }
-                ensure!(started.elapsed() < TIMEOUT, "QEMU did not connect within {} s", TIMEOUT.as_secs());
-                std::thread::sleep(Duration::from_millis(5));
-            }
-            Err(e) => return Err(e).context("accepting QEMU's connection"),
-        }
-    }
+    /// Kept for its drop, which ends QEMU.
+    _qemu: Qemu,
 }
 
 impl Chip {
     /// Starts `qemu` (`qemu-system-arm`) on the target `elf` in the working
-    /// directory `dir` (where the target keeps its emulated flash file).
-    pub fn launch(elf: &Path, qemu: &Path, dir: &Path) -> anyhow::Result<Self> {
-        ensure!(elf.is_file(), "PIL target {} not found: build pil/ (scripts/test.sh does)", elf.display());
-        ensure!(dir.is_dir(), "{} is not a directory", dir.display());
-        let elf = elf.canonicalize().with_context(|| format!("cannot resolve {}", elf.display()))?;
-        let listeners =
-            [TcpListener::bind("127.0.0.1:0")?, TcpListener::bind("127.0.0.1:0")?, TcpListener::bind("127.0.0.1:0")?];
-        let mut command = Command::new(qemu);
-        command.args(["-M", "mps2-an386", "-nographic", "-monitor", "none"]);
-        for (i, listener) in listeners.iter().enumerate() {
-            let port = listener.local_addr()?.port();
-            command
-                .arg("-chardev")
-                .arg(format!("socket,id=uart{i},host=127.0.0.1,port={port},nodelay=on"))
-                .arg("-serial")
-                .arg(format!("chardev:uart{i}"));
-        }
-        let mut qemu = command
-            .args(["-icount", "shift=5", "-semihosting-config", "enable=on,target=native", "-kernel"])
-            .arg(&elf)
-            .current_dir(dir)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .with_context(|| format!("cannot start {} (apt-get install -y qemu-system-arm)", qemu.display()))?;
-        let frames = accept(&listeners[0], &mut qemu)?;
-        let dcp = accept(&listeners[1], &mut qemu)?;
-        let service = accept(&listeners[2], &mut qemu)?;
-        Ok(Self { qemu, frames, dcp, service, decoder: Decoder::new() })
+    /// directory `dir` (where the target keeps its emulated flash file):
+    /// [`Qemu::launch`] with UART0 to UART2, `-icount shift=5`.
+    pub fn launch(elf: &Path, qemu: &Path, dir: &Path) -> Result<Self, DcpError> {
+        let options = PilOptions {
+            elf: elf.to_path_buf(),
+            qemu: qemu.to_path_buf(),
+            icount_shift: 5,
+            timeout: TIMEOUT,
+            log: None,
+            working_dir: Some(dir.to_path_buf()),
+        };
+        let (qemu, streams) = Qemu::launch(&options, 3)?;
+        let [frames, dcp, service]: [TcpStream; 3] = streams.try_into().expect("three UARTs");
+        Ok(Self { frames, dcp, service, decoder: Decoder::new(), _qemu: qemu })
     }
 
     /// Puts `dcp_out` on the DCP line and `service_out` on the service
     /// port, runs one step on `sensors`.
-    pub fn step(&mut self, dcp_out: &[u8], service_out: &[u8], sensors: &SensorFrame) -> anyhow::Result<ChipStep> {
+    pub fn step(&mut self, dcp_out: &[u8], service_out: &[u8], sensors: &SensorFrame) -> Result<ChipStep, DcpError> {
         if !service_out.is_empty() {
-            self.service.write_all(service_out)?;
+            self.service.write_all(service_out).map_err(io("send on the service port"))?;
         }
         if !dcp_out.is_empty() {
-            self.dcp.write_all(dcp_out)?;
+            self.dcp.write_all(dcp_out).map_err(io("send on the DCP line"))?;
         }
         let mut frame = [0u8; MAX_FRAME];
         let n = encode(&Message::Sense(*sensors), &mut frame);
-        self.frames.write_all(&frame[..n])?;
+        self.frames.write_all(&frame[..n]).map_err(io("send a frame"))?;
         let report = loop {
             let mut byte = [0u8; 1];
-            self.frames.read_exact(&mut byte).context("no output frame from the chip")?;
+            self.frames.read_exact(&mut byte).map_err(io("no output frame from the chip"))?;
             match self.decoder.push(byte[0]) {
                 Some(Ok(Message::Output(report))) => break report,
-                Some(other) => bail!("unexpected reply from the chip: {other:?}"),
+                Some(other) => return Err(DcpError::Check(format!("unexpected reply from the chip: {other:?}"))),
                 None => {}
             }
         };
-        let mut read = |n: usize| -> anyhow::Result<Vec<u8>> {
+        let mut read = |n: usize| -> Result<Vec<u8>, DcpError> {
             let mut buf = vec![0u8; n];
-            self.dcp.read_exact(&mut buf).context("no DCP record of the step from the chip")?;
+            self.dcp.read_exact(&mut buf).map_err(io("no DCP record of the step from the chip"))?;
             Ok(buf)
         };
         let n_in = read(1)?[0] as usize;
@@ -214,9 +197,9 @@ impl Chip {
     }
 
     /// `n` bytes the chip sent on the service port.
-    pub fn read_service(&mut self, n: usize) -> anyhow::Result<Vec<u8>> {
+    pub fn read_service(&mut self, n: usize) -> Result<Vec<u8>, DcpError> {
         let mut buf = vec![0u8; n];
-        self.service.read_exact(&mut buf).context("no service answer from the chip")?;
+        self.service.read_exact(&mut buf).map_err(io("no service answer from the chip"))?;
         Ok(buf)
     }
 }
@@ -308,7 +291,7 @@ impl Lift {
         status: ParamsStatus,
         m_car_kg: f64,
         lw_start_m: f64,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self, DcpError> {
         let (geometry, _) = geometry(rig);
         let lw_low = geometry.lw_lowest_landing_m as f64;
         let lw_high = lw_low + geometry.shaft_travel_mm as f64 / 1000.0;
@@ -322,7 +305,7 @@ impl Lift {
             pending: Default::default(),
             shadow: shadow(rig, parameters, status),
             drive: rig.drive_config(),
-            max_step_s: closed_loop::SimOptions::for_rig(rig).max_step_s,
+            max_step_s: crate::SimOptions::for_rig(rig).max_step_s,
             lw_lowest_landing_m: lw_low,
             steps: 0,
             last_period_instructions: None,
@@ -359,7 +342,7 @@ impl Lift {
     /// One PWM period: `dcp_out` on the DCP line, `service_out` on the
     /// service port, the chip's step checked against the shadow's, the
     /// plant advanced.
-    pub fn step(&mut self, dcp_out: &[u8], service_out: &[u8]) -> anyhow::Result<LiftStep> {
+    pub fn step(&mut self, dcp_out: &[u8], service_out: &[u8]) -> Result<LiftStep, DcpError> {
         self.step_sensing(dcp_out, service_out, &mut |_| {})
     }
 
@@ -370,12 +353,14 @@ impl Lift {
         dcp_out: &[u8],
         service_out: &[u8],
         sense: &mut dyn FnMut(&mut SensorFrame),
-    ) -> anyhow::Result<LiftStep> {
+    ) -> Result<LiftStep, DcpError> {
         let k = self.steps;
-        let mut sensors = closed_loop::sensor_frame(&self.plant);
+        let mut sensors = crate::sensor_frame(&self.plant);
         sense(&mut sensors);
         let chip = match self.chip.as_mut() {
-            Some(chip) => Some(chip.step(dcp_out, service_out, &sensors).with_context(|| format!("step {k}"))?),
+            Some(chip) => {
+                Some(chip.step(dcp_out, service_out, &sensors).map_err(|e| DcpError::Check(format!("step {k}: {e}")))?)
+            }
             None => None,
         };
         // The shadow takes what the chip took; alone, what is on the lines
@@ -447,7 +432,7 @@ impl Lift {
     /// Sends the service request `line` (without its `\n`) and steps until
     /// its answer has come (at most `max_steps`): the answer without its
     /// `\r\n`, and the parameters a `save` wrote. Nothing goes on the DCP line.
-    pub fn ask(&mut self, line: &str, max_steps: u64) -> anyhow::Result<(String, Option<DriveParameters>)> {
+    pub fn ask(&mut self, line: &str, max_steps: u64) -> Result<(String, Option<DriveParameters>), DcpError> {
         let mut request = line.as_bytes().to_vec();
         request.push(b'\n');
         let mut answer = Vec::new();
@@ -461,7 +446,7 @@ impl Lift {
                 return Ok((String::from_utf8_lossy(&answer).into_owned(), saved));
             }
         }
-        bail!("no answer to {line:?} within {max_steps} steps")
+        Err(DcpError::Check(format!("no answer to {line:?} within {max_steps} steps")))
     }
 
     /// The chip's step against the shadow's.
@@ -473,7 +458,7 @@ impl Lift {
         expected_answers: &[u8],
         dcp_replies: &[u8],
         output: &ControlOutput,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), DcpError> {
         ensure!(
             service_answers == expected_answers,
             "step {k}: service answers differ: chip {:?}, host {:?}",
@@ -865,12 +850,12 @@ impl Master {
     }
 
     /// Takes the drive's replies of a step (whole 6-byte messages).
-    pub fn receive(&mut self, replies: &[u8]) -> anyhow::Result<()> {
+    pub fn receive(&mut self, replies: &[u8]) -> Result<(), DcpError> {
         ensure!(replies.len() % 6 == 0, "a partial DCP reply: {replies:02x?}");
         for chunk in replies.chunks(6) {
             let bytes: [u8; 6] = chunk.try_into().expect("chunks of 6");
-            let frame =
-                SlaveFrame::decode(&bytes).map_err(|e| anyhow::anyhow!("a bad DCP reply ({e:?}): {bytes:02x?}"))?;
+            let frame = SlaveFrame::decode(&bytes)
+                .map_err(|e| DcpError::Check(format!("a bad DCP reply ({e:?}): {bytes:02x?}")))?;
             self.last_status = frame.status;
             self.replies.push(frame);
         }
@@ -881,5 +866,5 @@ impl Master {
 /// The default PIL target ELF: `pil/target/thumbv7em-none-eabihf/release/pil`
 /// (`PIL_ELF` overrides it).
 pub fn default_elf() -> PathBuf {
-    std::env::var_os("PIL_ELF").map(PathBuf::from).unwrap_or_else(closed_loop::pil::default_elf_path)
+    std::env::var_os("PIL_ELF").map(PathBuf::from).unwrap_or_else(crate::pil::default_elf_path)
 }
