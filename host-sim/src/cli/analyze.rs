@@ -213,11 +213,9 @@ fn analyze_travel(
         anyhow::bail!("`{stem}` is not a travel");
     };
     let fs = recording.meta.sample_rate_hz;
-    let pole_pairs = rig.motor.pole_pairs;
     let out = output.path(stem);
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let mut files = Vec::new();
-    let published = |path: &std::path::Path| output.published(path).display().to_string();
+    let mut files = TravelFiles { stem, out, output, published: Vec::new() };
 
     let TravelTorque {
         speed_radps: speed,
@@ -231,7 +229,81 @@ fn analyze_travel(
     let f_mech = stage_speed.iter().map(|w| w.abs()).sum::<f64>() / stage_speed.len() as f64 / std::f64::consts::TAU;
     let stage_torque = &torque[stage.clone()];
     let mean_torque = stage_torque.iter().sum::<f64>() / stage_torque.len() as f64;
+    let (ripple_lines, unresolved_orders, not_found) =
+        torque_psd_outputs(rig, args, &mut files, fs, &stage, stage_torque, f_mech)?;
+    let stage_band = Band {
+        x0: stage.start as f64 / fs,
+        x1: stage.end as f64 / fs,
+        label: "constant-speed stage (torque PSD)".to_string(),
+    };
+    let torque_png = files.out.join("torque.png");
+    let time: Vec<f64> = (0..torque.len()).map(|i| i as f64 / fs).collect();
+    stacked_plot(
+        &torque_png,
+        &format!("{stem}: machine torque from the phase currents (dq0), the stage of the torque PSD shaded"),
+        "time [s]",
+        &[Panel {
+            y_label: "torque [N m]".to_string(),
+            series: vec![Series::new("torque", time.clone(), torque.clone())],
+            ..Panel::default()
+        }],
+        std::slice::from_ref(&stage_band),
+    )?;
+    files.publish(&torque_png);
 
+    // Accelerations: 1 Hz zero-phase high-pass, spectrograms with the model's modes.
+    let mut chain = ChainParams::from_rig(rig, m_car_kg);
+    chain.m_cw_kg = m_cw_kg;
+    let lw = counterweight_side_length_m(&angle, lw_start_m, rig.mechanics.sheave_radius_m);
+    let traces = Traces { fs, chain: &chain, lw: &lw, speed: &speed, time: &time, stage_band: &stage_band };
+    for (name, label) in [(ACC_CAR, "car"), (ACC_CW, "counterweight"), (ACC_MACHINE, "machine")] {
+        let Some(acc) = recording.column(name) else { continue };
+        acceleration_outputs(rig, args, &mut files, name, label, &acc.values, &traces)?;
+    }
+    Ok(TravelAnalysis {
+        recording: stem.to_string(),
+        constant_speed_start_s: stage.start as f64 / fs,
+        constant_speed_end_s: stage.end as f64 / fs,
+        mechanical_frequency_hz: f_mech,
+        electrical_offset_rad: offset,
+        shaft_angle: angle_alignment,
+        mean_torque_nm: mean_torque,
+        ripple_lines,
+        unresolved_orders,
+        not_found,
+        files: files.published,
+    })
+}
+
+/// A travel's output folder and the files published in it so far.
+struct TravelFiles<'a> {
+    stem: &'a str,
+    /// The travel's folder (in the staging folder).
+    out: std::path::PathBuf,
+    output: &'a crate::output::OutputDir,
+    /// Where the written files land, in order.
+    published: Vec<String>,
+}
+
+impl TravelFiles<'_> {
+    /// Records `path` (written) under its published name.
+    fn publish(&mut self, path: &std::path::Path) {
+        self.published.push(self.output.published(path).display().to_string());
+    }
+}
+
+/// The torque's ripple PSD over the constant-speed `stage` (Welch, the
+/// `--welch-segment`), written as `torque_psd.csv` and `torque_psd.png`
+/// with its lines found: the lines, the unresolved orders, those not found.
+fn torque_psd_outputs(
+    rig: &RigConfig,
+    args: &AnalyzeArgs,
+    files: &mut TravelFiles<'_>,
+    fs: f64,
+    stage: &std::ops::Range<usize>,
+    stage_torque: &[f64],
+    f_mech: f64,
+) -> anyhow::Result<(Vec<RippleLine>, Vec<u32>, Vec<MissingLine>)> {
     let stage_s = stage_torque.len() as f64 / fs;
     if args.welch_segment_s > stage_s {
         anyhow::bail!(
@@ -246,106 +318,97 @@ fn analyze_travel(
     }
     let segment = (args.welch_segment_s * fs).round() as usize;
     let psd = welch_psd(stage_torque, fs, segment, 0.5).context("torque PSD (--welch-segment)")?;
-    let (ripple_lines, unresolved_orders, not_found) = find_ripple_lines(&psd, f_mech, fs, pole_pairs);
-    let psd_csv = out.join("torque_psd.csv");
+    let (ripple_lines, unresolved_orders, not_found) = find_ripple_lines(&psd, f_mech, fs, rig.motor.pole_pairs);
+    let psd_csv = files.out.join("torque_psd.csv");
     let mut csv = std::io::BufWriter::new(std::fs::File::create(&psd_csv)?);
     writeln!(csv, "frequency_hz,torque_psd_nm2_per_hz")?;
     for (f, d) in psd.frequency_hz.iter().zip(&psd.density) {
         writeln!(csv, "{f},{d}")?;
     }
     csv.flush()?;
-    files.push(published(&psd_csv));
-    let psd_png = out.join("torque_psd.png");
+    files.publish(&psd_csv);
+    let psd_png = files.out.join("torque_psd.png");
     let title = format!(
-        "{stem}: torque ripple PSD, constant-speed stage {:.2}-{:.2} s (Welch, {} s segments)",
+        "{}: torque ripple PSD, constant-speed stage {:.2}-{:.2} s (Welch, {} s segments)",
+        files.stem,
         stage.start as f64 / fs,
         stage.end as f64 / fs,
         args.welch_segment_s
     );
     torque_psd_plot(&psd_png, &title, &psd, &ripple_lines)?;
-    files.push(published(&psd_png));
-    let stage_band = Band {
-        x0: stage.start as f64 / fs,
-        x1: stage.end as f64 / fs,
-        label: "constant-speed stage (torque PSD)".to_string(),
-    };
-    let torque_png = out.join("torque.png");
-    let time: Vec<f64> = (0..torque.len()).map(|i| i as f64 / fs).collect();
+    files.publish(&psd_png);
+    Ok((ripple_lines, unresolved_orders, not_found))
+}
+
+/// What the acceleration plots trace: the sample rate (Hz), the model's
+/// chain and rope lengths `lw` (m, per sample), the shaft speed (rad/s),
+/// the time axis (s) and the constant-speed stage.
+struct Traces<'a> {
+    fs: f64,
+    chain: &'a ChainParams,
+    lw: &'a [f64],
+    speed: &'a [f64],
+    time: &'a [f64],
+    stage_band: &'a Band,
+}
+
+/// Acceleration column `name` (`label` in titles) high-passed and plotted,
+/// and its Burg and STFT spectrograms with the model's modes and the
+/// ripple orders traced.
+fn acceleration_outputs(
+    rig: &RigConfig,
+    args: &AnalyzeArgs,
+    files: &mut TravelFiles<'_>,
+    name: &str,
+    label: &str,
+    values: &[f64],
+    traces: &Traces<'_>,
+) -> anyhow::Result<()> {
+    let (stem, fs) = (files.stem, traces.fs);
+    let [_, band_hi] = rig.measurement.spectrogram_band_hz;
+    let rope = TopAxis::at_multiples("counterweight-side rope length lw [m]", traces.time, traces.lw, 0.5, 1);
+    let filtered = highpass_zero_phase(values, fs, rig.measurement.highpass_hz)
+        .with_context(|| format!("`{name}`: high-pass at [measurement].highpass_hz"))?;
+    let hp_png = files.out.join(format!("{name}_hp.png"));
     stacked_plot(
-        &torque_png,
-        &format!("{stem}: machine torque from the phase currents (dq0), the stage of the torque PSD shaded"),
+        &hp_png,
+        &format!("{stem}: {label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
         "time [s]",
         &[Panel {
-            y_label: "torque [N m]".to_string(),
-            series: vec![Series::new("torque", time.clone(), torque.clone())],
+            y_label: "acceleration [m/s^2]".to_string(),
+            series: vec![Series::new(label, traces.time.to_vec(), filtered.clone())],
             ..Panel::default()
         }],
-        std::slice::from_ref(&stage_band),
+        std::slice::from_ref(traces.stage_band),
     )?;
-    files.push(published(&torque_png));
-
-    // Accelerations: 1 Hz zero-phase high-pass, spectrograms with the model's modes.
-    let mut chain = ChainParams::from_rig(rig, m_car_kg);
-    chain.m_cw_kg = m_cw_kg;
-    let lw = counterweight_side_length_m(&angle, lw_start_m, rig.mechanics.sheave_radius_m);
-    let [_, band_hi] = rig.measurement.spectrogram_band_hz;
-    let rope = TopAxis::at_multiples("counterweight-side rope length lw [m]", &time, &lw, 0.5, 1);
-    for (name, label) in [(ACC_CAR, "car"), (ACC_CW, "counterweight"), (ACC_MACHINE, "machine")] {
-        let Some(acc) = recording.column(name) else { continue };
-        let filtered = highpass_zero_phase(&acc.values, fs, rig.measurement.highpass_hz)
-            .with_context(|| format!("`{name}`: high-pass at [measurement].highpass_hz"))?;
-        let hp_png = out.join(format!("{name}_hp.png"));
-        stacked_plot(
-            &hp_png,
-            &format!("{stem}: {label} acceleration, high-passed at {} Hz", rig.measurement.highpass_hz),
-            "time [s]",
-            &[Panel {
-                y_label: "acceleration [m/s^2]".to_string(),
-                series: vec![Series::new(label, time.clone(), filtered.clone())],
-                ..Panel::default()
-            }],
-            std::slice::from_ref(&stage_band),
+    files.publish(&hp_png);
+    let burg = burg_spectrogram(&filtered, fs, args.burg_window_s, 0.75, args.burg_order, band_hi, 0.25).with_context(
+        || {
+            format!(
+                "`{name}`: Burg spectrogram (--burg-window {} s, --burg-order {})",
+                args.burg_window_s, args.burg_order
+            )
+        },
+    )?;
+    let stft = stft_spectrogram(&filtered, fs, args.stft_window_s, 0.9, band_hi)
+        .with_context(|| format!("`{name}`: STFT spectrogram (--stft-window {} s)", args.stft_window_s))?;
+    for (method, spectrogram) in [("burg", &burg), ("stft", &stft)] {
+        let png = files.out.join(format!("{name}_spectrogram_{method}.png"));
+        spectrogram_plot_with_top_axis(
+            &png,
+            &format!("{stem}: {label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, modes and orders traced"),
+            spectrogram,
+            &[
+                mode_overlays(traces.chain, traces.lw, fs, spectrogram, band_hi),
+                order_overlays(rig, traces.speed, fs, spectrogram, band_hi),
+            ]
+            .concat(),
+            None,
+            Some(&rope),
         )?;
-        files.push(published(&hp_png));
-        let burg = burg_spectrogram(&filtered, fs, args.burg_window_s, 0.75, args.burg_order, band_hi, 0.25)
-            .with_context(|| {
-                format!(
-                    "`{name}`: Burg spectrogram (--burg-window {} s, --burg-order {})",
-                    args.burg_window_s, args.burg_order
-                )
-            })?;
-        let stft = stft_spectrogram(&filtered, fs, args.stft_window_s, 0.9, band_hi)
-            .with_context(|| format!("`{name}`: STFT spectrogram (--stft-window {} s)", args.stft_window_s))?;
-        for (method, spectrogram) in [("burg", &burg), ("stft", &stft)] {
-            let png = out.join(format!("{name}_spectrogram_{method}.png"));
-            spectrogram_plot_with_top_axis(
-                &png,
-                &format!("{stem}: {label} acceleration ({method}), dB re 1 (m/s^2)^2/Hz, modes and orders traced"),
-                spectrogram,
-                &[
-                    mode_overlays(&chain, &lw, fs, spectrogram, band_hi),
-                    order_overlays(rig, &speed, fs, spectrogram, band_hi),
-                ]
-                .concat(),
-                None,
-                Some(&rope),
-            )?;
-            files.push(published(&png));
-        }
+        files.publish(&png);
     }
-    Ok(TravelAnalysis {
-        recording: stem.to_string(),
-        constant_speed_start_s: stage.start as f64 / fs,
-        constant_speed_end_s: stage.end as f64 / fs,
-        mechanical_frequency_hz: f_mech,
-        electrical_offset_rad: offset,
-        shaft_angle: angle_alignment,
-        mean_torque_nm: mean_torque,
-        ripple_lines,
-        unresolved_orders,
-        not_found,
-        files,
-    })
+    Ok(())
 }
 
 /// Peak PSD over the local floor at `frequency_hz`, dB: the largest density

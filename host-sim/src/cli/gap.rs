@@ -70,21 +70,7 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     super::check_open_range("--nominal-excess-db", args.nominal_excess_db, 0.0, 100.0)?;
     super::check_open_range("--persistent-cell-db", args.persistent_cell_db, 0.0, 100.0)?;
     super::check_open_range("--explained-shrink", args.explained_shrink, 0.0, 1.0)?;
-    let effects = if args.effects.is_empty() {
-        EffectKind::ALL.to_vec()
-    } else {
-        args.effects
-            .iter()
-            .map(|n| {
-                EffectKind::from_name(n.trim()).ok_or_else(|| {
-                    anyhow::anyhow!(
-                        "--effects: unknown effect `{n}`; the library has: {}",
-                        EffectKind::ALL.map(EffectKind::name).join(", ")
-                    )
-                })
-            })
-            .collect::<anyhow::Result<Vec<_>>>()?
-    };
+    let effects = effects_of(args)?;
     let dataset = super::read_dataset_on(rig, &args.dataset)?;
     let out = super::output_dir_reading(&args.out, args.force, &[&args.dataset])?;
     out.refuse_existing(["gap.json", "gap.md"])?;
@@ -108,9 +94,40 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
     let name = args.dataset.display().to_string();
     let report = diagnose(rig, &name, &dataset, &options, &progress)?;
     bar.finish_and_clear();
+    let plots = car_acceleration_plots(&out, &report)?;
+    write_report(out.staging(), &report, &plots)?;
+    let written = out.commit()?;
+    print_summary(&report);
+    for p in written {
+        outln!("wrote {}", p.display());
+    }
+    Ok(())
+}
 
-    // Spectrograms of the car acceleration, data and models side by side,
-    // for the recording with the largest nominal gap.
+/// The effects `--effects` names (all of the library when none).
+fn effects_of(args: &GapArgs) -> anyhow::Result<Vec<EffectKind>> {
+    if args.effects.is_empty() {
+        return Ok(EffectKind::ALL.to_vec());
+    }
+    args.effects
+        .iter()
+        .map(|n| {
+            EffectKind::from_name(n.trim()).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--effects: unknown effect `{n}`; the library has: {}",
+                    EffectKind::ALL.map(EffectKind::name).join(", ")
+                )
+            })
+        })
+        .collect()
+}
+
+/// Spectrograms of the car acceleration, data and models side by side,
+/// for the recording with the largest nominal gap: (caption, file) each.
+fn car_acceleration_plots(
+    out: &crate::output::OutputDir,
+    report: &diagnosis::GapReport,
+) -> anyhow::Result<Vec<(String, String)>> {
     let mut plots = Vec::new();
     if let Some(views) = &report.car_acceleration_views {
         let stem = &views.recording;
@@ -127,8 +144,12 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
             plots.push((format!("car acceleration spectrogram of `{stem}`, {label}"), file));
         }
     }
-    write_report(out.staging(), &report, &plots)?;
-    let written = out.commit()?;
+    Ok(plots)
+}
+
+/// The report's summary on standard output: verdict, location, drive,
+/// notes, the first candidates.
+fn print_summary(report: &diagnosis::GapReport) {
     outln!(
         "verdict: {:?}{}",
         report.verdict,
@@ -150,6 +171,12 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         outln!("direct-axis lines: {}", diagnosis::report::electrical_lines_text(e));
     }
     outln!("drive: {:?}: {}", report.drive.drive, report.drive.reason);
+    print_rig_speed_loops(report);
+    print_notes_and_ranking(report);
+}
+
+/// Each recording's speed loop of the rig's drive and its shaft angle.
+fn print_rig_speed_loops(report: &diagnosis::GapReport) {
     for l in &report.rig_speed_loops {
         match (&l.controller, &l.refused) {
             (Some(c), _) => outln!(
@@ -172,6 +199,11 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         }
         outln!("    shaft angle: {}", l.shaft_angle.text());
     }
+}
+
+/// The attribution's notes, the recordings left out and the first five
+/// candidates with their held-out gaps.
+fn print_notes_and_ranking(report: &diagnosis::GapReport) {
     if let Some(note) = &report.attribution_note {
         outln!("attribution: {note}");
     }
@@ -201,8 +233,4 @@ pub fn run(rig: &RigConfig, args: &GapArgs) -> anyhow::Result<()> {
         );
     }
     outln!("{} simulations in {:.1} s", report.simulations, report.runtime_s);
-    for p in written {
-        outln!("wrote {}", p.display());
-    }
-    Ok(())
 }

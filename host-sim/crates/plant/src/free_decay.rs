@@ -7,8 +7,8 @@
 //! accelerometer records. With many elements the first natural frequency
 //! tends to the continuous rope's, the root of Eqn 9.
 
-use super::effects::tension_stiffening::static_tension_n;
-use super::effects::Effects;
+use super::effects::tension_stiffening::{static_tension_n, StiffeningSegment};
+use super::effects::{CoulombGuideFriction, Effects, TensionStiffening};
 use super::Rk4;
 
 /// One free-decay test.
@@ -94,6 +94,33 @@ pub fn simulate_free_decay_with(
     sample_rate_hz: f64,
     duration_s: f64,
 ) -> Result<Vec<f64>, FreeDecayError> {
+    check_spec(spec)?;
+    check("sample_rate_hz", sample_rate_hz, sample_rate_hz > 0.0, "> 0 Hz")?;
+    check("duration_s", duration_s, duration_s > 0.0 && duration_s * sample_rate_hz < 1.0e8, "> 0 s, < 1e8 samples")?;
+    let chain = DecayChain::new(spec, effects);
+    let substeps = (chain.w_max(spec) / sample_rate_hz).ceil().max(1.0) as usize;
+    let h = 1.0 / sample_rate_hz / substeps as f64;
+    let mut state = chain.released_state(spec);
+    let nodes = chain.nodes;
+    let samples = (duration_s * sample_rate_hz).round() as usize;
+    let mut record = Vec::with_capacity(samples);
+    let mut accel = vec![0.0; nodes];
+    let mut rk4 = Rk4::new();
+    for _ in 0..samples {
+        chain.acceleration(&state, &mut accel);
+        record.push(accel[nodes - 1]);
+        for _ in 0..substeps {
+            rk4.step(&mut state, h, |y, dy| {
+                dy[..nodes].copy_from_slice(&y[nodes..]);
+                chain.acceleration(y, &mut dy[nodes..]);
+            });
+        }
+    }
+    Ok(record)
+}
+
+/// The spec's ranges (the sampling's are checked by the caller).
+fn check_spec(spec: &FreeDecaySpec) -> Result<(), FreeDecayError> {
     check("mass_kg", spec.mass_kg, spec.mass_kg > 0.0, "> 0 kg")?;
     check("rope_length_m", spec.rope_length_m, spec.rope_length_m > 0.0, "> 0 m")?;
     check("rope_ea_n", spec.rope_ea_n, spec.rope_ea_n > 0.0, "> 0 N")?;
@@ -101,103 +128,166 @@ pub fn simulate_free_decay_with(
     check("rope_mass_per_length_kg_per_m", mu, mu >= 0.0, ">= 0 kg/m")?;
     check("damping_kg_per_s", spec.damping_kg_per_s, spec.damping_kg_per_s >= 0.0, ">= 0 kg/s")?;
     check("initial_acceleration_mps2", spec.initial_acceleration_mps2, true, "a finite value")?;
-    check("elements", spec.elements as f64, (1..=MAX_ELEMENTS).contains(&spec.elements), "1 to 400")?;
-    // A massless rope is one spring: its inner nodes would have no mass.
-    let n = if mu == 0.0 { 1 } else { spec.elements };
-    check("sample_rate_hz", sample_rate_hz, sample_rate_hz > 0.0, "> 0 Hz")?;
-    check("duration_s", duration_s, duration_s > 0.0 && duration_s * sample_rate_hz < 1.0e8, "> 0 s, < 1e8 samples")?;
+    check("elements", spec.elements as f64, (1..=MAX_ELEMENTS).contains(&spec.elements), "1 to 400")
+}
 
-    let k = spec.rope_ea_n * n as f64 / spec.rope_length_m;
-    let segment_length = spec.rope_length_m / n as f64;
-    let stiffening = effects.tension_stiffening;
-    // Spring i joins node i - 1 (the fixed top for i = 0) and node i; its
-    // static tension (tension stiffening).
-    let static_tensions: Vec<f64> = (0..n)
-        .map(|i| {
-            let below = spec.rope_length_m * (1.0 - (i as f64 + 0.5) / n as f64);
-            static_tension_n(spec.mass_kg, mu, below, DECAY_GRAVITY_MPS2)
-        })
-        .collect();
-    let springs: Vec<f64> = match &stiffening {
-        None => vec![k; n],
-        Some(e) => static_tensions.iter().map(|&t| e.ea_n(spec.rope_ea_n, t) / segment_length).collect(),
-    };
-    // Under stiffening, each spring's tension follows its instantaneous
-    // stretch beyond the static one.
-    let segments: Vec<_> = match &stiffening {
-        None => Vec::new(),
-        Some(e) => static_tensions.iter().map(|&t| e.segment(spec.rope_ea_n, t, segment_length)).collect(),
-    };
-    let segment = mu * spec.rope_length_m / n as f64;
-    let frame = effects.car_frame_mode;
-    let (hitch_mass, body_mass) = match &frame {
-        None => (spec.mass_kg, 0.0),
-        Some(f) => (f.hitch_mass_kg(spec.mass_kg), f.body_mass_kg(spec.mass_kg)),
-    };
-    let (k_frame, c_frame) = match &frame {
-        None => (0.0, 0.0),
-        Some(f) => (f.stiffness_n_per_m(spec.mass_kg), f.damping_kg_per_s(spec.mass_kg)),
-    };
-    // Nodes: n rope nodes (the last the hitch), then the body with a frame.
-    let nodes = if frame.is_some() { n + 1 } else { n };
-    let mut masses = vec![segment; nodes];
-    masses[n - 1] = 0.5 * segment + hitch_mass;
-    if frame.is_some() {
-        masses[n] = body_mass;
-    }
-    let friction = effects.coulomb_guide_friction;
-    // The chain's highest frequency sets the step: h w_max <= 1 (RK4 is
-    // stable below 2.78 and accurate well below it).
-    let mut k_max = springs.iter().copied().fold(0.0f64, f64::max);
-    if let Some(e) = &stiffening {
-        // The stiffest a spring gets: at its static tension plus three
-        // times the release force (the swing never exceeds it).
-        let swing = 3.0 * (spec.mass_kg * spec.initial_acceleration_mps2).abs();
-        let t_max = static_tensions.iter().copied().fold(0.0f64, f64::max) + swing;
-        k_max = k_max.max(e.ea_n(spec.rope_ea_n, t_max) / segment_length);
-    }
-    let mut w_max = 2.0 * (k_max / masses[..n].iter().copied().fold(f64::INFINITY, f64::min)).sqrt();
-    if frame.is_some() {
-        w_max = w_max
-            .max((2.0 * (k_max + k_frame) / masses[n - 1]).sqrt())
-            .max((2.0 * k_frame / body_mass).sqrt())
-            .max(2.0 * c_frame / body_mass.min(masses[n - 1]));
-    }
-    if let Some(f) = &friction {
-        w_max = w_max.max(f.stiffness_rate_per_s(masses[n - 1]));
-    }
-    let substeps = (w_max / sample_rate_hz).ceil().max(1.0) as usize;
-    let h = 1.0 / sample_rate_hz / substeps as f64;
+/// The decay rig discretised: `n` rope nodes (the last the hitch), then,
+/// with the car-frame mode, the body on its frame spring.
+struct DecayChain {
+    /// Rope nodes.
+    n: usize,
+    /// All nodes (`n`, or `n + 1` with the frame).
+    nodes: usize,
+    /// The linear rope's spring, N/m.
+    k: f64,
+    /// Each rope spring's stiffness, N/m (spring `i` joins node `i - 1`,
+    /// the fixed top for `i = 0`, and node `i`).
+    springs: Vec<f64>,
+    /// Each spring's static tension, N.
+    static_tensions: Vec<f64>,
+    /// Under tension stiffening, each spring's law about its static tension.
+    segments: Vec<StiffeningSegment>,
+    /// Rope segment length, m.
+    segment_length: f64,
+    /// Node masses, kg.
+    masses: Vec<f64>,
+    /// The body's mass (car-frame mode), kg.
+    body_mass: f64,
+    /// Frame spring (N/m) and damper (kg/s), zero without the frame.
+    k_frame: f64,
+    c_frame: f64,
+    /// Guide damping on the hitch, kg/s.
+    c: f64,
+    stiffening: Option<TensionStiffening>,
+    frame: bool,
+    friction: Option<CoulombGuideFriction>,
+}
 
-    // Static deflection under the force F0 = m a0 at the mass: u_i = F0 i / k.
-    let force = spec.mass_kg * spec.initial_acceleration_mps2;
-    let mut state = vec![0.0; 2 * nodes];
-    match &effects.tension_stiffening {
-        None => {
-            for (i, u) in state.iter_mut().take(n).enumerate() {
-                *u = -force * (i + 1) as f64 / k;
+impl DecayChain {
+    fn new(spec: &FreeDecaySpec, effects: &Effects) -> Self {
+        let mu = spec.rope_mass_per_length_kg_per_m;
+        // A massless rope is one spring: its inner nodes would have no mass.
+        let n = if mu == 0.0 { 1 } else { spec.elements };
+        let k = spec.rope_ea_n * n as f64 / spec.rope_length_m;
+        let segment_length = spec.rope_length_m / n as f64;
+        let stiffening = effects.tension_stiffening;
+        // Spring i joins node i - 1 (the fixed top for i = 0) and node i; its
+        // static tension (tension stiffening).
+        let static_tensions: Vec<f64> = (0..n)
+            .map(|i| {
+                let below = spec.rope_length_m * (1.0 - (i as f64 + 0.5) / n as f64);
+                static_tension_n(spec.mass_kg, mu, below, DECAY_GRAVITY_MPS2)
+            })
+            .collect();
+        let springs: Vec<f64> = match &stiffening {
+            None => vec![k; n],
+            Some(e) => static_tensions.iter().map(|&t| e.ea_n(spec.rope_ea_n, t) / segment_length).collect(),
+        };
+        // Under stiffening, each spring's tension follows its instantaneous
+        // stretch beyond the static one.
+        let segments: Vec<_> = match &stiffening {
+            None => Vec::new(),
+            Some(e) => static_tensions.iter().map(|&t| e.segment(spec.rope_ea_n, t, segment_length)).collect(),
+        };
+        let segment = mu * spec.rope_length_m / n as f64;
+        let frame = effects.car_frame_mode;
+        let (hitch_mass, body_mass) = match &frame {
+            None => (spec.mass_kg, 0.0),
+            Some(f) => (f.hitch_mass_kg(spec.mass_kg), f.body_mass_kg(spec.mass_kg)),
+        };
+        let (k_frame, c_frame) = match &frame {
+            None => (0.0, 0.0),
+            Some(f) => (f.stiffness_n_per_m(spec.mass_kg), f.damping_kg_per_s(spec.mass_kg)),
+        };
+        let nodes = if frame.is_some() { n + 1 } else { n };
+        let mut masses = vec![segment; nodes];
+        masses[n - 1] = 0.5 * segment + hitch_mass;
+        if frame.is_some() {
+            masses[n] = body_mass;
+        }
+        Self {
+            n,
+            nodes,
+            k,
+            springs,
+            static_tensions,
+            segments,
+            segment_length,
+            masses,
+            body_mass,
+            k_frame,
+            c_frame,
+            c: spec.damping_kg_per_s,
+            stiffening,
+            frame: frame.is_some(),
+            friction: effects.coulomb_guide_friction,
+        }
+    }
+
+    /// The chain's highest frequency, rad/s, which sets the step:
+    /// `h w_max <= 1` (RK4 is stable below 2.78 and accurate well below it).
+    fn w_max(&self, spec: &FreeDecaySpec) -> f64 {
+        let (n, masses) = (self.n, &self.masses);
+        let mut k_max = self.springs.iter().copied().fold(0.0f64, f64::max);
+        if let Some(e) = &self.stiffening {
+            // The stiffest a spring gets: at its static tension plus three
+            // times the release force (the swing never exceeds it).
+            let swing = 3.0 * (spec.mass_kg * spec.initial_acceleration_mps2).abs();
+            let t_max = self.static_tensions.iter().copied().fold(0.0f64, f64::max) + swing;
+            k_max = k_max.max(e.ea_n(spec.rope_ea_n, t_max) / self.segment_length);
+        }
+        let mut w_max = 2.0 * (k_max / masses[..n].iter().copied().fold(f64::INFINITY, f64::min)).sqrt();
+        if self.frame {
+            let (k_frame, c_frame, body_mass) = (self.k_frame, self.c_frame, self.body_mass);
+            w_max = w_max
+                .max((2.0 * (k_max + k_frame) / masses[n - 1]).sqrt())
+                .max((2.0 * k_frame / body_mass).sqrt())
+                .max(2.0 * c_frame / body_mass.min(masses[n - 1]));
+        }
+        if let Some(f) = &self.friction {
+            w_max = w_max.max(f.stiffness_rate_per_s(masses[n - 1]));
+        }
+        w_max
+    }
+
+    /// The state at release: the static deflection under the force
+    /// `F0 = m a0` at the mass (`u_i = F0 i / k` for the linear rope), at rest.
+    fn released_state(&self, spec: &FreeDecaySpec) -> Vec<f64> {
+        let n = self.n;
+        let force = spec.mass_kg * spec.initial_acceleration_mps2;
+        let mut state = vec![0.0; 2 * self.nodes];
+        match &self.stiffening {
+            None => {
+                for (i, u) in state.iter_mut().take(n).enumerate() {
+                    *u = -force * (i + 1) as f64 / self.k;
+                }
+            }
+            Some(_) => {
+                let mut u = 0.0;
+                for (i, segment) in self.segments.iter().enumerate() {
+                    u -= segment.stretch_change_m(force);
+                    state[i] = u;
+                }
             }
         }
-        Some(_) => {
-            let mut u = 0.0;
-            for (i, segment) in segments.iter().enumerate() {
-                u -= segment.stretch_change_m(force);
-                state[i] = u;
-            }
+        if self.frame {
+            // The body's share of the static force stretches the frame spring.
+            state[n] = state[n - 1] - self.body_mass * spec.initial_acceleration_mps2 / self.k_frame;
         }
+        state
     }
-    if frame.is_some() {
-        // The body's share of the static force stretches the frame spring.
-        state[n] = state[n - 1] - body_mass * spec.initial_acceleration_mps2 / k_frame;
-    }
-    let c = spec.damping_kg_per_s;
-    let acceleration = |y: &[f64], out: &mut [f64]| {
+
+    /// The nodes' accelerations `out` (m/s^2) at the state `y` (positions
+    /// then velocities).
+    fn acceleration(&self, y: &[f64], out: &mut [f64]) {
+        let (n, nodes, springs, segments) = (self.n, self.nodes, &self.springs, &self.segments);
+        let (k_frame, c_frame) = (self.k_frame, self.c_frame);
         // Stiffening: the tension change of the spring above node i, carried
         // from node i - 1 (each spring's law evaluated once).
         let mut upper = segments.first().map_or(0.0, |s| s.tension_change_n(-y[0]));
         for i in 0..n {
             let below = if i == 0 { 0.0 } else { y[i - 1] };
-            let mut f = if stiffening.is_none() {
+            let mut f = if self.stiffening.is_none() {
                 let (above, k_above) = if i + 1 < n { (y[i + 1], springs[i + 1]) } else { (y[i], springs[i]) };
                 -springs[i] * (y[i] - below) + k_above * (above - y[i])
             } else {
@@ -207,36 +297,21 @@ pub fn simulate_free_decay_with(
                 f
             };
             if i == n - 1 {
-                f -= c * y[nodes + i];
-                if let Some(friction) = &friction {
+                f -= self.c * y[nodes + i];
+                if let Some(friction) = &self.friction {
                     f += friction.force_n(y[nodes + i]);
                 }
-                if frame.is_some() {
+                if self.frame {
                     f += k_frame * (y[n] - y[i]) + c_frame * (y[nodes + n] - y[nodes + i]);
                 }
             }
-            out[i] = f / masses[i];
+            out[i] = f / self.masses[i];
         }
-        if frame.is_some() {
+        if self.frame {
             let f = -k_frame * (y[n] - y[n - 1]) - c_frame * (y[nodes + n] - y[nodes + n - 1]);
-            out[n] = f / masses[n];
-        }
-    };
-    let samples = (duration_s * sample_rate_hz).round() as usize;
-    let mut record = Vec::with_capacity(samples);
-    let mut accel = vec![0.0; nodes];
-    let mut rk4 = Rk4::new();
-    for _ in 0..samples {
-        acceleration(&state, &mut accel);
-        record.push(accel[nodes - 1]);
-        for _ in 0..substeps {
-            rk4.step(&mut state, h, |y, dy| {
-                dy[..nodes].copy_from_slice(&y[nodes..]);
-                acceleration(y, &mut dy[nodes..]);
-            });
+            out[n] = f / self.masses[n];
         }
     }
-    Ok(record)
 }
 
 /// Gravity of the decay rig (tension stiffening's static tensions), m/s^2.

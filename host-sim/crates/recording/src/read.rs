@@ -880,68 +880,74 @@ fn parse_meta(text: &str, path: &Path, rope_total_length_m: f64) -> Result<Recor
         },
     };
 
-    let kind = if is_travel {
-        let m_car_kg = file.positive(
-            "m_car_kg",
-            MAX_MASS_KG,
-            &format!("a finite car mass > 0 kg, at most {MAX_MASS_KG} kg"),
-            "a number (kg)",
-        )?;
-        let m_cw_kg = file.positive(
-            "m_cw_kg",
-            MAX_MASS_KG,
-            &format!("a finite counterweight mass > 0 kg, at most {MAX_MASS_KG} kg"),
-            "a number (kg)",
-        )?;
-        let (direction_text, direction_line) =
-            file.string("direction", "direction = \"up\" or direction = \"down\"")?;
-        let direction = match direction_text {
-            "up" => CarDirection::Up,
-            "down" => CarDirection::Down,
-            other => {
-                return Err(ReadError::InvalidDirection {
-                    path: path.to_path_buf(),
-                    line: direction_line,
-                    found: excerpt(other),
-                })
-            }
-        };
-        let lw_expected =
-            format!("a counterweight-side rope length in (0, {rope_total_length_m}) m (the rig's rope_total_length_m)");
-        let inside = |v: f64| v > 0.0 && v < rope_total_length_m;
-        let (lw_start_m, _) = file.number("lw_start_m", &lw_expected, inside, "a number (m)")?;
-        let (lw_end_m, _) = file.number("lw_end_m", &lw_expected, inside, "a number (m)")?;
-        let (consistent, relation) = match direction {
-            CarDirection::Up => (lw_end_m > lw_start_m, ">"),
-            CarDirection::Down => (lw_end_m < lw_start_m, "<"),
-        };
-        if !consistent {
-            return Err(ReadError::DirectionMismatch {
+    let kind = if is_travel { travel_kind(&file, rope_total_length_m)? } else { free_decay_kind(&file)? };
+    Ok(RecordingMeta { kind, sample_rate_hz, description })
+}
+
+/// The fields of a travel's metadata, checked.
+fn travel_kind(file: &MetaFile<'_>, rope_total_length_m: f64) -> Result<RecordingKind, ReadError> {
+    let path = file.path;
+    let m_car_kg = file.positive(
+        "m_car_kg",
+        MAX_MASS_KG,
+        &format!("a finite car mass > 0 kg, at most {MAX_MASS_KG} kg"),
+        "a number (kg)",
+    )?;
+    let m_cw_kg = file.positive(
+        "m_cw_kg",
+        MAX_MASS_KG,
+        &format!("a finite counterweight mass > 0 kg, at most {MAX_MASS_KG} kg"),
+        "a number (kg)",
+    )?;
+    let (direction_text, direction_line) = file.string("direction", "direction = \"up\" or direction = \"down\"")?;
+    let direction = match direction_text {
+        "up" => CarDirection::Up,
+        "down" => CarDirection::Down,
+        other => {
+            return Err(ReadError::InvalidDirection {
                 path: path.to_path_buf(),
                 line: direction_line,
-                direction: direction.as_str(),
-                lw_start_m,
-                lw_end_m,
-                relation,
-            });
+                found: excerpt(other),
+            })
         }
-        RecordingKind::Travel { m_car_kg, m_cw_kg, direction, lw_start_m, lw_end_m }
-    } else {
-        let mass_kg = file.positive(
-            "mass_kg",
-            MAX_MASS_KG,
-            &format!("a finite hanging mass > 0 kg, at most {MAX_MASS_KG} kg"),
-            "a number (kg)",
-        )?;
-        let rope_length_m = file.positive(
-            "rope_length_m",
-            MAX_ROPE_LENGTH_M,
-            &format!("a finite rope length > 0 m, at most {MAX_ROPE_LENGTH_M} m"),
-            "a number (m)",
-        )?;
-        RecordingKind::FreeDecay { mass_kg, rope_length_m }
     };
-    Ok(RecordingMeta { kind, sample_rate_hz, description })
+    let lw_expected =
+        format!("a counterweight-side rope length in (0, {rope_total_length_m}) m (the rig's rope_total_length_m)");
+    let inside = |v: f64| v > 0.0 && v < rope_total_length_m;
+    let (lw_start_m, _) = file.number("lw_start_m", &lw_expected, inside, "a number (m)")?;
+    let (lw_end_m, _) = file.number("lw_end_m", &lw_expected, inside, "a number (m)")?;
+    let (consistent, relation) = match direction {
+        CarDirection::Up => (lw_end_m > lw_start_m, ">"),
+        CarDirection::Down => (lw_end_m < lw_start_m, "<"),
+    };
+    if !consistent {
+        return Err(ReadError::DirectionMismatch {
+            path: path.to_path_buf(),
+            line: direction_line,
+            direction: direction.as_str(),
+            lw_start_m,
+            lw_end_m,
+            relation,
+        });
+    }
+    Ok(RecordingKind::Travel { m_car_kg, m_cw_kg, direction, lw_start_m, lw_end_m })
+}
+
+/// The fields of a free decay's metadata, checked.
+fn free_decay_kind(file: &MetaFile<'_>) -> Result<RecordingKind, ReadError> {
+    let mass_kg = file.positive(
+        "mass_kg",
+        MAX_MASS_KG,
+        &format!("a finite hanging mass > 0 kg, at most {MAX_MASS_KG} kg"),
+        "a number (kg)",
+    )?;
+    let rope_length_m = file.positive(
+        "rope_length_m",
+        MAX_ROPE_LENGTH_M,
+        &format!("a finite rope length > 0 m, at most {MAX_ROPE_LENGTH_M} m"),
+        "a number (m)",
+    )?;
+    Ok(RecordingKind::FreeDecay { mass_kg, rope_length_m })
 }
 
 /// Splits a CSV line with quoted fields (RFC 4180 within one line).
@@ -1052,41 +1058,7 @@ fn read_columns_from(file: File, path: &Path, meta: &RecordingMeta) -> Result<Ve
     let path_buf = || path.to_path_buf();
     let mut lines = LineReader::new(file, path);
 
-    // Header.
-    let names: Vec<String> = match lines.next_line()? {
-        None => return Err(ReadError::NoHeader { path: path_buf(), found: "the file is empty" }),
-        Some((_, "")) => return Err(ReadError::NoHeader { path: path_buf(), found: "the line is blank" }),
-        Some((_, header)) => split_quoted(header)
-            .map_err(|(field, problem)| ReadError::BadQuoting { path: path_buf(), line: 1, field, problem })?
-            .into_iter()
-            .map(Cow::into_owned)
-            .collect(),
-    };
-    for (i, name) in names.iter().enumerate() {
-        if name.is_empty() {
-            return Err(ReadError::EmptyColumnName { path: path_buf(), field: i + 1 });
-        }
-        if let Some(first) = names[..i].iter().position(|n| n == name) {
-            return Err(ReadError::DuplicateColumn {
-                path: path_buf(),
-                name: name.clone(),
-                first: first + 1,
-                second: i + 1,
-            });
-        }
-    }
-    let required = meta.kind.required_columns();
-    for &column in required {
-        if !names.iter().any(|n| n == column) {
-            let hint = names
-                .iter()
-                .find(|n| n.trim().eq_ignore_ascii_case(column))
-                .map(|n| format!(" (the header has `{n}`, which differs in spaces or case)"))
-                .unwrap_or_default();
-            let required = required.iter().map(|c| format!("`{c}`")).collect::<Vec<_>>().join(", ");
-            return Err(ReadError::MissingColumn { path: path_buf(), column, kind: meta.kind.name(), required, hint });
-        }
-    }
+    let names = read_header(&mut lines, path, meta)?;
     let bounds: Vec<Option<(f64, &'static str)>> = names.iter().map(|n| column_bound(n)).collect();
     let time_index = names.iter().position(|n| n == TIME_S).unwrap_or(0);
     let period = 1.0 / meta.sample_rate_hz;
@@ -1152,6 +1124,47 @@ fn read_columns_from(file: File, path: &Path, meta: &RecordingMeta) -> Result<Ve
         return Err(ReadError::TooFewSamples { path: path_buf(), found: rows });
     }
     Ok(names.into_iter().zip(values).map(|(name, values)| Column { name, values }).collect())
+}
+
+/// The header line of a recording's CSV: its column names, each named once,
+/// the columns `meta`'s kind requires among them.
+fn read_header(lines: &mut LineReader, path: &Path, meta: &RecordingMeta) -> Result<Vec<String>, ReadError> {
+    let path_buf = || path.to_path_buf();
+    let names: Vec<String> = match lines.next_line()? {
+        None => return Err(ReadError::NoHeader { path: path_buf(), found: "the file is empty" }),
+        Some((_, "")) => return Err(ReadError::NoHeader { path: path_buf(), found: "the line is blank" }),
+        Some((_, header)) => split_quoted(header)
+            .map_err(|(field, problem)| ReadError::BadQuoting { path: path_buf(), line: 1, field, problem })?
+            .into_iter()
+            .map(Cow::into_owned)
+            .collect(),
+    };
+    for (i, name) in names.iter().enumerate() {
+        if name.is_empty() {
+            return Err(ReadError::EmptyColumnName { path: path_buf(), field: i + 1 });
+        }
+        if let Some(first) = names[..i].iter().position(|n| n == name) {
+            return Err(ReadError::DuplicateColumn {
+                path: path_buf(),
+                name: name.clone(),
+                first: first + 1,
+                second: i + 1,
+            });
+        }
+    }
+    let required = meta.kind.required_columns();
+    for &column in required {
+        if !names.iter().any(|n| n == column) {
+            let hint = names
+                .iter()
+                .find(|n| n.trim().eq_ignore_ascii_case(column))
+                .map(|n| format!(" (the header has `{n}`, which differs in spaces or case)"))
+                .unwrap_or_default();
+            let required = required.iter().map(|c| format!("`{c}`")).collect::<Vec<_>>().join(", ");
+            return Err(ReadError::MissingColumn { path: path_buf(), column, kind: meta.kind.name(), required, hint });
+        }
+    }
+    Ok(names)
 }
 
 #[cfg(test)]
