@@ -686,6 +686,24 @@ impl Controller {
         self.last_time_us = None;
     }
 
+    /// Takes the rotor's electrical angle from an absolute encoder: the
+    /// count `origin_counts` is electrical angle zero (and the shaft
+    /// angle's zero), from the first step on, wherever the rotor is then
+    /// (after a reset of the chip alone, the machine may have turned).
+    /// Without it the first step's count is electrical zero (the rotor held
+    /// there by the alignment). Before the first step.
+    ///
+    /// # Errors
+    /// An origin outside one revolution (`counts_per_rev` or more): a
+    /// stored offset that cannot be this encoder's.
+    pub fn set_encoder_origin(&mut self, origin_counts: u32) -> Result<(), u32> {
+        if origin_counts >= self.config.encoder_counts_per_rev {
+            return Err(origin_counts);
+        }
+        self.estimator.set_absolute_origin(origin_counts);
+        Ok(())
+    }
+
     /// Clears a latched fault (explicit operator action); back to `Idle`.
     pub fn reset(&mut self) {
         self.supervisor.reset();
@@ -1125,6 +1143,29 @@ mod tests {
                 assert!((got - turns).abs() < 1e-9, "cpr {counts_per_rev}, raw {raw}: {got} vs {turns}");
             }
         }
+    }
+
+    /// With the encoder's origin set (an absolute encoder at its stored
+    /// offset) the electrical angle of the first step is the count's less
+    /// the origin, wherever the rotor is; without it the first count is
+    /// electrical zero. An origin of a whole revolution or more is refused.
+    #[test]
+    fn an_absolute_encoder_origin_gives_the_angle_from_the_first_step() {
+        let config = rig();
+        let cpr = config.encoder_counts_per_rev;
+        let turns = |c: &Controller| c.electrical_angle() as f64 / 4_294_967_296.0;
+        for (origin, first) in [(0u32, 0u32), (0, 1_000), (700, 1_000), (700, 100), (0, u32::MAX - 40)] {
+            let mut c = Controller::new(&config);
+            c.set_encoder_origin(origin).unwrap();
+            c.step(&SensorFrame { encoder_count: first, ..frame(0) });
+            let from_origin = (first.wrapping_sub(origin) as i32 as i64).rem_euclid(cpr as i64) as f64;
+            let expected = (from_origin * config.pole_pairs as f64 / cpr as f64).fract();
+            assert!((turns(&c) - expected).abs() < 1e-9, "origin {origin}, first {first}: {} vs {expected}", turns(&c));
+            let mut incremental = Controller::new(&config);
+            incremental.step(&SensorFrame { encoder_count: first, ..frame(0) });
+            assert_eq!(turns(&incremental), 0.0, "without an origin the first count is electrical zero");
+        }
+        assert_eq!(Controller::new(&config).set_encoder_origin(cpr), Err(cpr));
     }
 
     #[test]

@@ -394,12 +394,17 @@ pub enum AngleReference {
     /// calibration the drive waits, gates off and brake applied, for the
     /// service port's `align` ([`crate::startup`]).
     Alignment,
-    /// The encoder count of the controller's first step is electrical zero
-    /// (an absolute encoder at its stored offset; the simulated machine of
-    /// the host and of the processor in the loop, whose rotor starts there):
+    /// An absolute encoder: the electrical angle is the encoder count less
+    /// the stored offset (`DriveParameters::encoder_offset_counts`, the
+    /// count at electrical zero, installed by
+    /// [`LiftDrive::install_parameters`]) from the controller's first step,
+    /// after any reset and wherever the rotor then is (the simulated
+    /// machine of the host and of the processor in the loop: offset 0):
     /// the controller runs after the calibration, idle (gates off, brake
     /// applied) until a travel is commanded; `align` is answered
-    /// `error unsupported`.
+    /// `error unsupported`. A stored offset outside one revolution is
+    /// refused: the drive then waits for `align` as with
+    /// [`AngleReference::Alignment`].
     Given,
 }
 
@@ -640,8 +645,11 @@ impl LiftDrive {
 
     /// Installs the start-up parameters (the stored record's, or the
     /// defaults) on the drive model `chain`: the compensation strategy with
-    /// its table, the car mass, the DCP variant; `status` is what became of
-    /// the stored record (`get params`).
+    /// its table, the car mass, the DCP variant, and with
+    /// [`AngleReference::Given`] the encoder offset as the pole position
+    /// (refused outside one revolution: the drive then waits for `align`);
+    /// `status` is what became of the stored record (`get params`). Before
+    /// the first period.
     pub fn install_parameters(&mut self, parameters: &DriveParameters, chain: &ChainModel, status: ParamsStatus) {
         self.chain = Some(*chain);
         self.observer_task = ObserverTask::for_model(chain).ok();
@@ -649,6 +657,9 @@ impl LiftDrive {
         self.port.set_car_mass(parameters.m_car_kg);
         self.port.set_mode(parameters.dcp_mode);
         self.encoder_offset_counts = parameters.encoder_offset_counts;
+        if self.startup.angle_given() && self.controller.set_encoder_origin(parameters.encoder_offset_counts).is_err() {
+            self.startup.require_alignment();
+        }
         self.service.strategy = parameters.strategy;
         self.service.table = parameters.table;
         self.service.m_car_kg = parameters.m_car_kg;
@@ -1466,5 +1477,52 @@ mod tests {
         edges.service_in.extend_from_slice(b"reset\n");
         period(&mut drive, &mut edges);
         assert_eq!(edges.answers.last().map(|l| l.as_bytes().to_vec()), Some(b"error nothing-to-reset\r\n".to_vec()));
+    }
+
+    /// The pole position of an absolute encoder from the stored offset:
+    /// installed within one revolution, the controller runs after the
+    /// calibration and takes its angle from the offset (`align`
+    /// unsupported); an offset of a revolution or more is refused and the
+    /// drive waits, safe and not ready, for the commanded alignment.
+    #[test]
+    fn a_stored_encoder_offset_is_the_pole_position_only_within_one_revolution() {
+        let rig = reference_rig();
+        let parameters = |offset: u32| DriveParameters {
+            strategy: Strategy::Off,
+            table: HarmonicTable::default(),
+            m_car_kg: 70.5,
+            encoder_offset_counts: offset,
+            dcp_mode: Mode::Dcp4,
+        };
+        let calibrated = |offset: u32| {
+            let mut drive = LiftDrive::new(Controller::new(&rig), port(), &rig, AngleReference::Given);
+            drive.install_parameters(&parameters(offset), &crate::config::reference_chain(), ParamsStatus::Stored);
+            let mut io = TimedEdges {
+                latency: 0,
+                step_cycles: 0,
+                late: None,
+                replies: std::vec::Vec::new(),
+                service_in: std::vec::Vec::new(),
+                answers: std::vec::Vec::new(),
+                cleared: false,
+            };
+            for k in 0..(crate::startup::SETTLE_STEPS + crate::startup::CALIBRATION_SAMPLES) as u32 + 10 {
+                let sensors = SensorFrame {
+                    phase_current_codes: [2048; 3],
+                    encoder_count: 5_000,
+                    dc_bus_code: 2048,
+                    time_us: k * 62 + k / 2,
+                };
+                let out = drive.period(&sensors, &mut io).drive.control;
+                assert!(!out.pwm_enabled && !out.brake_released && out.pwm_compare == [0; 3]);
+            }
+            drive
+        };
+        let within = calibrated(rig.encoder_counts_per_rev - 1);
+        assert!(within.startup().is_running() && within.is_ready());
+        assert_eq!(within.parameters().encoder_offset_counts, rig.encoder_counts_per_rev - 1);
+        let mut refused = calibrated(rig.encoder_counts_per_rev);
+        assert!(refused.startup().is_waiting_for_alignment() && !refused.is_ready());
+        assert_eq!(refused.align(), Ok(()), "the alignment is commanded instead");
     }
 }

@@ -18,6 +18,9 @@ use crate::fixed::Q16;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpeedEstimator {
     last_count: Option<u32>,
+    /// The count at the revolution's zero of an absolute encoder, if any
+    /// ([`SpeedEstimator::set_absolute_origin`]).
+    absolute_origin: Option<u32>,
     position_counts: i64,
     /// Position modulo one revolution, `0..counts_per_rev`, counts.
     revolution_counts: u32,
@@ -41,6 +44,7 @@ impl SpeedEstimator {
         let sat = I32F32::saturating_from_num;
         Self {
             last_count: None,
+            absolute_origin: None,
             position_counts: 0,
             revolution_counts: 0,
             counts_per_rev: counts_per_rev.max(1),
@@ -54,13 +58,27 @@ impl SpeedEstimator {
         }
     }
 
+    /// Makes the encoder absolute: the revolution position
+    /// ([`SpeedEstimator::revolution_counts`]) of the first reading is that
+    /// reading less `origin_counts` (modulo one revolution; the difference
+    /// taken as a signed count) instead of 0. Before the first reading.
+    pub fn set_absolute_origin(&mut self, origin_counts: u32) {
+        self.absolute_origin = Some(origin_counts);
+    }
+
     /// Takes a new counter reading; returns the signed increment since the
     /// previous reading, counts (0 for the first reading).
     pub fn count(&mut self, raw_count: u32) -> i32 {
         let delta = match self.last_count {
             // Modular difference of a wrapping hardware counter, then signed.
             Some(last) => raw_count.wrapping_sub(last) as i32,
-            None => 0,
+            None => {
+                if let Some(origin) = self.absolute_origin {
+                    let from_origin = raw_count.wrapping_sub(origin) as i32 as i64;
+                    self.revolution_counts = from_origin.rem_euclid(self.counts_per_rev as i64) as u32;
+                }
+                0
+            }
         };
         self.last_count = Some(raw_count);
         self.position_counts = self.position_counts.saturating_add(delta as i64);
@@ -108,6 +126,24 @@ impl SpeedEstimator {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_absolute_origin_places_the_first_reading_within_the_revolution() {
+        // Incremental: the first reading is the revolution's zero.
+        let mut e = SpeedEstimator::new(2000.0, 20.0, 1000);
+        e.count(12_345);
+        assert_eq!(e.revolution_counts(), 0);
+        // Absolute: the first reading less the origin, on either side of it.
+        for (origin, raw, within) in [(100, 350, 250), (100, 2_450, 350), (300, 100, 800), (0, u32::MAX, 999)] {
+            let mut e = SpeedEstimator::new(2000.0, 20.0, 1000);
+            e.set_absolute_origin(origin);
+            assert_eq!(e.count(raw), 0, "the first reading moves nothing");
+            assert_eq!(e.revolution_counts(), within, "origin {origin}, reading {raw}");
+            assert_eq!(e.position_counts(), 0, "the position is counted from the first reading");
+            e.count(raw.wrapping_add(5));
+            assert_eq!(e.revolution_counts(), (within + 5) % 1000);
+        }
+    }
 
     #[test]
     fn revolution_position_is_the_position_modulo_one_revolution() {

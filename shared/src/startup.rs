@@ -17,11 +17,18 @@
 //! back in its safe state, waiting for the alignment command (or, after a
 //! failed calibration, calibrates again).
 //!
-//! What this sequence does not do: identify the pole position with the
-//! brake closed, or take it from a stored offset checked against an
-//! absolute encoder. The rig's encoder is incremental; the alignment moves
-//! the rotor (a quarter of an electrical turn) with the brake open, so the
-//! car must be balanced when it is commanded.
+//! With an absolute encoder ([`Startup::with_angle_given`]) the pole
+//! position is the stored offset (`DriveParameters::encoder_offset_counts`,
+//! the count at electrical zero), checked to lie within one revolution and
+//! taken by the controller from its first step, wherever a reset of the
+//! chip alone left the rotor (`Controller::set_encoder_origin`); an offset
+//! outside one revolution is refused and the sequence waits for the
+//! commanded alignment instead (`LiftDrive::install_parameters`). What this
+//! sequence does not do: identify the pole position with the brake closed,
+//! or check the stored offset against the machine beyond that range. The
+//! rig's encoder is incremental; the alignment moves the rotor (a quarter
+//! of an electrical turn) with the brake open, so the car must be balanced
+//! when it is commanded.
 
 use crate::alignment::{Alignment, AlignmentError, AlignmentParams, AlignmentStep, Injection};
 use crate::config::DriveConfig;
@@ -156,14 +163,22 @@ impl Startup {
     }
 
     /// The sequence for a machine whose electrical angle reference is
-    /// given (the encoder count of the controller's first step is
-    /// electrical zero: an absolute encoder at its stored offset, or the
-    /// simulated machine): after the calibration the controller runs at
-    /// once, idle (gates off, brake applied) until a travel is commanded;
-    /// [`StartupCommand::Align`] is refused ([`StartupRefusal::Busy`]).
+    /// given (an absolute encoder whose stored offset the controller takes,
+    /// `Controller::set_encoder_origin`, or the simulated machine): after
+    /// the calibration the controller runs at once, idle (gates off, brake
+    /// applied) until a travel is commanded; [`StartupCommand::Align`] is
+    /// refused ([`StartupRefusal::Busy`]).
     pub fn with_angle_given(mut self) -> Self {
         self.angle_given = true;
         self
+    }
+
+    /// The angle reference is not given after all (the stored offset was
+    /// refused): after the calibration the sequence waits for
+    /// [`StartupCommand::Align`], as without [`Startup::with_angle_given`].
+    /// Before the sequence's first step.
+    pub fn require_alignment(&mut self) {
+        self.angle_given = false;
     }
 
     /// Whether the angle reference is given ([`Startup::with_angle_given`]).
