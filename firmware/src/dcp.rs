@@ -12,7 +12,9 @@
 //! the UART reports the last stop bit out (transmission complete, the
 //! buffered UART's `flush`), a few microseconds of interrupt latency after
 //! it; with /RE tied to DE the receiver is off while the drive talks, so
-//! its own reply is never read back.
+//! its own reply is never read back. Until `main` makes PC10 an output
+//! (and through any reset) the pin is high-impedance: the transceiver's
+//! DE needs a pull-down so that the drive never holds the line then.
 //!
 //! Two tasks only move bytes: [`receive`] puts every byte received into
 //! `edges::DCP_RX` (the control interrupt takes up to 8 a PWM period and
