@@ -229,7 +229,12 @@ fn frame_mode_rings_in_a_free_vibration() {
 fn extended_line_conserves_energy_without_damping() {
     let rig = rig();
     let effects = Effects {
-        diverting_pulley: Some(DivertingPulley { inertia_kg_m2: 0.02, radius_m: 0.065, sheave_to_pulley_m: 0.5 }),
+        diverting_pulley: Some(DivertingPulley {
+            inertia_kg_m2: 0.02,
+            radius_m: 0.065,
+            sheave_to_pulley_m: 0.5,
+            damping_ratio: 0.0,
+        }),
         rope_discretization: Some(RopeDiscretization { elements: 3 }),
         car_frame_mode: Some(CarFrameMode { frequency_hz: 235.0, damping_ratio: 0.0, mass_fraction: 0.3 }),
         sheave_eccentricity: Some(SheaveEccentricity { eccentricity: 0.02, phase_rad: 0.4 }),

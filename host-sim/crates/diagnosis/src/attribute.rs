@@ -192,7 +192,14 @@ fn search(kind: EffectKind, reference_tension_n: Option<f64>) -> Search {
             Search::Grid([0.2, 0.5, 0.85].iter().map(|&a| with(&[(0, a), (1, t)])).collect())
         }
         EffectKind::DivertingPulley => {
-            Search::Grid([0.004, 0.012, 0.035, 0.1].iter().map(|&j| with(&[(0, j)])).collect())
+            // The pulley's own mode is as strong as it is undamped: its
+            // damping is searched with its inertia.
+            Search::Grid(
+                [0.004, 0.012, 0.035, 0.1]
+                    .iter()
+                    .flat_map(|&j| [0.005, 0.02, 0.08].map(|z| with(&[(0, j), (3, z)])))
+                    .collect(),
+            )
         }
         EffectKind::RopeDiscretization => Search::Grid([2.0, 4.0, 8.0].iter().map(|&n| with(&[(0, n)])).collect()),
         EffectKind::CarFrameMode => Search::Grid(
@@ -360,9 +367,11 @@ impl Lab<'_> {
             return Vec::new();
         };
         let mut lines: Vec<(EffectKind, Vec<Vec<f64>>)> = Vec::new();
+        let mut grids: Vec<Vec<Vec<f64>>> = Vec::new();
         for &kind in kinds.iter().filter(|&&k| screen::is_screened(k)) {
             if let Search::Grid(points) = search(kind, self.reference_tension_n) {
-                lines.push((kind, screen::dense_line(kind, &points[0])));
+                lines.push((kind, screen::dense_line(kind, &screen::line_template(kind, &points[0]))));
+                grids.push(points);
             }
         }
         let models: Vec<Effects> =
@@ -379,10 +388,11 @@ impl Lab<'_> {
         let mut scores =
             runs.iter().map(|r| r[0].as_ref().map_or(f64::INFINITY, |spectra| self.run_excess(t, spectra)));
         let mut out = Vec::new();
-        for (kind, line) in lines {
+        for ((kind, line), grid) in lines.into_iter().zip(&grids) {
             let line_scores: Vec<f64> = scores.by_ref().take(line.len()).collect();
             if let Some(kept) = screen::bracket(&line_scores) {
-                out.push((kind, kept.into_iter().map(|i| line[i].clone()).collect()));
+                let bracket: Vec<f64> = kept.into_iter().map(|i| line[i][0]).collect();
+                out.push((kind, screen::across_grid(&bracket, grid)));
             }
         }
         out
@@ -1266,16 +1276,18 @@ mod tests {
     fn first_stage_numbers_every_point_in_turn() {
         let kinds = [EffectKind::DivertingPulley, EffectKind::DeadTime, EffectKind::SheaveEccentricity];
         let plan = plan_first_stage(&kinds, None, &[]);
-        // 4 pulley inertias, 1 dead-time probe, 2 eccentricity probes.
-        assert_eq!(plan.models.len(), 7);
+        // 4 pulley inertias x 3 damping ratios, 1 dead-time probe, 2
+        // eccentricity probes.
+        assert_eq!(plan.models.len(), 15);
         let idx: Vec<&[usize]> = plan.effects.iter().map(|e| e.models.as_slice()).collect();
-        assert_eq!(idx, [&[0, 1, 2, 3][..], &[4], &[5, 6]]);
+        assert_eq!(idx, [&(0..12).collect::<Vec<_>>()[..], &[12], &[13, 14]]);
         assert_eq!(plan.effects[1].kind, EffectKind::DeadTime);
         assert_eq!(plan.models[0].values(EffectKind::DivertingPulley).unwrap()[0], 0.004);
-        assert_eq!(plan.models[3].values(EffectKind::DivertingPulley).unwrap()[0], 0.1);
-        assert_eq!(plan.models[4].values(EffectKind::DeadTime).unwrap()[0], DEAD_TIME_PROBE_S);
-        assert_eq!(plan.models[6].values(EffectKind::SheaveEccentricity).unwrap(), [ECCENTRICITY_PROBE, 0.25 * TAU]);
-        assert_eq!(plan.models[4].enabled(), [EffectKind::DeadTime]);
+        assert_eq!(plan.models[1].values(EffectKind::DivertingPulley).unwrap()[3], 0.02);
+        assert_eq!(plan.models[11].values(EffectKind::DivertingPulley).unwrap()[0], 0.1);
+        assert_eq!(plan.models[12].values(EffectKind::DeadTime).unwrap()[0], DEAD_TIME_PROBE_S);
+        assert_eq!(plan.models[14].values(EffectKind::SheaveEccentricity).unwrap(), [ECCENTRICITY_PROBE, 0.25 * TAU]);
+        assert_eq!(plan.models[12].enabled(), [EffectKind::DeadTime]);
     }
 
     #[test]

@@ -38,6 +38,9 @@ pub fn neutral(effect: &str, parameter: &str) -> Neutral {
         (_, p) if p.contains("phase") => Neutral::NotAStrength,
         ("rope_discretization", "elements") => Neutral::At(1.0),
         ("car_frame_mode", _) => Neutral::AboveRange,
+        // How strongly the pulley's own mode is damped says nothing on
+        // whether there is a pulley: its inertia does.
+        ("diverting_pulley", "damping_ratio") => Neutral::NotAStrength,
         // Every other strength of the library vanishes at zero: the
         // tension-stiffening exponent, the pulley's inertia, the friction
         // force, the clamp's stiffness, the eccentricities, the dead time,

@@ -470,6 +470,22 @@ fn ranking_section(s: &mut String, ranking: &[Candidate]) {
             if c.naming.named { "yes".to_string() } else { format!("no: {}", c.naming.reason) }
         );
     }
+    if let Some(pulley) = ranking.first().and_then(|c| c.effects.diverting_pulley) {
+        let _ = writeln!(s, "\n{}", pulley_note(&pulley));
+    }
+}
+
+/// What the recordings fix of a fitted diverting pulley: its rim's
+/// equivalent mass `J / r_p^2` (kg); the inertia only at a radius, which
+/// the rope's motion does not tell.
+fn pulley_note(pulley: &plant::effects::DivertingPulley) -> String {
+    let r = pulley.radius_m;
+    let mass = pulley.inertia_kg_m2 / (r * r);
+    format!(
+        "The recordings fix the diverting pulley's equivalent mass at its rim, J / r_p^2 = {mass:.2} kg; its inertia \
+         above is at the radius r_p = {r:.3} m the effect assumes (the rope's motion does not tell the radius): at the \
+         rig's own radius r_p the inertia is {mass:.2} kg x r_p^2."
+    )
 }
 
 /// Section `Recordings`: one table row per recording (`-` where a figure
@@ -581,6 +597,18 @@ mod tests {
             "\n## Calibration (step 1)\n\nEA 1.2345e6 N (rig 1.0000e6), guide damping 150.0 kg/s (rig 148.0), sheave \
              damping 3.000 N m s/rad (rig 3.000); 0 decays, 2 travels used. Skipped: x: short; y: flat.\n\n"
         );
+    }
+
+    #[test]
+    fn the_pulley_note_gives_the_equivalent_mass_the_recordings_fix() {
+        let p = plant::effects::DivertingPulley {
+            inertia_kg_m2: 0.0338,
+            radius_m: 0.065,
+            sheave_to_pulley_m: 0.5,
+            damping_ratio: 0.02,
+        };
+        // 0.0338 / 0.065^2 = 8.00 kg.
+        assert!(pulley_note(&p).contains("J / r_p^2 = 8.00 kg"), "{}", pulley_note(&p));
     }
 
     #[test]

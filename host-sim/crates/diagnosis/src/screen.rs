@@ -42,6 +42,32 @@ pub fn dense_line(kind: EffectKind, template: &[f64]) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// The template of `kind`'s dense line from its grid's `first` point: the
+/// fitted parameters other than the screened one at the effect's defaults
+/// (the grid searches them; the line is run once, at their middle).
+pub fn line_template(kind: EffectKind, first: &[f64]) -> Vec<f64> {
+    let defaults = kind.defaults();
+    let specs = kind.parameters();
+    first.iter().enumerate().map(|(j, &v)| if j > 0 && specs[j].fitted { defaults[j] } else { v }).collect()
+}
+
+/// The grid a screened effect is fitted on: every value of `bracket` (of
+/// its first parameter) with every distinct setting of its other
+/// parameters in `grid` (a pulley's damping ratios: the screen places the
+/// resonance, the grid still searches how damped it is).
+pub fn across_grid(bracket: &[f64], grid: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut rests: Vec<&[f64]> = Vec::new();
+    for p in grid {
+        if !rests.contains(&&p[1..]) {
+            rests.push(&p[1..]);
+        }
+    }
+    bracket
+        .iter()
+        .flat_map(|&x| rests.iter().map(move |rest| std::iter::once(x).chain(rest.iter().copied()).collect()))
+        .collect()
+}
+
 /// Indices of the best point of a line by `scores` (lower is better; not
 /// finite: the run failed) and its two neighbours, three consecutive
 /// indices (at an end of the line, the three nearest it); `None` when no
@@ -64,6 +90,16 @@ pub fn screening_target(nominal_db: &[f64]) -> Option<usize> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_screened_bracket_keeps_the_grids_other_parameters() {
+        let grid = vec![vec![1.0, 7.0, 0.1], vec![2.0, 7.0, 0.1], vec![1.0, 7.0, 0.3], vec![2.0, 7.0, 0.3]];
+        let out = super::across_grid(&[5.0, 6.0], &grid);
+        assert_eq!(out, vec![vec![5.0, 7.0, 0.1], vec![5.0, 7.0, 0.3], vec![6.0, 7.0, 0.1], vec![6.0, 7.0, 0.3]]);
+        // A one-parameter grid gives the bracket alone.
+        let one = vec![vec![1.0, 7.0], vec![2.0, 7.0]];
+        assert_eq!(super::across_grid(&[5.0, 6.0], &one), vec![vec![5.0, 7.0], vec![6.0, 7.0]]);
+    }
+
     use super::*;
 
     #[test]

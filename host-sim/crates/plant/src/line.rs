@@ -214,6 +214,10 @@ impl Line {
         out.damping_kg_per_s[0] = p.c_cw_kg_per_s;
         out.damping_kg_per_s[layout.sheave] = p.c_sheave_nms_per_rad / (r * r);
         out.damping_kg_per_s[layout.hitch] = p.c_car_kg_per_s;
+        if let (Some(pulley), Some(node)) = (&e.diverting_pulley, layout.pulley) {
+            out.damping_kg_per_s[node] =
+                pulley.damping_kg_per_s(out.springs_n_per_m[layout.sheave], out.masses_kg[node]);
+        }
         out
     }
 

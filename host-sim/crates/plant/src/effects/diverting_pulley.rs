@@ -9,6 +9,11 @@ pub struct DivertingPulley {
     pub radius_m: f64,
     /// Rope length from the sheave to the pulley (fixed during the travel), m.
     pub sheave_to_pulley_m: f64,
+    /// Damping ratio of the pulley's own mode on the sheave-to-pulley
+    /// segment (its bearing and the rope's losses where it bends over the
+    /// pulley), -: the pulley's rim is damped by `2 zeta sqrt(k_sp m_p)`
+    /// on its absolute velocity.
+    pub damping_ratio: f64,
 }
 
 /// Lumping of the car side with the pulley: the sheave, a massless spring
@@ -33,6 +38,15 @@ impl DivertingPulley {
         ea_n / self.sheave_to_pulley_m
     }
 
+    /// Viscous damping on the pulley's rim, kg/s, for the segment's
+    /// stiffness `segment_n_per_m` (N/m) and the pulley's equivalent mass
+    /// `mass_kg` (kg): `2 zeta sqrt(k_sp m_p)`. Without it the pulley's own
+    /// mode (about `sqrt(k_sp / m_p) / 2 pi`, 80-110 Hz on a lab rig) rings
+    /// undamped between two springs.
+    pub fn damping_kg_per_s(&self, segment_n_per_m: f64, mass_kg: f64) -> f64 {
+        2.0 * self.damping_ratio * (segment_n_per_m * mass_kg).sqrt()
+    }
+
     /// Car-side rope hanging below the pulley, m, for a car side of
     /// `car_side_length_m` (m): `l_c - l_sp`.
     pub fn rope_below_pulley_m(&self, car_side_length_m: f64) -> f64 {
@@ -46,9 +60,11 @@ mod tests {
 
     #[test]
     fn lumping() {
-        let p = DivertingPulley { inertia_kg_m2: 0.02, radius_m: 0.1, sheave_to_pulley_m: 0.5 };
+        let p = DivertingPulley { inertia_kg_m2: 0.02, radius_m: 0.1, sheave_to_pulley_m: 0.5, damping_ratio: 0.1 };
         assert!((p.equivalent_mass_kg(0.1) - 2.05).abs() < 1e-12);
         assert!((p.segment_stiffness_n_per_m(1.0e6) - 2.0e6).abs() < 1e-6);
         assert!((p.rope_below_pulley_m(3.0) - 2.5).abs() < 1e-12);
+        // 2 x 0.1 x sqrt(2e6 N/m x 2 kg) = 400 kg/s.
+        assert!((p.damping_kg_per_s(2.0e6, 2.0) - 400.0).abs() < 1e-9);
     }
 }

@@ -121,10 +121,11 @@ const TENSION_STIFFENING: [ParamSpec; 2] = [
         "tension at which EA equals the configured EA0 (default: 33 kg hanging)",
     ),
 ];
-const DIVERTING_PULLEY: [ParamSpec; 3] = [
+const DIVERTING_PULLEY: [ParamSpec; 4] = [
     p("inertia_kg_m2", "kg m^2", 0.02, 0.002, 0.2, Log, true, "pulley inertia"),
     p("radius_m", "m", 0.065, 0.02, 0.3, Linear, false, "pulley radius"),
     p("sheave_to_pulley_m", "m", 0.5, 0.05, 0.9, Linear, false, "rope length from the sheave to the pulley"),
+    p("damping_ratio", "-", 0.02, 0.002, 0.5, Log, true, "damping ratio of the pulley's own mode"),
 ];
 const ROPE_DISCRETIZATION: [ParamSpec; 1] =
     [p("elements", "-", 4.0, 1.0, 8.0, Integer, true, "lumped elements per rope side")];
@@ -366,8 +367,12 @@ impl Effects {
                 self.tension_stiffening = Some(TensionStiffening { alpha: v[0], reference_tension_n: v[1] })
             }
             EffectKind::DivertingPulley => {
-                self.diverting_pulley =
-                    Some(DivertingPulley { inertia_kg_m2: v[0], radius_m: v[1], sheave_to_pulley_m: v[2] })
+                self.diverting_pulley = Some(DivertingPulley {
+                    inertia_kg_m2: v[0],
+                    radius_m: v[1],
+                    sheave_to_pulley_m: v[2],
+                    damping_ratio: v[3],
+                })
             }
             EffectKind::RopeDiscretization => {
                 self.rope_discretization = Some(RopeDiscretization { elements: v[0] as usize })
@@ -423,7 +428,7 @@ impl Effects {
         match kind {
             EffectKind::TensionStiffening => self.tension_stiffening.map(|e| vec![e.alpha, e.reference_tension_n]),
             EffectKind::DivertingPulley => {
-                self.diverting_pulley.map(|e| vec![e.inertia_kg_m2, e.radius_m, e.sheave_to_pulley_m])
+                self.diverting_pulley.map(|e| vec![e.inertia_kg_m2, e.radius_m, e.sheave_to_pulley_m, e.damping_ratio])
             }
             EffectKind::RopeDiscretization => self.rope_discretization.map(|e| vec![e.elements as f64]),
             EffectKind::CarFrameMode => {
