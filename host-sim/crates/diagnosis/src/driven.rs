@@ -380,28 +380,28 @@ struct NodeState {
 }
 
 /// One classical Runge-Kutta step of `h` s from `state` over the first
-/// `nodes` nodes; `deriv(s, frac)` is the state's rate at the fraction
-/// `frac` of the step.
+/// `nodes` nodes ([`plant::rk4_step_in_time`], the plant's integrator, on
+/// positions and velocities packed in one slice); `deriv(s, frac)` is the
+/// state's rate at the fraction `frac` of the step.
 fn rk4_step(state: &NodeState, nodes: usize, h: f64, deriv: impl Fn(&NodeState, f64) -> NodeState) -> NodeState {
-    let add = |s: &NodeState, d: &NodeState, f: f64| {
-        let mut o = *s;
-        for i in 0..nodes {
-            o.position_m[i] += f * d.position_m[i];
-            o.velocity_mps[i] += f * d.velocity_mps[i];
-        }
-        o
+    let unpack = |y: &[f64]| {
+        let mut s = NodeState::default();
+        s.position_m[..nodes].copy_from_slice(&y[..nodes]);
+        s.velocity_mps[..nodes].copy_from_slice(&y[nodes..2 * nodes]);
+        s
     };
-    let k1 = deriv(state, 0.0);
-    let k2 = deriv(&add(state, &k1, 0.5 * h), 0.5);
-    let k3 = deriv(&add(state, &k2, 0.5 * h), 0.5);
-    let k4 = deriv(&add(state, &k3, h), 1.0);
+    let mut y = [0.0; 2 * MAX_NODES];
+    y[..nodes].copy_from_slice(&state.position_m[..nodes]);
+    y[nodes..2 * nodes].copy_from_slice(&state.velocity_mps[..nodes]);
+    let mut work = [0.0; 10 * MAX_NODES];
+    plant::rk4_step_in_time(&mut y[..2 * nodes], h, &mut work, |frac, y, dy| {
+        let d = deriv(&unpack(y), frac);
+        dy[..nodes].copy_from_slice(&d.position_m[..nodes]);
+        dy[nodes..].copy_from_slice(&d.velocity_mps[..nodes]);
+    });
     let mut next = *state;
-    for i in 0..nodes {
-        next.position_m[i] +=
-            h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
-        next.velocity_mps[i] +=
-            h / 6.0 * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
-    }
+    next.position_m[..nodes].copy_from_slice(&y[..nodes]);
+    next.velocity_mps[..nodes].copy_from_slice(&y[nodes..2 * nodes]);
     next
 }
 

@@ -47,6 +47,7 @@ pub fn replay_accelerations(
     let mut car = Vec::with_capacity(n);
     let mut cw = Vec::with_capacity(n);
     let accel_at = |s: &ChainState| chain.acceleration_mps2(s, 0.0, false);
+    let mut work = [0.0; 10 * DOF];
     for k in 0..n {
         let a = accel_at(&state);
         car.push(a[CAR]);
@@ -69,26 +70,24 @@ pub fn replay_accelerations(
             d.velocity_mps[SHEAVE] = 0.0;
             d
         };
-        let add = |s: &ChainState, d: &ChainState, f: f64| {
-            let mut o = *s;
-            for i in 0..DOF {
-                o.position_m[i] += f * d.position_m[i];
-                o.velocity_mps[i] += f * d.velocity_mps[i];
-            }
-            o
+        // The plant's integrator on positions and velocities packed in one
+        // slice; every stage's sheave put on the recorded one.
+        let unpack = |y: &[f64]| {
+            let mut s = ChainState::default();
+            s.position_m.copy_from_slice(&y[..DOF]);
+            s.velocity_mps.copy_from_slice(&y[DOF..]);
+            s
         };
         let s0 = with_sheave(&state, 0.0);
-        let k1 = deriv(&s0);
-        let k2 = deriv(&with_sheave(&add(&s0, &k1, 0.5 * h), 0.5));
-        let k3 = deriv(&with_sheave(&add(&s0, &k2, 0.5 * h), 0.5));
-        let k4 = deriv(&with_sheave(&add(&s0, &k3, h), 1.0));
-        let mut next = s0;
-        for i in 0..DOF {
-            next.position_m[i] +=
-                h / 6.0 * (k1.position_m[i] + 2.0 * k2.position_m[i] + 2.0 * k3.position_m[i] + k4.position_m[i]);
-            next.velocity_mps[i] += h / 6.0
-                * (k1.velocity_mps[i] + 2.0 * k2.velocity_mps[i] + 2.0 * k3.velocity_mps[i] + k4.velocity_mps[i]);
-        }
+        let mut y = [0.0; 2 * DOF];
+        y[..DOF].copy_from_slice(&s0.position_m);
+        y[DOF..].copy_from_slice(&s0.velocity_mps);
+        plant::rk4_step_in_time(&mut y, h, &mut work, |frac, y, dy| {
+            let d = deriv(&with_sheave(&unpack(y), frac));
+            dy[..DOF].copy_from_slice(&d.position_m);
+            dy[DOF..].copy_from_slice(&d.velocity_mps);
+        });
+        let next = unpack(&y);
         state = with_sheave(&next, 1.0);
         if !state.position_m.iter().chain(&state.velocity_mps).all(|x| x.is_finite()) {
             bail!("replay diverged at t = {:.3} s", k as f64 * h);
