@@ -449,8 +449,83 @@ fn true_shaft_angle_rad(recorded_rad: &[f64], effects: &Effects) -> Option<Vec<f
     Some(recorded_rad.iter().map(|&t| t - e.eccentricity_rad * (t + e.phase_rad).sin()).collect())
 }
 
+/// The torque the shaft got (N m) when `effects` hold a current-sensor
+/// error and the travel's currents are the drive's transducer signals;
+/// `None`: the recorded torque is the shaft's.
+fn true_torque_nm(travel: &DrivenTravel, effects: &Effects) -> Option<Vec<f64>> {
+    match (&effects.current_sensor_error, travel.transducer) {
+        (Some(error), Some(series)) => Some(series.true_torque_nm(travel.torque_nm, error)),
+        _ => None,
+    }
+}
+
+/// An error naming the time `t_s` (s) when the first `nodes` of `state`
+/// are not all finite: the model diverged.
+fn check_finite(state: &NodeState, nodes: usize, t_s: f64) -> Result<()> {
+    if !state.position_m[..nodes].iter().chain(&state.velocity_mps[..nodes]).all(|x| x.is_finite()) {
+        bail!("the torque-driven model diverged at t = {t_s:.3} s");
+    }
+    Ok(())
+}
+
+/// The shaft's ripple torque the model adds to the measured torque: the
+/// rig's, its phases matched to the drive's torque when `settings` say so,
+/// shifted by the settings' phase.
+fn ripple_of(rig: &RigConfig, travel: &DrivenTravel, settings: &DrivenSettings) -> RippleTorque {
+    let mut ripple = if settings.ripple_phases_from_torque {
+        ripple_matched_to_the_drive(rig, travel)
+    } else {
+        RippleTorque::from_rig(&rig.ripple)
+    };
+    ripple.harmonics.iter_mut().for_each(|h| h.phase_rad += settings.ripple_phase_shift_rad);
+    ripple
+}
+
+/// The tracking loop's gains for `bandwidth_hz` (Hz): accelerations per
+/// metre (1/s^2) and per metre per second (1/s) of error.
+fn tracking_gains(bandwidth_hz: f64) -> (f64, f64) {
+    let wb = TAU * bandwidth_hz;
+    (wb * wb, 2.0 * TRACKING_DAMPING * wb)
+}
+
+/// The chain's state at the first sample and the torque offset (N m)
+/// applied while it moves: at rest without either, unless the recording
+/// begins in motion; then the chain starts moving with the rig in the
+/// quasi-static state of its speed `speed_mps` (m/s), jolted as the start
+/// state says (what the rig's brake lift left before the recording is not
+/// recorded).
+fn start_state(
+    line: &Line,
+    chain: &Chain,
+    travel: &DrivenTravel,
+    settings: &DrivenSettings,
+    speed_mps: f64,
+) -> (NodeState, f64) {
+    if !moving_at_first_sample(&travel.motion) {
+        return (NodeState::default(), 0.0);
+    }
+    let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
+    let span = ((START_TORQUE_SPAN_S * travel.sample_rate_hz).round() as usize).clamp(1, n);
+    let first_nm = travel.torque_nm[..span].iter().sum::<f64>() / span as f64;
+    let (state, needed_nm) = moving_start(line, chain, speed_mps, first_nm);
+    let offset_nm = match settings.start_state {
+        StartState::AsRecorded => 0.0,
+        StartState::Balanced => needed_nm - first_nm,
+        StartState::Unheld => -first_nm,
+    };
+    (state, offset_nm)
+}
+
 /// [`torque_driven_accelerations`] with `max_rate_per_step` in place of
 /// [`MAX_RATE_PER_STEP`].
+///
+/// While the rig moves, the tracking loop acts on the rigid-body
+/// coordinate (the mass-weighted mean of the line's displacements) as a
+/// force spread in proportion to mass: it moves the rigid-body mode alone
+/// and neither drives nor damps the elastic modes. At standstill the brake
+/// holds the sheave (rigid, as in the nominal plant). The rig drive's
+/// answer to the model's speed where it departs from the rig's is
+/// `-Kp de - Ki integral(de)`, `de` the model's estimate minus the rig's.
 fn torque_driven_accelerations_with(
     rig: &RigConfig,
     travel: &DrivenTravel,
@@ -459,10 +534,7 @@ fn torque_driven_accelerations_with(
     max_rate_per_step: f64,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let corrected = true_shaft_angle_rad(travel.shaft_angle_rad, effects);
-    let true_torque = match (&effects.current_sensor_error, travel.transducer) {
-        (Some(error), Some(series)) => Some(series.true_torque_nm(travel.torque_nm, error)),
-        _ => None,
-    };
+    let true_torque = true_torque_nm(travel, effects);
     let travel = &DrivenTravel {
         torque_nm: true_torque.as_deref().unwrap_or(travel.torque_nm),
         shaft_angle_rad: corrected.as_deref().unwrap_or(travel.shaft_angle_rad),
@@ -483,48 +555,14 @@ fn torque_driven_accelerations_with(
     let line = Line::new(effects);
     let layout = line.layout;
     let nodes = layout.nodes;
-    let mut ripple = if settings.ripple_phases_from_torque {
-        ripple_matched_to_the_drive(rig, travel)
-    } else {
-        RippleTorque::from_rig(&rig.ripple)
-    };
-    ripple.harmonics.iter_mut().for_each(|h| h.phase_rad += settings.ripple_phase_shift_rad);
-    let gains = |per_kg: f64, bandwidth_hz: f64| {
-        let wb = TAU * bandwidth_hz;
-        (per_kg * wb * wb, per_kg * 2.0 * TRACKING_DAMPING * wb)
-    };
-    // Accelerations per metre and per metre per second of error.
-    let tracking = gains(1.0, settings.tracking_bandwidth_hz);
+    let ripple = ripple_of(rig, travel, settings);
+    let tracking = tracking_gains(settings.tracking_bandwidth_hz);
     let h = 1.0 / fs;
     let theta0 = travel.shaft_angle_rad[0];
     let steps = steps_per_sample(&line, &chain, (travel.shaft_angle_rad[n - 1] - theta0) * r, h, max_rate_per_step);
     let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
-    let mut state = NodeState::default();
-    let mut offset_nm = 0.0;
-    // A recording that begins in motion: the chain starts moving with the
-    // rig in the quasi-static state of its speed, jolted as the start
-    // state says (what the rig's brake lift left before the recording is
-    // not recorded).
-    if moving_at_first_sample(&travel.motion) {
-        let span = ((START_TORQUE_SPAN_S * fs).round() as usize).clamp(1, n);
-        let first_nm = travel.torque_nm[..span].iter().sum::<f64>() / span as f64;
-        let needed_nm;
-        (state, needed_nm) = moving_start(&line, &chain, reference.1[0], first_nm);
-        offset_nm = match settings.start_state {
-            StartState::AsRecorded => 0.0,
-            StartState::Balanced => needed_nm - first_nm,
-            StartState::Unheld => -first_nm,
-        };
-    }
-    // Accelerations at sample k + frac. While the rig moves, the tracking loop
-    // acts on the rigid-body coordinate (the mass-weighted mean of the
-    // line's displacements) as a force spread in proportion to mass: it
-    // moves the rigid-body mode alone and neither drives nor damps the
-    // elastic modes. At standstill the brake holds the sheave (rigid, as in
-    // the nominal plant).
-    // The rig drive's answer to the model's speed where it departs from
-    // the rig's: `-Kp de - Ki integral(de)`, `de` the model's estimate
-    // minus the rig's.
+    let (mut state, offset_nm) = start_state(&line, &chain, travel, settings, reference.1[0]);
+    // Accelerations at sample k + frac (the function's comment says how).
     let deriv =
         |s: &NodeState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64), series: &AngleSeries| {
             let j = (k + 1).min(n - 1);
@@ -575,9 +613,7 @@ fn torque_driven_accelerations_with(
             state = rk4_step(&state, nodes, h * sub, |s, frac| deriv(s, k, start + frac * sub, e, &series));
         }
         estimate.advance(state.velocity_mps[layout.sheave] / r, travel.speed_estimate_radps[k], h);
-        if !state.position_m[..nodes].iter().chain(&state.velocity_mps[..nodes]).all(|x| x.is_finite()) {
-            bail!("the torque-driven model diverged at t = {:.3} s", k as f64 * h);
-        }
+        check_finite(&state, nodes, k as f64 * h)?;
     }
     let split_hz = RIGID_FRACTION * first_mode_hz(&chain, travel, r);
     let rope = rope_acceleration_mps2(travel, effects, r, &reference.1)?;

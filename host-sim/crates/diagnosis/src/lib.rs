@@ -722,7 +722,6 @@ fn counterpart(
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
         driven_counterpart(model, recording, &measured, drive_record, settings, &none)
     };
-    let run_closed = |model: &RigConfig| simulate_counterpart(model, &none, recording, stem, model_step_s(model));
     let (nominal, perturbed, how) = if driven {
         let settings = driven::DrivenSettings::default();
         let mut perturbed = vec![run_driven(models[1], &settings)?, run_driven(models[2], &settings)?];
@@ -746,17 +745,7 @@ fn counterpart(
         let how = Counterpart::Driven(std::sync::Arc::new(inputs));
         (how.simulate(models[0], &none, recording, stem)?, perturbed, how)
     } else {
-        let (mut nominal, mut perturbed) = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
-        let mut highpass_hz = 0.0;
-        if drive == DriveModel::Foreign {
-            // Another rig's data acquisition: its accelerometers' high-pass
-            // found from the decay itself and applied to the model's.
-            highpass_hz = decay_highpass_hz(&measured, &nominal)?;
-            for run in std::iter::once(&mut nominal).chain(perturbed.iter_mut()) {
-                highpass_accelerations(run, highpass_hz);
-            }
-        }
-        (nominal, perturbed, Counterpart::Simulated { highpass_hz })
+        simulated_counterpart(models, drive, recording, stem, &measured, closed)?
     };
     let noise_response = if driven {
         let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
@@ -785,6 +774,31 @@ fn counterpart(
         simulations,
         how,
     })
+}
+
+/// The simulated counterpart of a recording (the closed loop's run
+/// `closed`, or a free decay): the nominal run, the perturbed models'
+/// runs; under another rig's data acquisition, its accelerometers'
+/// high-pass found from the decay itself and applied to the model's.
+fn simulated_counterpart(
+    models: [&RigConfig; 3],
+    drive: DriveModel,
+    recording: &Recording,
+    stem: &str,
+    measured: &ChainSignals,
+    closed: Result<ChainSignals>,
+) -> Result<(ChainSignals, Vec<ChainSignals>, Counterpart)> {
+    let none = Effects::none();
+    let run_closed = |model: &RigConfig| simulate_counterpart(model, &none, recording, stem, model_step_s(model));
+    let (mut nominal, mut perturbed) = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
+    let mut highpass_hz = 0.0;
+    if drive == DriveModel::Foreign {
+        highpass_hz = decay_highpass_hz(measured, &nominal)?;
+        for run in std::iter::once(&mut nominal).chain(perturbed.iter_mut()) {
+            highpass_accelerations(run, highpass_hz);
+        }
+    }
+    Ok((nominal, perturbed, Counterpart::Simulated { highpass_hz }))
 }
 
 /// The first-order high-pass (corner, Hz) that brings the model's car
@@ -1124,6 +1138,89 @@ fn verdict_of(
     }
 }
 
+/// Why some effects are not fitted to the mechanics under another drive,
+/// in words (`None` when every effect is).
+fn not_fitted_note(not_fitted: &[EffectKind]) -> Option<String> {
+    (!not_fitted.is_empty()).then(|| {
+        let names: Vec<&str> = not_fitted.iter().map(|k| k.name()).collect();
+        format!(
+            "the rig's drive is another, so the effects are fitted with the mechanics driven by its measured torque; \
+             not fitted to the mechanics: {} (the dead time acts through the currents, which the measured torque \
+             already carries: it is fitted to the direct-axis current's lines instead; the brake clamp acts at \
+             standstill, where another drive's start and stop are not compared)",
+            names.join(", ")
+        )
+    })
+}
+
+/// Steps 4 and 5 on the mechanics: every effect the counterpart holds
+/// fitted (the calibration re-done under the hypotheses that it can
+/// absorb), cross-validated and named; with the note on what is not
+/// fitted and the runs planned per recording.
+fn attribute_mechanics(
+    model: &RigConfig,
+    calibration: &Calibration,
+    dataset: &[(String, Recording)],
+    compared: &Compared,
+    drive: DriveModel,
+    options: &GapOptions,
+    progress: &(dyn Fn(&str, usize, usize) + Sync),
+) -> (Vec<Candidate>, Option<String>, usize) {
+    let planned = std::sync::atomic::AtomicUsize::new(0);
+    let report_progress = |done: usize, total: usize| {
+        planned.store(total, std::sync::atomic::Ordering::Relaxed);
+        progress("fitting effects", done, total);
+    };
+    // Under another drive the counterpart is the torque-driven mechanics,
+    // which holds only some of the library's effects.
+    let (kinds, not_fitted): (Vec<EffectKind>, Vec<EffectKind>) =
+        options.effects.iter().partition(|k| drive == DriveModel::Project || driven::holds_effect(**k));
+    // The calibration re-done under the hypotheses of the effects it can
+    // absorb (step 4a).
+    let refits: Vec<hypotheses::Refit> =
+        kinds.iter().filter_map(|&k| hypotheses::refit(k, model, calibration, dataset)).collect();
+    let lab = Lab {
+        refits: &refits,
+        rig: model,
+        targets: &compared.targets,
+        bands: &compared.bands,
+        reference_tension_n: calibration.reference_tension_n,
+        progress: &report_progress,
+    };
+    let mut ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
+    naming::name_candidates(&mut ranking);
+    (ranking, not_fitted_note(&not_fitted), planned.load(std::sync::atomic::Ordering::Relaxed))
+}
+
+/// Under another drive, its transducer and inverter errors show in the
+/// direct-axis current, not in the torque-driven mechanics: the lines'
+/// own attribution (`None` under the project's drive).
+fn electrical_lines_of(
+    compared: &mut Compared,
+    drive: DriveModel,
+    options: &GapOptions,
+) -> Option<electrical_lines::ElectricalLines> {
+    (drive == DriveModel::Foreign).then(|| {
+        let (measured, not_measured) = std::mem::take(&mut compared.direct_axis);
+        let mut lines = electrical_lines::explain(measured, not_measured, &options.effects);
+        naming::name_candidates(&mut lines.ranking);
+        lines
+    })
+}
+
+/// The names of what explains the gap: the lines' named effect, then the
+/// mechanics', joined by ` + `.
+fn explained_by(electrical: Option<&electrical_lines::ElectricalLines>, best: Option<&Candidate>) -> String {
+    let names: Vec<&str> = electrical
+        .and_then(|e| e.ranking.first())
+        .filter(|c| c.naming.named)
+        .into_iter()
+        .chain(best)
+        .map(|c| c.name.as_str())
+        .collect();
+    names.join(" + ")
+}
+
 /// Runs the diagnosis of `dataset` (named `name`) on `rig`; `progress`
 /// gets (step, runs done, runs planned). A recording that cannot be
 /// measured or simulated is left out with the reason; the verdict is given
@@ -1166,66 +1263,17 @@ pub fn diagnose(
     let noise_gap_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;
     let location = locate(&nominal_cells, &recordings, &compared.bands, &compared.targets, &compared.measured);
 
-    // Attribution.
-    let planned = std::sync::atomic::AtomicUsize::new(0);
-    let report_progress = |done: usize, total: usize| {
-        planned.store(total, std::sync::atomic::Ordering::Relaxed);
-        progress("fitting effects", done, total);
-    };
     let persistent_cell = persistent_cell(&nominal_cells, &compared.bands);
     let is_nominal = nominal_excess_db <= options.nominal_excess_db
         && persistent_cell.as_ref().is_none_or(|p| p.rms_beyond_db <= options.persistent_cell_db);
-    // Under another drive the counterpart is the torque-driven mechanics,
-    // which holds only some of the library's effects.
-    let (kinds, not_fitted): (Vec<EffectKind>, Vec<EffectKind>) =
-        options.effects.iter().partition(|k| drive.drive == DriveModel::Project || driven::holds_effect(**k));
-    let attribution_note = (!not_fitted.is_empty()).then(|| {
-        let names: Vec<&str> = not_fitted.iter().map(|k| k.name()).collect();
-        format!(
-            "the rig's drive is another, so the effects are fitted with the mechanics driven by its measured torque; \
-             not fitted to the mechanics: {} (the dead time acts through the currents, which the measured torque \
-             already carries: it is fitted to the direct-axis current's lines instead; the brake clamp acts at \
-             standstill, where another drive's start and stop are not compared)",
-            names.join(", ")
-        )
-    });
-    // The calibration re-done under the hypotheses of the effects it can
-    // absorb (step 4a).
-    let refits: Vec<hypotheses::Refit> =
-        kinds.iter().filter_map(|&k| hypotheses::refit(k, &model, &calibration, dataset)).collect();
-    let lab = Lab {
-        refits: &refits,
-        rig: &model,
-        targets: &compared.targets,
-        bands: &compared.bands,
-        reference_tension_n: calibration.reference_tension_n,
-        progress: &report_progress,
-    };
-    let mut mechanical_ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
-    naming::name_candidates(&mut mechanical_ranking);
-    // Under another drive, its transducer and inverter errors show in the
-    // direct-axis current, not in the torque-driven mechanics.
-    let electrical_lines = (drive.drive == DriveModel::Foreign).then(|| {
-        let (measured, not_measured) = std::mem::take(&mut compared.direct_axis);
-        let mut lines = electrical_lines::explain(measured, not_measured, &options.effects);
-        naming::name_candidates(&mut lines.ranking);
-        lines
-    });
+    let (mechanical_ranking, attribution_note, planned) =
+        attribute_mechanics(&model, &calibration, dataset, &compared, drive.drive, options, progress);
+    let electrical_lines = electrical_lines_of(&mut compared, drive.drive, options);
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
     let best = if is_nominal { None } else { mechanical_ranking.first().filter(|c| c.naming.named) };
-    let mut simulations =
-        compared.simulations + planned.load(std::sync::atomic::Ordering::Relaxed) * compared.targets.len();
-    let explained_by = (verdict == Verdict::Explained).then(|| {
-        let names: Vec<&str> = electrical
-            .and_then(|e| e.ranking.first())
-            .filter(|c| c.naming.named)
-            .into_iter()
-            .chain(best)
-            .map(|c| c.name.as_str())
-            .collect();
-        names.join(" + ")
-    });
+    let mut simulations = compared.simulations + planned * compared.targets.len();
+    let explained_by = (verdict == Verdict::Explained).then(|| explained_by(electrical, best));
     let mut map_after = Vec::new();
     if let (Verdict::Explained, Some(best)) = (verdict, best) {
         progress(&format!("checking {}", best.effects.summary()), 0, compared.targets.len());
