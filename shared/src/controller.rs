@@ -914,6 +914,51 @@ impl Controller {
         });
     }
 
+    /// The travel's reference at `t` s into the state, in the car-up
+    /// coordinate: position (m), speed (m/s), acceleration (m/s^2). At rest
+    /// after the travel (hold, brake set) the end position; otherwise zero.
+    fn travel_reference(&mut self, travel: &Travel, sign: f32, t: f32) -> (f32, f32, f32) {
+        match self.state {
+            DriveState::Travel => {
+                let p = match travel.reference {
+                    Reference::Distance(profile) => profile.at(t),
+                    Reference::Retarget { approach, start_s } => approach.at(t - start_s),
+                    Reference::Speed(s) => self.speed_reference_at(s, t),
+                };
+                (sign * p.position_m, sign * p.speed_mps, sign * p.accel_mps2)
+            }
+            DriveState::Hold | DriveState::BrakeSet => {
+                let end = match travel.reference {
+                    Reference::Distance(profile) => profile.distance_m(),
+                    Reference::Retarget { approach, .. } => approach.at(approach.duration_s()).position_m,
+                    Reference::Speed(s) => s.ramp.end().position_m,
+                };
+                (sign * end, 0.0, 0.0)
+            }
+            _ => (0.0, 0.0, 0.0),
+        }
+    }
+
+    /// The observer's schedule: the estimate its task computed from the
+    /// previous tick's input, then this tick's input (`kt`: torque constant,
+    /// N·m/A). None while the brake sets or without a started observer.
+    fn observer_exchange(&mut self, kt: f32) -> Option<ObserverEstimate> {
+        match self.observer.as_mut() {
+            Some(link) if self.state != DriveState::BrakeSet && link.is_started() => {
+                let estimate = link.consume(self.speed_ticks).and_then(|o| o.estimate);
+                link.publish(
+                    self.speed_ticks,
+                    ObserverRequest::Update {
+                        encoder_count: self.last_encoder_count,
+                        motor_torque_nm: kt * self.telemetry.iq_a,
+                    },
+                );
+                estimate
+            }
+            _ => None,
+        }
+    }
+
     /// Speed-loop period: estimator, over-speed check, sequence, q-current reference.
     fn speed_tick(&mut self) {
         self.speed_ticks = self.speed_ticks.wrapping_add(1);
@@ -936,25 +981,7 @@ impl Controller {
         let t = self.state_time_s();
 
         // Reference in the car-up coordinate: position (m), speed (m/s), accel (m/s^2).
-        let (position_ref, speed_ref, accel_ref) = match self.state {
-            DriveState::Travel => {
-                let p = match travel.reference {
-                    Reference::Distance(profile) => profile.at(t),
-                    Reference::Retarget { approach, start_s } => approach.at(t - start_s),
-                    Reference::Speed(s) => self.speed_reference_at(s, t),
-                };
-                (sign * p.position_m, sign * p.speed_mps, sign * p.accel_mps2)
-            }
-            DriveState::Hold | DriveState::BrakeSet => {
-                let end = match travel.reference {
-                    Reference::Distance(profile) => profile.distance_m(),
-                    Reference::Retarget { approach, .. } => approach.at(approach.duration_s()).position_m,
-                    Reference::Speed(s) => s.ramp.end().position_m,
-                };
-                (sign * end, 0.0, 0.0)
-            }
-            _ => (0.0, 0.0, 0.0),
-        };
+        let (position_ref, speed_ref, accel_ref) = self.travel_reference(&travel, sign, t);
         let moved_counts = self.estimator.position_counts().saturating_sub(travel.start_counts);
         let position_m = moved_counts as f32 * core::f32::consts::TAU / c.encoder_counts_per_rev as f32 * r;
         let lw_m = travel.command.lw_start_m + position_m;
@@ -980,22 +1007,7 @@ impl Controller {
             DriveState::BrakeLift | DriveState::Travel | DriveState::Hold | DriveState::BrakeSet => {
                 let speed_ref_q16 = q16(speed_ref_radps);
                 let shaft_angle = self.shaft_angle();
-                // The observer's schedule: the estimate its task computed
-                // from the previous tick's input, then this tick's input.
-                let estimate = match self.observer.as_mut() {
-                    Some(link) if self.state != DriveState::BrakeSet && link.is_started() => {
-                        let estimate = link.consume(self.speed_ticks).and_then(|o| o.estimate);
-                        link.publish(
-                            self.speed_ticks,
-                            ObserverRequest::Update {
-                                encoder_count: self.last_encoder_count,
-                                motor_torque_nm: kt * self.telemetry.iq_a,
-                            },
-                        );
-                        estimate
-                    }
-                    _ => None,
-                };
+                let estimate = self.observer_exchange(kt);
                 if let (Some(c), DriveState::Travel) = (self.compensation.as_mut(), self.state) {
                     c.speed_tick(&LearningInput {
                         shaft_angle,

@@ -372,6 +372,48 @@ impl Slave {
         self.phase = Phase::Done;
     }
 
+    /// A travel (or relevelling) command at rest: the speed travel at the
+    /// selected speed (relevelling: Vn), when the speed is configured, the
+    /// position known and the drive ready; otherwise refused (S5 clear).
+    fn speed_travel(&mut self, c: &Command, direction: Travel, drive: &DriveStatus) -> Option<Request> {
+        let speed = if c.kind == Kind::Relevel { Some(Speed::Vn) } else { self.selected };
+        let Some((speed, speed_mps)) = speed.and_then(|s| Some((s, self.config.speeds_mps[s.index()]?))) else {
+            self.accepted = false;
+            return None;
+        };
+        // The drive's rope lengths (feed-forward) and shaft ends need the position.
+        let Some(start_position_mm) = self.position_mm else {
+            self.accepted = false;
+            return None;
+        };
+        if !drive.ready {
+            self.accepted = false;
+            return None;
+        }
+        self.accepted = true;
+        self.phase = Phase::SpeedTravel { direction, started: false, speed_mps };
+        Some(Request::Speed { direction, speed, speed_mps, start_position_mm })
+    }
+
+    /// A remaining distance during a distance travel towards `target_mm`.
+    /// One that puts the car outside the shaft (seen from the target) is
+    /// out of range.
+    fn remaining(&mut self, direction: Travel, target_mm: i32, remaining_mm: u16) -> Result<Request, CommandError> {
+        let remaining = remaining_mm as i32;
+        let beyond = match direction {
+            Travel::Up => target_mm - remaining < 0,
+            Travel::Down => target_mm + remaining > self.config.shaft_travel_mm as i32,
+        };
+        if beyond {
+            return Err(CommandError::DistanceOutOfRange);
+        }
+        // Whether the car can stop within it, the drive decides
+        // ([`Slave::refuse_remaining`] when it cannot): until it
+        // takes one again, S5 stays as it said.
+        self.accepted = !self.remaining_refused;
+        Ok(Request::Remaining { remaining_mm })
+    }
+
     fn command(&mut self, c: &Command, drive: &DriveStatus) -> Result<Option<Request>, CommandError> {
         let direction = if c.down { Travel::Down } else { Travel::Up };
         // Range checks first: a bad value is an error answer in any phase.
@@ -413,25 +455,7 @@ impl Slave {
                 self.accepted = false;
                 Ok(None)
             }
-            (Kind::Travel | Kind::Relevel, Phase::Enabled) => {
-                let speed = if c.kind == Kind::Relevel { Some(Speed::Vn) } else { self.selected };
-                let Some((speed, speed_mps)) = speed.and_then(|s| Some((s, self.config.speeds_mps[s.index()]?))) else {
-                    self.accepted = false;
-                    return Ok(None);
-                };
-                // The drive's rope lengths (feed-forward) and shaft ends need the position.
-                let Some(start_position_mm) = self.position_mm else {
-                    self.accepted = false;
-                    return Ok(None);
-                };
-                if !drive.ready {
-                    self.accepted = false;
-                    return Ok(None);
-                }
-                self.accepted = true;
-                self.phase = Phase::SpeedTravel { direction, started: false, speed_mps };
-                Ok(Some(Request::Speed { direction, speed, speed_mps, start_position_mm }))
-            }
+            (Kind::Travel | Kind::Relevel, Phase::Enabled) => Ok(self.speed_travel(c, direction, drive)),
             (Kind::Travel | Kind::Relevel, Phase::SpeedTravel { direction: running, .. }) => {
                 if running != direction {
                     return Ok(Some(self.halt(StopReason::Inconsistent, drive)));
@@ -460,22 +484,8 @@ impl Slave {
                 if running != direction {
                     return Ok(Some(self.halt(StopReason::Inconsistent, drive)));
                 }
-                // Range-checked above. A remaining distance that puts the
-                // car outside the shaft (seen from the target) is out of range.
-                let remaining_mm = distance.unwrap_or(0);
-                let remaining = remaining_mm as i32;
-                let beyond = match direction {
-                    Travel::Up => target_mm - remaining < 0,
-                    Travel::Down => target_mm + remaining > self.config.shaft_travel_mm as i32,
-                };
-                if beyond {
-                    return Err(CommandError::DistanceOutOfRange);
-                }
-                // Whether the car can stop within it, the drive decides
-                // ([`Slave::refuse_remaining`] when it cannot): until it
-                // takes one again, S5 stays as it said.
-                self.accepted = !self.remaining_refused;
-                Ok(Some(Request::Remaining { remaining_mm }))
+                // Range-checked above.
+                self.remaining(direction, target_mm, distance.unwrap_or(0)).map(Some)
             }
             (Kind::Stop, Phase::Distance { started, .. }) => {
                 if drive.travelling || !started {
