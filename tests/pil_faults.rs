@@ -87,7 +87,7 @@ fn missed_deadline_and_corrupted_frames_on_the_emulated_chip() {
 
 /// The start-up sequence and the faults of the application layer
 /// (`drive_core::lift_drive::LiftDrive`) on the emulated chip, every step
-/// against its host shadow bit for bit (`host_sim::cli::pil::dcp::Lift`):
+/// against its host shadow bit for bit (`closed_loop::pil::dcp::Lift`):
 /// after power-up the drive calibrates with gates off and the brake
 /// applied and the car does not move until the lift controller commands a
 /// travel; a current-offset calibration refused at power-up, and a DC-bus
@@ -97,12 +97,12 @@ fn missed_deadline_and_corrupted_frames_on_the_emulated_chip() {
 /// (the calibration runs again), and the travel then runs and lands.
 #[test]
 fn start_up_and_faults_of_the_application_layer_on_the_emulated_chip_end_safe_until_the_reset_command() {
+    use closed_loop::pil::dcp::{default_elf, default_parameters, geometry, Chip, Lift, Master, Phase, Trip};
     use drive_core::dcp::command::{Mode, Speed};
     use drive_core::dcp::slave::{S0_READY, S3_FAULT};
     use drive_core::dcp::SlaveFrame;
     use drive_core::service::ParamsStatus;
     use drive_core::startup::{CALIBRATION_SAMPLES, SETTLE_STEPS};
-    use host_sim::cli::pil::dcp::{default_elf, default_parameters, geometry, Chip, Lift, Master, Phase, Trip};
     use std::path::Path;
 
     let rig = rig();
@@ -233,7 +233,7 @@ struct Restartable {
     rig: rig_config::RigConfig,
     dir: tempfile::TempDir,
     plant: plant::Plant,
-    chip: Option<host_sim::cli::pil::dcp::Chip>,
+    chip: Option<closed_loop::pil::dcp::Chip>,
     shadow: drive_core::lift_drive::LiftDrive,
     max_step_s: f64,
     lw_lowest_landing_m: f64,
@@ -268,16 +268,16 @@ impl Restartable {
     /// The car at rest `lw_start_m` with the rig's heaviest car, the chip booted.
     fn new(lw_start_m: f64) -> Self {
         let rig = rig();
-        let (geometry, m_car) = host_sim::cli::pil::dcp::geometry(&rig);
+        let (geometry, m_car) = closed_loop::pil::dcp::geometry(&rig);
         let mut lift = Self {
             plant: plant::Plant::new(&rig, m_car as f64, lw_start_m),
             max_step_s: closed_loop::SimOptions::for_rig(&rig).max_step_s,
             lw_lowest_landing_m: geometry.lw_lowest_landing_m as f64,
             dir: tempfile::tempdir().unwrap(),
             chip: None,
-            shadow: host_sim::cli::pil::dcp::shadow(
+            shadow: closed_loop::pil::dcp::shadow(
                 &rig,
-                &host_sim::cli::pil::dcp::default_parameters(&rig),
+                &closed_loop::pil::dcp::default_parameters(&rig),
                 drive_core::service::ParamsStatus::None,
             ),
             rig,
@@ -292,7 +292,7 @@ impl Restartable {
     /// shadow is the application layer as the firmware builds it after
     /// any reset. The plant is not touched.
     fn reset_chip(&mut self) {
-        use host_sim::cli::pil::dcp::{default_elf, default_parameters, shadow, Chip};
+        use closed_loop::pil::dcp::{default_elf, default_parameters, shadow, Chip};
         self.chip = None; // QEMU killed first: one target on the sockets at a time
         let chip = Chip::launch(&default_elf(), std::path::Path::new("qemu-system-arm"), self.dir.path());
         self.chip = Some(chip.expect("the PIL target starts"));
@@ -342,16 +342,16 @@ impl Restartable {
 /// `LiftDrive` against its host shadow, bit for bit.
 #[test]
 fn a_watchdog_reset_mid_travel_and_idle_leaves_the_drive_safe_until_a_command() {
+    use closed_loop::pil::dcp::{Master, Phase, Trip};
     use drive_core::dcp::command::{Mode, Speed};
     use drive_core::dcp::slave::S0_READY;
     use drive_core::dcp::SlaveFrame;
     use drive_core::startup::{CALIBRATION_SAMPLES, SETTLE_STEPS};
-    use host_sim::cli::pil::dcp::{Master, Phase, Trip};
 
     let started = Instant::now();
     let drive = rig().drive_config();
     let calibration_steps = (SETTLE_STEPS + CALIBRATION_SAMPLES) as u64;
-    let (geometry, _) = host_sim::cli::pil::dcp::geometry(&rig());
+    let (geometry, _) = closed_loop::pil::dcp::geometry(&rig());
     let mut lift = Restartable::new(geometry.lw_lowest_landing_m as f64 + 1.0);
     let status = |replies: &[u8]| -> Vec<u8> {
         replies.chunks(6).map(|c| SlaveFrame::decode(c.try_into().unwrap()).unwrap().status).collect()

@@ -13,11 +13,11 @@
 
 use std::path::Path;
 
+use closed_loop::pil::dcp::{default_elf, default_parameters, geometry, Chip, Lift, Master, Phase, Trip};
 use drive_core::dcp::command::{Mode, Speed};
 use drive_core::param_store::{DriveParameters, RecordError};
 use drive_core::ripple::Strategy;
 use drive_core::service::ParamsStatus;
-use host_sim::cli::pil::dcp::{default_elf, default_parameters, geometry, Chip, Lift, Master, Phase, Trip};
 use rig_config::RigConfig;
 
 fn rig() -> RigConfig {

@@ -5,10 +5,6 @@
 //! plays the lift controller on its DCP line ([`dcp`], the harness in the
 //! `closed-loop` library).
 
-/// The lift-controller harness (`closed_loop::pil::dcp`), also reachable
-/// as `host_sim::cli::pil::dcp`.
-pub use closed_loop::pil::dcp;
-
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -23,7 +19,7 @@ use super::travel::DirectionArg;
 use super::StrategyArg;
 use super::{check_open_range, default_car_mass_kg, output_dir};
 use closed_loop::compensation::rig_ripple_table;
-use closed_loop::pil::{default_elf_path, PilOptions, PilTarget};
+use closed_loop::pil::{dcp, default_elf_path, PilOptions, PilTarget};
 use closed_loop::{simulate_travel_with, SimOptions, TravelSpec};
 use rig_config::RigConfig;
 
