@@ -13,29 +13,25 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod alignment;
-pub mod config;
-pub mod controller;
-pub mod current_loop;
-pub mod current_offset;
-pub mod dcp;
-pub mod fixed;
-pub mod frame;
-pub mod lift_drive;
-pub mod observer;
-pub mod param_store;
-pub mod park_clarke;
-pub mod pi;
-pub mod profile;
-pub mod pwm_timing;
-pub mod ripple;
-pub mod service;
-pub mod speed_estimator;
-pub mod speed_loop;
-pub mod startup;
-pub mod supervisor;
-pub mod svpwm;
-pub mod trig;
+// Crate-wide: the parameters and the number types.
+pub mod config; // `DriveConfig`: the drive's parameters in SI units
+pub mod fixed; // Q16.16 / Q2.30 fixed point, saturating arithmetic, integer sqrt
+
+// By concern.
+pub mod foc; // field-oriented control: the 16 kHz current path, offsets, rotor alignment
+pub mod lift; // the lift drive's application layer and its ports: DCP, service, parameters
+pub mod observer; // the reduced chain observer (car acceleration, rope forces)
+pub mod ripple; // torque-ripple compensation and its learning
+pub mod travel; // the travel: controller sequence, profile, speed loop, start-up, fault supervisor
+
+// The processor-in-the-loop link.
+pub mod frame; // the PIL frame codec, both ends of the link
+
+// The modules by their flat paths (`drive_core::controller`, ...), as the
+// firmware, the PIL target, the simulator and the tests name them.
+pub use foc::{alignment, current_loop, current_offset, park_clarke, pi, pwm_timing, speed_estimator, svpwm, trig};
+pub use lift::{dcp, lift_drive, param_store, service};
+pub use travel::{controller, profile, speed_loop, startup, supervisor};
 
 pub use config::DriveConfig;
 pub use controller::{ControlOutput, Controller, DriveState, SensorFrame, SpeedTravelCommand, TravelCommand};
