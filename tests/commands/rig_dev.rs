@@ -79,7 +79,7 @@ fn diverting_pulley_is_explained_with_its_equivalent_mass() {
     let first = &r.ranking[0];
     assert!(first.held_out_shrink >= 0.7, "held-out shrink {:.2}", first.held_out_shrink);
     let pulley = first.effects.diverting_pulley.expect("the pulley is fitted");
-    let mass_kg = pulley.inertia_kg_m2 / (pulley.radius_m * pulley.radius_m);
+    let mass_kg = pulley.rim_mass_kg();
     assert!((mass_kg / 8.0 - 1.0).abs() <= 0.30, "equivalent mass {mass_kg:.2} kg against the README's 8 kg");
 }
 
@@ -97,10 +97,8 @@ fn rig_dev_datasets_table() {
         let first = r.ranking.first();
         let fitted = first.map_or("-".to_string(), |c| {
             let p: Vec<String> = c.parameters.iter().map(|p| format!("{} {:.3e}", p.name, p.value)).collect();
-            let pulley = c
-                .effects
-                .diverting_pulley
-                .map_or(String::new(), |d| format!(", J/r_p^2 {:.2} kg", d.inertia_kg_m2 / (d.radius_m * d.radius_m)));
+            let pulley =
+                c.effects.diverting_pulley.map_or(String::new(), |d| format!(", J/r_p^2 {:.2} kg", d.rim_mass_kg()));
             format!("{} ({}{pulley})", c.name, p.join(", "))
         });
         let c = &r.calibration;

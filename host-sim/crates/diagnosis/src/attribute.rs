@@ -366,17 +366,20 @@ impl Lab<'_> {
         let Some(t) = screen::screening_target(nominal) else {
             return Vec::new();
         };
-        let mut lines: Vec<(EffectKind, Vec<Vec<f64>>)> = Vec::new();
-        let mut grids: Vec<Vec<Vec<f64>>> = Vec::new();
+        // Each screened effect: its dense line and the grid it replaces.
+        type Points = Vec<Vec<f64>>;
+        let mut lines: Vec<(EffectKind, Points, Points)> = Vec::new();
         for &kind in kinds.iter().filter(|&&k| screen::is_screened(k)) {
             if let Search::Grid(points) = search(kind, self.reference_tension_n) {
-                lines.push((kind, screen::dense_line(kind, &screen::line_template(kind, &points[0]))));
-                grids.push(points);
+                lines.push((kind, screen::dense_line(kind, &screen::line_template(kind, &points[0])), points));
             }
         }
-        let models: Vec<Effects> =
-            lines.iter().flat_map(|(k, line)| line.iter().map(|p| effects_of(&[(*k, p.clone())]))).flatten().collect();
-        if models.len() != lines.iter().map(|(_, l)| l.len()).sum::<usize>() {
+        let models: Vec<Effects> = lines
+            .iter()
+            .flat_map(|(k, line, _)| line.iter().map(|p| effects_of(&[(*k, p.clone())])))
+            .flatten()
+            .collect();
+        if models.len() != lines.iter().map(|(_, l, _)| l.len()).sum::<usize>() {
             // A value the effect refuses: keep the grids.
             return Vec::new();
         }
@@ -388,11 +391,11 @@ impl Lab<'_> {
         let mut scores =
             runs.iter().map(|r| r[0].as_ref().map_or(f64::INFINITY, |spectra| self.run_excess(t, spectra)));
         let mut out = Vec::new();
-        for ((kind, line), grid) in lines.into_iter().zip(&grids) {
+        for (kind, line, grid) in lines {
             let line_scores: Vec<f64> = scores.by_ref().take(line.len()).collect();
             if let Some(kept) = screen::bracket(&line_scores) {
                 let bracket: Vec<f64> = kept.into_iter().map(|i| line[i][0]).collect();
-                out.push((kind, screen::across_grid(&bracket, grid)));
+                out.push((kind, screen::across_grid(&bracket, &grid)));
             }
         }
         out

@@ -479,8 +479,7 @@ fn ranking_section(s: &mut String, ranking: &[Candidate]) {
 /// equivalent mass `J / r_p^2` (kg); the inertia only at a radius, which
 /// the rope's motion does not tell.
 fn pulley_note(pulley: &plant::effects::DivertingPulley) -> String {
-    let r = pulley.radius_m;
-    let mass = pulley.inertia_kg_m2 / (r * r);
+    let (r, mass) = (pulley.radius_m, pulley.rim_mass_kg());
     format!(
         "The recordings fix the diverting pulley's equivalent mass at its rim, J / r_p^2 = {mass:.2} kg; its inertia \
          above is at the radius r_p = {r:.3} m the effect assumes (the rope's motion does not tell the radius): at the \

@@ -90,17 +90,17 @@ pub fn screening_target(nominal_db: &[f64]) -> Option<usize> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn a_screened_bracket_keeps_the_grids_other_parameters() {
         let grid = vec![vec![1.0, 7.0, 0.1], vec![2.0, 7.0, 0.1], vec![1.0, 7.0, 0.3], vec![2.0, 7.0, 0.3]];
-        let out = super::across_grid(&[5.0, 6.0], &grid);
+        let out = across_grid(&[5.0, 6.0], &grid);
         assert_eq!(out, vec![vec![5.0, 7.0, 0.1], vec![5.0, 7.0, 0.3], vec![6.0, 7.0, 0.1], vec![6.0, 7.0, 0.3]]);
         // A one-parameter grid gives the bracket alone.
         let one = vec![vec![1.0, 7.0], vec![2.0, 7.0]];
-        assert_eq!(super::across_grid(&[5.0, 6.0], &one), vec![vec![5.0, 7.0], vec![6.0, 7.0]]);
+        assert_eq!(across_grid(&[5.0, 6.0], &one), vec![vec![5.0, 7.0], vec![6.0, 7.0]]);
     }
-
-    use super::*;
 
     #[test]
     fn the_dense_line_spans_the_range_in_its_scale() {

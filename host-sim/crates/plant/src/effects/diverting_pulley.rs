@@ -26,10 +26,17 @@ pub struct DivertingPulley {
 /// (Eqn 4 counts the whole car side as hanging; the difference,
 /// `mu l_sp g r`, is below 0.03 N m on the rig).
 impl DivertingPulley {
+    /// Mass of the pulley's rim in rope coordinates, kg: `J / r_p^2`
+    /// (what the rope's motion tells of the pulley: not the inertia and
+    /// the radius apart).
+    pub fn rim_mass_kg(&self) -> f64 {
+        self.inertia_kg_m2 / (self.radius_m * self.radius_m)
+    }
+
     /// Equivalent mass of the pulley in rope coordinates, with the
     /// segment's rope, kg: `J / r_p^2 + mu l_sp` (`mu` in kg/m).
     pub fn equivalent_mass_kg(&self, mu_kg_per_m: f64) -> f64 {
-        self.inertia_kg_m2 / (self.radius_m * self.radius_m) + mu_kg_per_m * self.sheave_to_pulley_m
+        self.rim_mass_kg() + mu_kg_per_m * self.sheave_to_pulley_m
     }
 
     /// Stiffness of the sheave-to-pulley segment, N/m, for the rope's
