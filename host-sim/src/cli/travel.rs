@@ -170,18 +170,27 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         run.duration_s() / wall
     );
 
-    let recording = run.to_recording(
-        &spec,
-        rig.mechanics.m_cw_kg,
-        format!(
-            "host-sim closed-loop travel, {}, step {:.3e} s, {description}",
-            options.effects.summary(),
-            options.max_step_s
-        ),
-    );
-    let (toml_path, csv_path) = write_recording(out.staging(), &stem, &recording)?;
+    // The recording is written on a second thread while this one draws the
+    // plots (both only read the run).
+    let (written, plot_paths) = std::thread::scope(|scope| {
+        let writer = scope.spawn(|| {
+            let recording = run.to_recording(
+                &spec,
+                rig.mechanics.m_cw_kg,
+                format!(
+                    "host-sim closed-loop travel, {}, step {:.3e} s, {description}",
+                    options.effects.summary(),
+                    options.max_step_s
+                ),
+            );
+            write_recording(out.staging(), &stem, &recording)
+        });
+        let plot_paths = plots(rig, &spec, &run, args, &stem, &out);
+        (writer.join(), plot_paths)
+    });
+    let (toml_path, csv_path) = written.map_err(|_| anyhow::anyhow!("the thread writing the recording panicked"))??;
+    let plot_paths = plot_paths?;
     let (toml_path, csv_path) = (out.published(&toml_path), out.published(&csv_path));
-    let plot_paths = plots(rig, &spec, &run, args, &stem, &out)?;
     out.commit()?;
     outln!("recording: {} and {}", toml_path.display(), csv_path.display());
     outln!("plots: {}", plot_paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));

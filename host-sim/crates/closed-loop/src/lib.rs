@@ -386,7 +386,7 @@ pub fn simulate_travel_faulted(
     if let Some(bar) = progress {
         bar.set_length(expected_steps);
     }
-    let mut run = TravelRun { sample_rate_hz: options.sample_rate_hz, ..TravelRun::default() };
+    let mut run = TravelRun::with_capacity(options.sample_rate_hz, expected_samples(time_limit, options));
     let mut acquisition = Acquisition {
         ts,
         sample_period: 1.0 / options.sample_rate_hz,
@@ -445,6 +445,19 @@ pub fn simulate_travel_faulted(
         bar.finish_and_clear();
     }
     Ok(run)
+}
+
+/// Samples to reserve room for in a run whose time limit is `time_limit`
+/// (s): those of half of it (the bound [`MAX_RUN_BYTES`] is checked on),
+/// so that the columns do not grow (and copy) during the run; pages of the
+/// room not reached are never touched.
+fn expected_samples(time_limit: f64, options: &SimOptions) -> usize {
+    let samples = time_limit / 2.0 * options.sample_rate_hz;
+    if samples.is_finite() && samples > 0.0 {
+        samples as usize + 16
+    } else {
+        0
+    }
 }
 
 /// True when the counterweight-side rope length `lw` (m) lies inside the
@@ -651,6 +664,27 @@ fn record(run: &mut TravelRun, t: f64, o: &PlantObservation, output: &drive_core
 }
 
 impl TravelRun {
+    /// An empty run at `sample_rate_hz` (Hz) with room for `samples` samples
+    /// in every column.
+    pub fn with_capacity(sample_rate_hz: f64, samples: usize) -> Self {
+        let column = || Vec::with_capacity(samples);
+        Self {
+            sample_rate_hz,
+            time_s: column(),
+            acc_car_mps2: column(),
+            acc_cw_mps2: column(),
+            phase_currents_a: [column(), column(), column()],
+            speed_radps: column(),
+            angle_rad: column(),
+            ref_speed_mps: column(),
+            motor_torque_nm: column(),
+            ripple_torque_nm: column(),
+            shaft_speed_radps: column(),
+            lw_m: column(),
+            drive_state: column(),
+        }
+    }
+
     /// The run as a recording in the measurement format: the required and
     /// optional columns of the format, then the simulator's own columns
     /// (`motor_torque_nm`, `ripple_torque_nm`, `shaft_speed_true_radps`,

@@ -32,6 +32,10 @@ pub struct AngleSeries {
     half_width_rad: f64,
     /// Coefficients of `delta^j` of the ripple torque, N m / rad^j.
     ripple_nm: [f64; DEGREE + 1],
+    /// Coefficients of `delta^j` of the ripple torque's first three
+    /// derivatives divided by `m!` (`m` = 1, 2, 3): `binom(j + m, m)
+    /// ripple_nm[j + m]`, for [`AngleSeries::ripple_taylor`].
+    ripple_shifted: [[f64; DEGREE + 1]; 3],
     /// Coefficients of `delta^j` of `cos(p theta)`, 1 / rad^j.
     cos_p: [f64; DEGREE + 1],
     /// Coefficients of `delta^j` of `sin(p theta)`, 1 / rad^j.
@@ -44,6 +48,7 @@ impl Default for AngleSeries {
             theta_ref_rad: f64::NAN,
             half_width_rad: 0.0,
             ripple_nm: [0.0; DEGREE + 1],
+            ripple_shifted: [[0.0; DEGREE + 1]; 3],
             cos_p: [0.0; DEGREE + 1],
             sin_p: [0.0; DEGREE + 1],
         }
@@ -62,9 +67,30 @@ fn add_cos_series(coefficients: &mut [f64; DEGREE + 1], scale: f64, n: f64, phas
     }
 }
 
-/// `sum_j coefficients[j] x^j` by Horner's rule.
-fn horner(coefficients: &[f64; DEGREE + 1], x: f64) -> f64 {
-    coefficients.iter().rev().fold(0.0, |acc, &c| acc * x + c)
+/// `n` choose `k` (small arguments), as a float.
+fn binomial(n: usize, k: usize) -> f64 {
+    (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
+}
+
+/// `sum_j coefficients[j] x^j` by Estrin's scheme: pairs, then pairs of
+/// pairs with `x^2`, `x^4`, `x^8`, so that the chain of dependent
+/// operations is 5 multiply-adds long instead of Horner's 12 (the
+/// polynomials sit on the path of every integration stage). The same value
+/// as Horner's rule to a few ulps (the terms fall by `0.3^j / j!`).
+fn estrin(c: &[f64; DEGREE + 1], x: f64) -> f64 {
+    const _: () = assert!(DEGREE == 12, "Estrin's scheme below is written for degree 12");
+    let x2 = x * x;
+    let x4 = x2 * x2;
+    let x8 = x4 * x4;
+    let p01 = c[0] + c[1] * x;
+    let p23 = c[2] + c[3] * x;
+    let p45 = c[4] + c[5] * x;
+    let p67 = c[6] + c[7] * x;
+    let p89 = c[8] + c[9] * x;
+    let p1011 = c[10] + c[11] * x;
+    let low = (p01 + p23 * x2) + (p45 + p67 * x2) * x4;
+    let high = (p89 + p1011 * x2) + c[12] * x4;
+    low + high * x8
 }
 
 impl AngleSeries {
@@ -84,13 +110,46 @@ impl AngleSeries {
         }
     }
 
+    /// Makes sure the polynomials hold from `theta_rad` (rad) over a
+    /// further `step_rad` (rad, signed: the shaft's turn over the coming
+    /// step) with a twentieth of their interval to spare; refreshes them
+    /// otherwise, about a reference half their half-width ahead of
+    /// `theta_rad` in the direction of `step_rad` (when the step is short
+    /// beside the interval), so that a shaft turning steadily uses them
+    /// about three times as long as with [`AngleSeries::ensure`].
+    pub fn ensure_ahead(&mut self, theta_rad: f64, step_rad: f64, ripple: &RippleTorque, pole_pairs: f64) {
+        let reach = step_rad.abs();
+        // A NaN reference (no polynomial yet) compares false: refresh.
+        let inside = (theta_rad - self.theta_ref_rad).abs() + reach <= 0.95 * self.half_width_rad;
+        if !inside {
+            let half_width = Self::half_width_rad(ripple, pole_pairs);
+            let ahead = if reach <= 0.4 * half_width { (0.5 * half_width).copysign(step_rad) } else { 0.0 };
+            self.refresh(theta_rad + ahead, ripple, pole_pairs);
+        }
+    }
+
+    /// Half width of the polynomials' interval, rad, for `ripple` and
+    /// `pole_pairs`: [`MAX_PHASE_RAD`] of the fastest term.
+    fn half_width_rad(ripple: &RippleTorque, pole_pairs: f64) -> f64 {
+        let fastest = ripple.harmonics.iter().map(|h| h.mechanical_order.abs()).fold(pole_pairs.abs(), f64::max);
+        MAX_PHASE_RAD / fastest.max(1.0)
+    }
+
     /// The polynomials about `theta_rad` (rad) for `ripple` and `pole_pairs`.
     pub fn refresh(&mut self, theta_rad: f64, ripple: &RippleTorque, pole_pairs: f64) {
-        let fastest = ripple.harmonics.iter().map(|h| h.mechanical_order.abs()).fold(pole_pairs.abs(), f64::max);
-        *self = Self { theta_ref_rad: theta_rad, half_width_rad: MAX_PHASE_RAD / fastest.max(1.0), ..Self::default() };
+        *self = Self {
+            theta_ref_rad: theta_rad,
+            half_width_rad: Self::half_width_rad(ripple, pole_pairs),
+            ..Self::default()
+        };
         for h in &ripple.harmonics {
             let n = h.mechanical_order;
             add_cos_series(&mut self.ripple_nm, h.amplitude_nm, n, n * theta_rad + h.phase_rad);
+        }
+        for (m, shifted) in (1..).zip(self.ripple_shifted.iter_mut()) {
+            for (j, (slot, c)) in shifted.iter_mut().zip(&self.ripple_nm[m..]).enumerate() {
+                *slot = binomial(j + m, m) * c;
+            }
         }
         let electrical = pole_pairs * theta_rad;
         add_cos_series(&mut self.cos_p, 1.0, pole_pairs, electrical);
@@ -103,15 +162,11 @@ impl AngleSeries {
     /// [`AngleSeries::ensure`] first so that it holds there).
     pub fn ripple_taylor(&self, theta_rad: f64) -> [f64; 4] {
         let delta = theta_rad - self.theta_ref_rad;
-        // Taylor shift by repeated synthetic division: after pass m,
-        // c[m] is the m-th coefficient about theta_rad.
-        let mut c = self.ripple_nm;
-        for m in 0..4 {
-            for j in (m..DEGREE).rev() {
-                c[j] += delta * c[j + 1];
-            }
-        }
-        [c[0], c[1], c[2], c[3]]
+        // The m-th coefficient about theta_rad is the m-th derivative over
+        // m! there: four independent polynomials (no chain of dependent
+        // passes).
+        let [d1, d2, d3] = &self.ripple_shifted;
+        [estrin(&self.ripple_nm, delta), estrin(d1, delta), estrin(d2, delta), estrin(d3, delta)]
     }
 
     /// Ripple torque (N m) at shaft angle `theta_rad` (rad): from the
@@ -119,9 +174,21 @@ impl AngleSeries {
     pub fn ripple_nm(&self, theta_rad: f64, ripple: &RippleTorque) -> f64 {
         let delta = theta_rad - self.theta_ref_rad;
         if delta.abs() <= self.half_width_rad {
-            horner(&self.ripple_nm, delta)
+            estrin(&self.ripple_nm, delta)
         } else {
             ripple.torque_nm(theta_rad)
+        }
+    }
+
+    /// `cos(p theta)` and `sin(p theta)` at shaft angle `theta_rad` (rad),
+    /// the same values as [`AngleSeries::eval`]'s without the ripple.
+    pub fn park(&self, theta_rad: f64, pole_pairs: f64) -> (f64, f64) {
+        let delta = theta_rad - self.theta_ref_rad;
+        if delta.abs() <= self.half_width_rad {
+            (estrin(&self.cos_p, delta), estrin(&self.sin_p, delta))
+        } else {
+            let (s, c) = (pole_pairs * theta_rad).sin_cos();
+            (c, s)
         }
     }
 
@@ -131,7 +198,7 @@ impl AngleSeries {
     pub fn eval(&self, theta_rad: f64, ripple: &RippleTorque, pole_pairs: f64) -> (f64, f64, f64) {
         let delta = theta_rad - self.theta_ref_rad;
         if delta.abs() <= self.half_width_rad {
-            (horner(&self.ripple_nm, delta), horner(&self.cos_p, delta), horner(&self.sin_p, delta))
+            (estrin(&self.ripple_nm, delta), estrin(&self.cos_p, delta), estrin(&self.sin_p, delta))
         } else {
             let (s, c) = (pole_pairs * theta_rad).sin_cos();
             (ripple.torque_nm(theta_rad), c, s)

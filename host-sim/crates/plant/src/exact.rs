@@ -15,12 +15,14 @@
 //!
 //! What is approximated, with its bound:
 //! - `A` is evaluated at a reference sheave position and refreshed when the
-//!   sheave has moved [`REFRESH_DISTANCE_M`] / 2 from it; the springs' and
-//!   masses' change along the rope (`2EA/l`, `mu l`) up to there is added to
-//!   second order (central differences at the refresh) as a force constant
-//!   over the step, at the step's predicted midpoint: what is left is third
-//!   order, `(0.25 mm / l)^3`, below 2e-11 of the rope forces on the
-//!   shortest (1 m) side.
+//!   sheave has moved half the refresh distance from it: [`REFRESH_DISTANCE_M`]
+//!   times the shorter rope side's length in metres (at least 1, at most
+//!   [`MAX_REFRESH_SCALE`]), so that the distance is the same fraction of
+//!   the rope everywhere; the springs' and masses' change along the rope
+//!   (`2EA/l`, `mu l`) up to there is added to second order (central
+//!   differences at the refresh) as a force constant over the step, at the
+//!   step's predicted midpoint: what is left is third order,
+//!   `(0.25 mm / 1 m)^3`, below 2e-11 of the rope forces on either side.
 //! - The machine currents over the half period are their degree-6 Taylor
 //!   series in time (the voltage equations differentiated term by term with
 //!   the shaft's speed, acceleration and jerk at the start; first term left
@@ -47,8 +49,13 @@ use super::{Plant, PlantObservation, STATE_LEN};
 const MECH: usize = 2 * DOF;
 
 /// Distance (m) over which the sheave may move before `A` is evaluated
-/// anew (half of it either side of the reference position).
+/// anew (half of it either side of the reference position) when the
+/// shorter rope side is 1 m long or less; it grows in proportion to that
+/// side's length beyond (up to [`MAX_REFRESH_SCALE`] times).
 pub const REFRESH_DISTANCE_M: f64 = 0.5e-3;
+
+/// Largest factor on [`REFRESH_DISTANCE_M`] (a shorter side of 8 m).
+pub const MAX_REFRESH_SCALE: f64 = 8.0;
 
 /// Terms of the Taylor series of `Phi` and `Gamma_j` (`rho(A h) <= 0.5`:
 /// the first term left out is below `0.5^16 / 16! = 7e-19`).
@@ -162,23 +169,41 @@ pub(crate) struct ExactStep {
     h: f64,
     /// Reference sheave position, m.
     u_ref_m: f64,
+    /// Refresh distance, m: `A` holds within half of it of `u_ref_m`.
+    distance_m: f64,
     coefficients: Coefficients,
-    phi: [[f64; MECH]; MECH],
-    /// Response to `t^j` (N) on the sheave edge.
-    gamma: [[f64; MECH]; 4],
-    /// Response to a constant force (N) on the car.
-    gamma_car: [f64; MECH],
-    /// `int_0^h e^{As} ds` restricted to the velocity inputs: the response
-    /// to a constant acceleration (m/s^2) of each node.
-    psi: [[f64; DOF]; MECH],
+    /// The step as one matrix, column by column, acting on
+    /// [`ExactStep::inputs`]: `Phi` (columns 0-9), the responses
+    /// `Gamma_j` to `t^j` (N) on the sheave edge (10-13), the response to a
+    /// constant force (N) on the car (14), and `int_0^h e^{As} ds`
+    /// restricted to the velocity inputs, the responses to a constant
+    /// acceleration (m/s^2) of each node (15-19). Column by column, the
+    /// product is ten-wide multiply-adds that vectorise.
+    columns: [[f64; MECH]; COLUMNS],
 }
 
-fn mat_vec(m: &[[f64; MECH]; MECH], x: &[f64; MECH]) -> [f64; MECH] {
-    let mut out = [0.0; MECH];
-    for (o, row) in out.iter_mut().zip(m) {
-        *o = row.iter().zip(x).map(|(a, b)| a * b).sum();
+/// Columns of [`ExactStep::columns`]: the state, four force terms, the car
+/// force, five accelerations.
+const COLUMNS: usize = MECH + 4 + 1 + DOF;
+
+impl ExactStep {
+    /// The state after the step from `x0` with the sheave-edge force
+    /// `force` (N / s^j), car force `f_car` (N) and accelerations
+    /// `correction` (m/s^2).
+    fn apply(&self, x0: &[f64; MECH], force: &[f64; 4], f_car: f64, correction: &[f64; DOF]) -> [f64; MECH] {
+        let mut inputs = [0.0; COLUMNS];
+        inputs[..MECH].copy_from_slice(x0);
+        inputs[MECH..MECH + 4].copy_from_slice(force);
+        inputs[MECH + 4] = f_car;
+        inputs[MECH + 5..].copy_from_slice(correction);
+        let mut out = [0.0; MECH];
+        for (column, &z) in self.columns.iter().zip(&inputs) {
+            for (o, m) in out.iter_mut().zip(column) {
+                *o += m * z;
+            }
+        }
+        out
     }
-    out
 }
 
 /// `e^{Ah}` and `int_0^h e^{As} ds` (its velocity-input columns) by their
@@ -238,6 +263,16 @@ fn poly<const N: usize>(c: &[f64; N], t: f64) -> f64 {
     c.iter().rev().fold(0.0, |acc, &x| acc * t + x)
 }
 
+/// [`poly`] of a currents' series by pairs (Estrin's scheme): it sits on
+/// the path from one half period to the next, three multiply-adds long
+/// instead of six.
+fn series_at(c: &[f64; SERIES], t: f64) -> f64 {
+    const _: () = assert!(SERIES == 7, "written for degree 6");
+    let t2 = t * t;
+    let t4 = t2 * t2;
+    ((c[0] + c[1] * t) + (c[2] + c[3] * t) * t2) + ((c[4] + c[5] * t) + c[6] * t2) * t4
+}
+
 impl Plant {
     /// True when a half period of `h` (s) can take the exact
     /// discretisation now (its matrices made ready): the fixed-size nominal
@@ -269,15 +304,23 @@ impl Plant {
         let fresh = e.h > 0.0
             && (h - e.h).abs() <= 1e-9 * e.h
             && e.coefficients.held == held
-            && (u - e.u_ref_m).abs() <= 0.5 * REFRESH_DISTANCE_M;
+            && (u - e.u_ref_m).abs() <= 0.5 * e.distance_m;
         if fresh {
             return;
         }
+        // The same fraction of the shorter side everywhere: the interval
+        // (its reference ahead of the sheave by at most half of it) reaches
+        // at most the largest distance (4 mm) from here, taken off the side's
+        // length so that the side is at least that long all over it.
+        let lw = self.line.counterweight_side_length_m(&self.chain, u);
+        let shorter = lw.min(self.chain.params.car_side_length_m(lw));
+        let distance =
+            REFRESH_DISTANCE_M * (shorter - REFRESH_DISTANCE_M * MAX_REFRESH_SCALE).clamp(1.0, MAX_REFRESH_SCALE);
         // Ahead of the sheave when it will cross the interval soon (in 1000
         // steps), centred on it otherwise (at a stop).
-        let ahead = if v.abs() * 1000.0 * h > REFRESH_DISTANCE_M { 0.5 * REFRESH_DISTANCE_M * v.signum() } else { 0.0 };
+        let ahead = if v.abs() * 1000.0 * h > distance { 0.5 * distance * v.signum() } else { 0.0 };
         let u_ref = u + ahead;
-        let c = self.coefficients_at(u_ref, held);
+        let c = self.coefficients_at(u_ref, held, distance);
         let mut b = [0.0; MECH];
         if !held {
             b[DOF + SHEAVE] = c.inv_mass[SHEAVE];
@@ -285,23 +328,34 @@ impl Plant {
         let mut b_car = [0.0; MECH];
         b_car[DOF + CAR] = c.inv_mass[CAR];
         let (phi, psi) = transition(&c, h);
+        let gamma = input_responses(&c, &b, h);
+        let gamma_car = input_responses(&c, &b_car, h)[0];
+        let mut columns = [[0.0; MECH]; COLUMNS];
+        for i in 0..MECH {
+            for j in 0..MECH {
+                columns[j][i] = phi[i][j];
+            }
+            for j in 0..DOF {
+                columns[MECH + 5 + j][i] = psi[i][j];
+            }
+        }
+        columns[MECH..MECH + 4].copy_from_slice(&gamma);
+        columns[MECH + 4] = gamma_car;
         self.exact = ExactStep {
             valid: h * self.line.omega_max_radps(&self.chain, u_ref, false) <= 0.5,
             h,
             u_ref_m: u_ref,
+            distance_m: distance,
             coefficients: c,
-            phi,
-            gamma: input_responses(&c, &b, h),
-            gamma_car: input_responses(&c, &b_car, h)[0],
-            psi,
+            columns,
         };
     }
 
     /// The chain's coefficients at sheave position `u_ref` (m), with the
     /// springs' and masses' derivatives along it by central differences
-    /// over [`REFRESH_DISTANCE_M`] / 2.
-    fn coefficients_at(&self, u_ref: f64, held: bool) -> Coefficients {
-        let d = 0.5 * REFRESH_DISTANCE_M;
+    /// over half the refresh distance `distance` (m).
+    fn coefficients_at(&self, u_ref: f64, held: bool, distance: f64) -> Coefficients {
+        let d = 0.5 * distance;
         let [below, lumped, above]: [Lumped; 3] = [-d, 0.0, d].map(|x| self.line.lumped(&self.chain, u_ref + x));
         let p = &self.chain.params;
         let mut c = Coefficients {
@@ -330,8 +384,9 @@ impl Plant {
     /// (A / s^k) over the half period: the voltage equations differentiated
     /// term by term, for the electrical speed `w(t) = w[0] + w[1] t + w[2]
     /// t^2` (rad/s) and `cos`, `sin` of the electrical angle at the start;
-    /// the first `terms` (at most [`SERIES`]), the others zero.
-    fn current_series(&self, w: [f64; 3], c: f64, s: f64, terms: usize) -> ([f64; SERIES], [f64; SERIES]) {
+    /// the first `TERMS` (at most [`SERIES`]), the others zero (a constant,
+    /// so that the recursion unrolls).
+    fn current_series<const TERMS: usize>(&self, w: [f64; 3], c: f64, s: f64) -> ([f64; SERIES], [f64; SERIES]) {
         let n = STATE_LEN - 2;
         let mut id = [0.0; SERIES];
         let mut iq = [0.0; SERIES];
@@ -346,19 +401,22 @@ impl Plant {
         let mut vd = [0.0; SERIES];
         let mut vq = [0.0; SERIES];
         (vd[0], vq[0]) = (va * c + vb * s, -va * s + vb * c);
-        for k in 0..terms - 1 {
-            // (w y)[k] = sum_j w[j] y[k - j].
-            let (mut w_id, mut w_iq, mut w_vd, mut w_vq) = (w[0] * id[k], w[0] * iq[k], w[0] * vd[k], w[0] * vq[k]);
+        let (lq_w0, ld_w0) = (lq * w[0], ld * w[0]);
+        for k in 0..TERMS - 1 {
+            // (w y)[k] = sum_j w[j] y[k - j]; the currents' older terms
+            // (j >= 1) apart, so that the chain from one coefficient to
+            // the next is four operations long.
+            let (mut old_id, mut old_iq, mut w_vd, mut w_vq) = (0.0, 0.0, w[0] * vd[k], w[0] * vq[k]);
             for j in 1..3.min(k + 1) {
-                w_id += w[j] * id[k - j];
-                w_iq += w[j] * iq[k - j];
+                old_id += w[j] * id[k - j];
+                old_iq += w[j] * iq[k - j];
                 w_vd += w[j] * vd[k - j];
                 w_vq += w[j] * vq[k - j];
             }
             let scale = INVERSE[k];
             let psi_w = if k < 3 { psi * w[k] } else { 0.0 };
-            id[k + 1] = (vd[k] - r * id[k] + lq * w_iq) * (inv_ld * scale);
-            iq[k + 1] = (vq[k] - r * iq[k] - ld * w_id - psi_w) * (inv_lq * scale);
+            id[k + 1] = ((vd[k] + lq * old_iq) + (lq_w0 * iq[k] - r * id[k])) * (inv_ld * scale);
+            iq[k + 1] = ((vq[k] - ld * old_id - psi_w) - (r * iq[k] + ld_w0 * id[k])) * (inv_lq * scale);
             vd[k + 1] = w_vq * scale;
             vq[k + 1] = -w_vd * scale;
         }
@@ -399,9 +457,10 @@ impl Plant {
         let r = self.chain.params.sheave_radius_m;
         let p = self.pmsm.pole_pairs;
         let theta0 = self.state[SHEAVE] / r;
-        self.angle.ensure(theta0, &self.ripple, p);
+        let turn = self.state[DOF + SHEAVE] / r * h;
+        self.angle.ensure_ahead(theta0, turn, &self.ripple, p);
         let q = self.angle.ripple_taylor(theta0);
-        let (_, c, s) = self.angle.eval(theta0, &self.ripple, p);
+        let (c, s) = self.angle.park(theta0, p);
         let co = self.exact.coefficients;
         let f_car = self.faults.car_extra_force_n;
         let mut x0 = [0.0; MECH];
@@ -420,18 +479,14 @@ impl Plant {
         let (omega, alpha) = (v0[SHEAVE] / r, a0[SHEAVE] / r);
         // The shaft's jerk needs the torque's rate, which needs the currents'
         // first terms (the series' first two terms depend on `w[0]` alone).
-        let (id, iq) = self.current_series([p * omega, 0.0, 0.0], c, s, 2);
+        let (id, iq) = self.current_series::<2>([p * omega, 0.0, 0.0], c, s);
         let rate = self.torque_cubic(&id, &iq, &q, [omega, alpha, 0.0])[1];
         let jerk = co.jerk(v0, &a0, rate / r)[SHEAVE] / r;
-        let (id, iq) = self.current_series([p * omega, p * alpha, 0.5 * p * jerk], c, s, SERIES);
+        let (id, iq) = self.current_series::<SERIES>([p * omega, p * alpha, 0.5 * p * jerk], c, s);
         let force = self.torque_cubic(&id, &iq, &q, [omega, alpha, jerk]).map(|x| x / r);
         let e = &self.exact;
-        let mut x1 = mat_vec(&e.phi, &x0);
         let f0 = force[0] + co.out_of_balance_n;
-        for (i, x) in x1.iter_mut().enumerate() {
-            *x += e.gamma[0][i] * f0 + e.gamma[1][i] * force[1] + e.gamma[2][i] * force[2] + e.gamma[3][i] * force[3];
-            *x += e.gamma_car[i] * f_car + (0..DOF).map(|j| e.psi[i][j] * correction[j]).sum::<f64>();
-        }
+        let mut x1 = e.apply(&x0, &[f0, force[1], force[2], force[3]], f_car, &correction);
         if co.held {
             x1[SHEAVE] = x0[SHEAVE];
             x1[DOF + SHEAVE] = 0.0;
@@ -448,10 +503,10 @@ impl Plant {
             }
         }
         self.state[..MECH].copy_from_slice(&x1);
-        self.state[n] = poly(&id, h);
-        self.state[n + 1] = poly(&iq, h);
+        self.state[n] = series_at(&id, h);
+        self.state[n + 1] = series_at(&iq, h);
         let theta1 = self.state[SHEAVE] / r;
-        self.angle.ensure(theta1, &self.ripple, p);
+        self.angle.ensure_ahead(theta1, theta1 - theta0, &self.ripple, p);
     }
 
     /// The observation at offset `tau` (s) inside the half period `ends`.
@@ -477,7 +532,7 @@ impl Plant {
         let r = self.chain.params.sheave_radius_m;
         let theta = u_sh / r;
         let (ripple, c, s) = self.angle.eval(theta, &self.ripple, self.pmsm.pole_pairs);
-        let (id, iq) = (poly(&ends.id, tau), poly(&ends.iq, tau));
+        let (id, iq) = (series_at(&ends.id, tau), series_at(&ends.iq, tau));
         PlantObservation {
             car_acceleration_mps2: at(CAR),
             counterweight_acceleration_mps2: -at(CW),

@@ -16,10 +16,10 @@
 //!   `[f64; 12]` state, spring tensions instead of the general line's
 //!   loops, no allocation, no dynamic dispatch.
 
-use super::line::Lumped;
+use super::line::{BrakeAction, Lumped, MAX_NODES};
 use super::pmsm::phase_currents_cs_a;
 use super::rope::{CAR, DOF, SHEAVE};
-use super::{rk4_step, Plant, PlantObservation, Rk4Scratch, MAX_STATE_LEN, STATE_LEN};
+use super::{rk4_step, rk4_step_in, Plant, PlantObservation, MAX_STATE_LEN, STATE_LEN};
 
 /// The nominal line's coefficients over one step (or at one instant).
 struct NominalStep<'a> {
@@ -97,7 +97,107 @@ impl<'a> NominalStep<'a> {
     }
 }
 
+/// The general line's coefficients over one step: the lumped values with
+/// the masses inverted once, the out-of-balance torque evaluated once, and
+/// the forces written as spring tensions (no division, no branch per node
+/// in the stages). With `sheave_eccentricity` the line's own
+/// [`super::line::Line::accelerations_of`] runs instead (its lever ratio
+/// changes at every stage).
+struct LineStep<'a> {
+    /// The lumped values (for the eccentric sheave's path).
+    lumped: &'a Lumped,
+    /// `1 / m_i`, 1/kg (the first `nodes`).
+    inv_mass: [f64; MAX_NODES],
+    /// Out-of-balance torque of Eqn 4, N m.
+    out_of_balance_nm: f64,
+}
+
+impl<'a> LineStep<'a> {
+    fn new(plant: &Plant, lumped: &'a Lumped) -> Self {
+        let mut inv_mass = [0.0; MAX_NODES];
+        // A side's rope elements share one mass: one division each run of
+        // equal masses.
+        let mut last = (f64::NAN, f64::NAN);
+        for (inv, &m) in inv_mass.iter_mut().zip(&lumped.masses_kg).take(plant.nodes()) {
+            if m != last.0 {
+                last = (m, 1.0 / m);
+            }
+            *inv = last.1;
+        }
+        let out_of_balance_nm = plant.chain.params.out_of_balance_torque_nm(lumped.lw_m);
+        Self { lumped, inv_mass, out_of_balance_nm }
+    }
+}
+
 impl Plant {
+    /// Node accelerations (m/s^2) into `accel` as
+    /// [`super::line::Line::accelerations_of`] gives them (to rounding), with
+    /// the step's coefficients `step`.
+    #[allow(clippy::too_many_arguments)]
+    fn line_accelerations(
+        &self,
+        step: &LineStep,
+        position: &[f64],
+        velocity: &[f64],
+        shaft_torque_nm: f64,
+        brake: BrakeAction,
+        car_extra_force_n: f64,
+        accel: &mut [f64],
+    ) {
+        let line = &self.line;
+        let lumped = step.lumped;
+        if line.effects.sheave_eccentricity.is_some() {
+            line.accelerations_of(
+                &self.chain,
+                lumped,
+                position,
+                velocity,
+                shaft_torque_nm,
+                brake,
+                car_extra_force_n,
+                accel,
+            );
+            return;
+        }
+        let layout = &line.layout;
+        let n = layout.nodes;
+        let sheave = layout.sheave;
+        let r = self.chain.params.sheave_radius_m;
+        let mut torque = shaft_torque_nm;
+        if let BrakeAction::Clamped { angle_rad } = brake {
+            if let Some(clamp) = &line.effects.brake_stop {
+                torque += clamp.torque_nm(position[sheave] / r, angle_rad, velocity[sheave] / r);
+            }
+        }
+        let (k, c, inv_m) = (&lumped.springs_n_per_m[..n], &lumped.damping_kg_per_s[..n], &step.inv_mass[..n]);
+        let (x, v, a) = (&position[..n], &velocity[..n], &mut accel[..n]);
+        // Net spring force on node i: tension of spring i minus that of i - 1.
+        let mut below = 0.0;
+        for i in 0..n - 1 {
+            let tension = k[i] * (x[i + 1] - x[i]);
+            a[i] = (tension - below - c[i] * v[i]) * inv_m[i];
+            below = tension;
+        }
+        a[n - 1] = (-below - c[n - 1] * v[n - 1]) * inv_m[n - 1];
+        a[sheave] += (torque - step.out_of_balance_nm) / r * inv_m[sheave];
+        if let Some(friction) = &line.effects.coulomb_guide_friction {
+            for i in [0, layout.hitch] {
+                a[i] += friction.force_n(v[i]) * inv_m[i];
+            }
+        }
+        if layout.body != layout.hitch && lumped.frame_damping_kg_per_s != 0.0 {
+            let f = lumped.frame_damping_kg_per_s * (v[layout.body] - v[layout.hitch]);
+            a[layout.hitch] += f * inv_m[layout.hitch];
+            a[layout.body] -= f * inv_m[layout.body];
+        }
+        if brake == BrakeAction::Held {
+            a[sheave] = 0.0;
+        }
+        if car_extra_force_n != 0.0 {
+            a[layout.body] += car_extra_force_n * inv_m[layout.body];
+        }
+    }
+
     /// True when the fixed-size nominal path applies: the 5-DOF layout, no
     /// mechanical effect beyond the lumped values (dry friction, the brake
     /// clamp, the eccentric sheave), no dead time, no open phase.
@@ -148,19 +248,31 @@ impl Plant {
     fn advance_line(&mut self, steps: usize, h: f64) {
         let len = self.state_len();
         let mut state = self.state;
-        let mut scratch = Rk4Scratch::new();
+        // The RK4's work space is kept from call to call (no zeroing of a
+        // fresh one each time).
+        let mut work = std::mem::take(&mut self.rk4_work);
+        if work.len() < 5 * len {
+            work.resize(5 * len, 0.0);
+        }
         for _ in 0..steps {
             let theta = self.shaft_angle_rad(&state);
             self.angle.ensure(theta, &self.ripple, self.pmsm.pole_pairs);
             let lumped = self.midpoint_lumped(&state, h);
-            scratch.step(&mut state[..len], h, |y, dy| self.line_derivative(&lumped, y, dy));
+            let step = LineStep::new(self, &lumped);
+            rk4_step_in(&mut state[..len], h, &mut work, |y, dy| self.line_step_derivative(&step, y, dy));
         }
+        self.rk4_work = work;
         self.state = state;
     }
 
     /// Time derivative `dy` of the general line's state `y` with its masses
     /// and springs `lumped` (the first `2 * nodes + 2` entries of each).
     fn line_derivative(&self, lumped: &Lumped, y: &[f64], dy: &mut [f64]) {
+        self.line_step_derivative(&LineStep::new(self, lumped), y, dy);
+    }
+
+    /// [`Self::line_derivative`] with the step's coefficients `step`.
+    fn line_step_derivative(&self, step: &LineStep, y: &[f64], dy: &mut [f64]) {
         let n = self.nodes();
         let sheave = self.line.layout.sheave;
         let r = self.chain.params.sheave_radius_m;
@@ -174,7 +286,7 @@ impl Plant {
         });
         let (position, velocity) = (&y[..n], &y[n..2 * n]);
         let extra = self.faults.car_extra_force_n;
-        self.line.accelerations_of(&self.chain, lumped, position, velocity, torque, brake, extra, &mut dy[n..2 * n]);
+        self.line_accelerations(step, position, velocity, torque, brake, extra, &mut dy[n..2 * n]);
     }
 
     /// [`Plant::observe`] with [`super::Integrator::Fast`]: masses and springs at

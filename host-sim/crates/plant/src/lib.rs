@@ -175,6 +175,13 @@ pub struct Plant {
     inputs: PlantInputs,
     v_alpha_beta: (f64, f64),
     phase_v: [f64; 3],
+    /// [`Plant::stable_step_s`] where it was last evaluated ([`Plant::advance`]).
+    step_bound: Option<StepBound>,
+    /// The general line's RK4 work space, kept between calls.
+    rk4_work: Vec<f64>,
+    /// Compare values, timer period and bus voltage (bits) that `phase_v`
+    /// and `v_alpha_beta` were computed for.
+    phase_v_key: Option<([u16; 3], u16, u64)>,
     short_current_a: f64,
     time_s: f64,
     /// How [`Plant::advance`] integrates.
@@ -183,6 +190,21 @@ pub struct Plant {
     angle: AngleSeries,
     /// The nominal chain's exact half-period discretisation ([`Integrator::Fast`]).
     exact: exact::ExactStep,
+}
+
+/// [`Plant::stable_step_s`] evaluated at one sheave position.
+#[derive(Clone, Debug)]
+struct StepBound {
+    /// Sheave position, m.
+    u_m: f64,
+    /// The brake clamp was in force.
+    clamped: bool,
+    /// Distance from `u_m` (m) over which the bound is taken as holding to 1.1 %.
+    reach_m: f64,
+    /// The chain it was evaluated for.
+    chain: Chain,
+    /// The bound, s.
+    stable_step_s: f64,
 }
 
 /// What the drive's sensors hand to whichever controller closes the loop,
@@ -239,6 +261,9 @@ impl Plant {
             inputs: PlantInputs { brake_engaged: true, ..PlantInputs::default() },
             v_alpha_beta: (0.0, 0.0),
             phase_v: [0.0; 3],
+            phase_v_key: None,
+            step_bound: None,
+            rk4_work: Vec::new(),
             short_current_a: 0.0,
             time_s: 0.0,
             integrator: Integrator::Fast,
@@ -363,8 +388,15 @@ impl Plant {
                 self.state[n + sheave] = 0.0;
             }
         }
-        self.phase_v = phase_voltages_v(inputs.pwm_compare, self.pwm_period_counts, self.dc_bus_v);
-        self.v_alpha_beta = alpha_beta_v(self.phase_v);
+        // The voltages of the same compare values, timer period and bus are
+        // the ones in force (two of a PWM period's three calls change only
+        // the brake or nothing).
+        let key = (inputs.pwm_compare, self.pwm_period_counts, self.dc_bus_v.to_bits());
+        if self.phase_v_key != Some(key) {
+            self.phase_v = phase_voltages_v(inputs.pwm_compare, self.pwm_period_counts, self.dc_bus_v);
+            self.v_alpha_beta = alpha_beta_v(self.phase_v);
+            self.phase_v_key = Some(key);
+        }
         self.inputs = inputs;
     }
 
@@ -524,6 +556,34 @@ impl Plant {
         1.0 / self.line.omega_max_radps(&self.chain, self.state[self.line.layout.sheave], clamped)
     }
 
+    /// True when [`Self::stable_step_s`] is known to be longer than
+    /// `max_step_s` (s) without evaluating it: the bound evaluated last
+    /// (kept in `step_bound`, evaluated anew here when it does not apply)
+    /// for the same chain and brake, with the sheave within 1 % of the
+    /// shorter rope side from where it was evaluated, and `max_step_s` at
+    /// most 0.9 of it. The line's rates scale at most like `1 / l` with the
+    /// rope lengths, so they change by less than 1.1 % over that distance:
+    /// the step is then `max_step_s` whichever way it is taken.
+    fn step_bound_allows(&mut self, max_step_s: f64) -> bool {
+        let clamped = self.inputs.brake_engaged && self.effects.brake_stop.is_some();
+        let u = self.state[self.line.layout.sheave];
+        let holds = |b: &StepBound| {
+            b.clamped == clamped && (u - b.u_m).abs() <= b.reach_m && b.chain == self.chain && u.is_finite()
+        };
+        if !self.step_bound.as_ref().is_some_and(holds) {
+            let lw = self.line.counterweight_side_length_m(&self.chain, u);
+            let shorter = lw.min(self.chain.params.car_side_length_m(lw));
+            self.step_bound = Some(StepBound {
+                u_m: u,
+                clamped,
+                reach_m: 0.01 * shorter.max(0.0),
+                chain: self.chain.clone(),
+                stable_step_s: self.stable_step_s(),
+            });
+        }
+        self.step_bound.as_ref().is_some_and(|b| max_step_s <= 0.9 * b.stable_step_s)
+    }
+
     /// Integrates over `duration_s` with the inputs held, in equal classical
     /// Runge-Kutta (RK4) steps no longer than `max_step_s` nor than
     /// [`Self::stable_step_s`] (so any `max_step_s` is stable); a
@@ -534,7 +594,7 @@ impl Plant {
             return;
         }
         // `min` keeps `max_step_s` if the bound is NaN (a diverged state).
-        let step = max_step_s.min(self.stable_step_s());
+        let step = if self.step_bound_allows(max_step_s) { max_step_s } else { max_step_s.min(self.stable_step_s()) };
         let steps = (duration_s / step).ceil();
         let steps = if steps.is_nan() { 1 } else { steps.clamp(1.0, 1.0e7) as usize };
         let h = duration_s / steps as f64;
@@ -623,7 +683,7 @@ impl Plant {
         let theta_m = self.shaft_angle_rad(&self.state);
         match self.integrator {
             Integrator::Fast => {
-                let (_, c, s) = self.angle.eval(theta_m, &self.ripple, self.pmsm.pole_pairs);
+                let (c, s) = self.angle.park(theta_m, self.pmsm.pole_pairs);
                 phase_currents_cs_a(id, iq, c, s)
             }
             Integrator::Reference => phase_currents_a(id, iq, self.pmsm.pole_pairs * theta_m),

@@ -177,9 +177,8 @@ impl Line {
         for j in 0..n {
             out.masses_kg[1 + j] = cw_element;
         }
-        for j in 0..=n {
-            out.springs_n_per_m[j] = spring_n_per_m(lw, n, j, mu, p.rope_ea_n, p.m_cw_kg, g, stiffening);
-        }
+        let cw_spring = |j: usize| spring_n_per_m(lw, n, j, mu, p.rope_ea_n, p.m_cw_kg, g, stiffening);
+        fill_side(&mut out.springs_n_per_m[..=n], stiffening.is_none(), cw_spring);
         let r = p.sheave_radius_m;
         out.masses_kg[layout.sheave] = p.sheave_inertia_kg_m2 / (r * r);
         // Car side, from the sheave (or pulley) down.
@@ -197,11 +196,9 @@ impl Line {
         for j in 0..n {
             out.masses_kg[top + 1 + j] = car_element;
         }
-        for j in 0..=n {
-            // Spring top + j is the side's spring n - j counted from the car.
-            out.springs_n_per_m[top + j] =
-                spring_n_per_m(hanging, n, n - j, mu, p.rope_ea_n, p.m_car_kg, g, stiffening);
-        }
+        // Spring top + j is the side's spring n - j counted from the car.
+        let car_spring = |j: usize| spring_n_per_m(hanging, n, n - j, mu, p.rope_ea_n, p.m_car_kg, g, stiffening);
+        fill_side(&mut out.springs_n_per_m[top..=top + n], stiffening.is_none(), car_spring);
         match &e.car_frame_mode {
             None => out.masses_kg[layout.hitch] = p.m_car_kg,
             Some(frame) => {
@@ -409,6 +406,24 @@ impl Line {
             _ => 0.0,
         };
         kinetic + elastic + gravity + clamp
+    }
+}
+
+/// The springs of one side, `springs[j] = spring(j)`: with `uniform` (no
+/// tension stiffening) the end springs are all one value and the inner
+/// ones another, so each is computed once (the same arithmetic).
+fn fill_side(springs: &mut [f64], uniform: bool, spring: impl Fn(usize) -> f64) {
+    let last = springs.len() - 1;
+    if uniform && last >= 1 {
+        let end = spring(0);
+        let inner = if last >= 2 { spring(1) } else { end };
+        springs.fill(inner);
+        springs[0] = end;
+        springs[last] = end;
+    } else {
+        for (j, slot) in springs.iter_mut().enumerate() {
+            *slot = spring(j);
+        }
     }
 }
 

@@ -36,12 +36,12 @@ impl Sensors {
 
     /// ADC code of a phase current (rounded, clipped to the converter range).
     pub fn current_code(&self, current_a: f64) -> u16 {
-        (self.current_zero_code + current_a / self.current_lsb_a).round().clamp(0.0, self.adc_max_code) as u16
+        round(self.current_zero_code + current_a / self.current_lsb_a).clamp(0.0, self.adc_max_code) as u16
     }
 
     /// ADC code of the DC-bus voltage.
     pub fn dc_bus_code(&self, dc_bus_v: f64) -> u16 {
-        (dc_bus_v / self.dc_bus_lsb_v).round().clamp(0.0, self.adc_max_code) as u16
+        round(dc_bus_v / self.dc_bus_lsb_v).clamp(0.0, self.adc_max_code) as u16
     }
 
     /// Encoder counter for the shaft angle `theta_m_rad` from the zero mark:
@@ -55,5 +55,49 @@ impl Sensors {
     /// Microsecond time stamp of `t_s` (a free-running 32-bit timer).
     pub fn time_us(t_s: f64) -> u32 {
         ((t_s * 1.0e6).floor() as i64).rem_euclid(1 << 32) as u32
+    }
+}
+
+/// [`f64::round`] (halves away from zero), the same value, without the
+/// library call that baseline x86-64 (no SSE4.1 `roundsd`) makes of it:
+/// below 2^52 in magnitude the integer part is exact as an `i64`, and the
+/// fraction `x - trunc(x)` is exact.
+#[inline]
+fn round(x: f64) -> f64 {
+    const LIMIT: f64 = (1u64 << 52) as f64;
+    if x.abs() < LIMIT {
+        let whole = (x as i64) as f64;
+        let fraction = x - whole;
+        if fraction >= 0.5 {
+            whole + 1.0
+        } else if fraction <= -0.5 {
+            whole - 1.0
+        } else {
+            // Keeps the sign of a negative x rounding to zero (-0.0).
+            whole.copysign(x)
+        }
+    } else {
+        x.round()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::round;
+
+    /// The same value as `f64::round` bit for bit: halves, neighbours of
+    /// halves, signed zeros, large values and NaN.
+    #[test]
+    fn round_is_the_standard_one() {
+        let mut values = vec![0.0, -0.0, 0.5, -0.5, 1.5, -1.5, 2.5, -2.5, 4095.5, 1e300, -1e300, f64::INFINITY];
+        values.extend([0.49999999999999994, -0.49999999999999994, 4503599627370495.5, 4503599627370497.0]);
+        for k in -20000..20000 {
+            let x = k as f64 * 0.123456789 + 0.5;
+            values.extend([x, x.next_up(), x.next_down(), (k as f64 + 0.5).next_down(), (k as f64 + 0.5).next_up()]);
+        }
+        for x in values {
+            assert_eq!(round(x).to_bits(), x.round().to_bits(), "{x}");
+        }
+        assert!(round(f64::NAN).is_nan());
     }
 }
