@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{car_mass_kg, check_open_range, check_physical_range, output_dir, readable};
 use closed_loop::compensation::{compensator, rig_ripple_table};
-use closed_loop::{simulate_travel_with, SimOptions, TravelRun, TravelSpec};
+use closed_loop::{simulate_travel_with, SimOptions, TravelSpec};
 use dsp::{highpass_zero_phase, stft_spectrogram, Spectrogram};
 use plant::effects::Effects;
 use plant::modes::natural_modes;
@@ -170,22 +170,21 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         run.duration_s() / wall
     );
 
+    let recording = run.into_recording(
+        &spec,
+        rig.mechanics.m_cw_kg,
+        format!(
+            "host-sim closed-loop travel, {}, step {:.3e} s, {description}",
+            options.effects.summary(),
+            options.max_step_s
+        ),
+    );
+    let columns = RunColumns::of(&recording)?;
     // The recording is written on a second thread while this one draws the
-    // plots (both only read the run).
+    // plots (both only read its columns).
     let (written, plot_paths) = std::thread::scope(|scope| {
-        let writer = scope.spawn(|| {
-            let recording = run.to_recording(
-                &spec,
-                rig.mechanics.m_cw_kg,
-                format!(
-                    "host-sim closed-loop travel, {}, step {:.3e} s, {description}",
-                    options.effects.summary(),
-                    options.max_step_s
-                ),
-            );
-            write_recording(out.staging(), &stem, &recording)
-        });
-        let plot_paths = plots(rig, &spec, &run, args, &stem, &out);
+        let writer = scope.spawn(|| write_recording(out.staging(), &stem, &recording));
+        let plot_paths = plots(rig, &spec, &columns, args, &stem, &out);
         (writer.join(), plot_paths)
     });
     let (toml_path, csv_path) = written.map_err(|_| anyhow::anyhow!("the thread writing the recording panicked"))??;
@@ -212,6 +211,37 @@ fn whole_record_spectrogram(x: &[f64], fs: f64, window_s: f64, band_hi: f64) -> 
     Ok(spectrogram)
 }
 
+/// The columns of a travel's recording that its plots draw.
+struct RunColumns<'a> {
+    /// Sample rate, Hz.
+    sample_rate_hz: f64,
+    time_s: &'a [f64],
+    acc_car_mps2: &'a [f64],
+    lw_m: &'a [f64],
+    speed_radps: &'a [f64],
+    ref_speed_mps: &'a [f64],
+}
+
+impl<'a> RunColumns<'a> {
+    /// The columns of `recording` (a travel run's, [`TravelRun::into_recording`]).
+    fn of(travel: &'a recording::Recording) -> anyhow::Result<Self> {
+        let column = |name: &str| {
+            travel
+                .column(name)
+                .map(|c| c.values.as_slice())
+                .ok_or_else(|| anyhow::anyhow!("the travel's recording has no column {name}"))
+        };
+        Ok(Self {
+            sample_rate_hz: travel.meta.sample_rate_hz,
+            time_s: column(recording::TIME_S)?,
+            acc_car_mps2: column(recording::ACC_CAR)?,
+            lw_m: column("lw_m")?,
+            speed_radps: column(recording::SPEED)?,
+            ref_speed_mps: column(recording::REF_SPEED)?,
+        })
+    }
+}
+
 /// The plots of a travel: `<stem>_<suffix>.png`.
 const PLOTS: [&str; 3] = ["acc_car_hp", "spectrogram", "drive"];
 
@@ -219,14 +249,14 @@ const PLOTS: [&str; 3] = ["acc_car_hp", "spectrogram", "drive"];
 fn plots(
     rig: &RigConfig,
     spec: &TravelSpec,
-    run: &TravelRun,
+    run: &RunColumns,
     args: &TravelArgs,
     stem: &str,
     out: &crate::output::OutputDir,
 ) -> anyhow::Result<Vec<PathBuf>> {
     let fs = run.sample_rate_hz;
     let highpass_hz = rig.measurement.highpass_hz;
-    let filtered = highpass_zero_phase(&run.acc_car_mps2, fs, highpass_hz)?;
+    let filtered = highpass_zero_phase(run.acc_car_mps2, fs, highpass_hz)?;
     let hp_path = out.path(format!("{stem}_{}.png", PLOTS[0]));
     line_plot(
         &hp_path,
@@ -236,7 +266,7 @@ fn plots(
         ),
         "time [s]",
         "acceleration [m/s^2]",
-        &[Series::new("car (simulated)", run.time_s.clone(), filtered.clone())],
+        &[Series::new("car (simulated)", run.time_s.to_vec(), filtered.clone())],
     )?;
 
     let [band_lo, band_hi] = rig.measurement.spectrogram_band_hz;
@@ -266,7 +296,7 @@ fn plots(
     }
     let (lw0, lw1) = (run.lw_m[0], run.lw_m[run.lw_m.len() - 1]);
     let spectrogram_path = out.path(format!("{stem}_{}.png", PLOTS[1]));
-    let rope = TopAxis::at_multiples("counterweight-side rope length lw [m]", &run.time_s, &run.lw_m, 0.5, 1);
+    let rope = TopAxis::at_multiples("counterweight-side rope length lw [m]", run.time_s, run.lw_m, 0.5, 1);
     spectrogram_plot_with_top_axis(
         &spectrogram_path,
         &format!(
@@ -287,8 +317,8 @@ fn plots(
         "time [s]",
         "speed [m/s]",
         &[
-            Series::new("reference", run.time_s.clone(), run.ref_speed_mps.clone()),
-            Series::new("encoder estimate", run.time_s.clone(), run.speed_radps.iter().map(|w| w * r).collect()),
+            Series::new("reference", run.time_s.to_vec(), run.ref_speed_mps.to_vec()),
+            Series::new("encoder estimate", run.time_s.to_vec(), run.speed_radps.iter().map(|w| w * r).collect()),
         ],
     )?;
     Ok([hp_path, spectrogram_path, drive_path].iter().map(|p| out.published(p)).collect())

@@ -690,22 +690,30 @@ impl TravelRun {
     /// (`motor_torque_nm`, `ripple_torque_nm`, `shaft_speed_true_radps`,
     /// `lw_m`, `drive_state`), which readers keep and ignore.
     pub fn to_recording(&self, spec: &TravelSpec, m_cw_kg: f64, description: String) -> Recording {
+        self.clone().into_recording(spec, m_cw_kg, description)
+    }
+
+    /// [`TravelRun::to_recording`] taking the run's columns instead of
+    /// copying them.
+    pub fn into_recording(self, spec: &TravelSpec, m_cw_kg: f64, description: String) -> Recording {
         use recording as rec;
+        let sample_rate_hz = self.sample_rate_hz;
+        let [i_a, i_b, i_c] = self.phase_currents_a;
         let columns = vec![
-            Column::new(rec::TIME_S, self.time_s.clone()),
-            Column::new(rec::ACC_CAR, self.acc_car_mps2.clone()),
-            Column::new(rec::ACC_CW, self.acc_cw_mps2.clone()),
-            Column::new(rec::I_A, self.phase_currents_a[0].clone()),
-            Column::new(rec::I_B, self.phase_currents_a[1].clone()),
-            Column::new(rec::I_C, self.phase_currents_a[2].clone()),
-            Column::new(rec::SPEED, self.speed_radps.clone()),
-            Column::new(rec::ANGLE, self.angle_rad.clone()),
-            Column::new(rec::REF_SPEED, self.ref_speed_mps.clone()),
-            Column::new("motor_torque_nm", self.motor_torque_nm.clone()),
-            Column::new("ripple_torque_nm", self.ripple_torque_nm.clone()),
-            Column::new("shaft_speed_true_radps", self.shaft_speed_radps.clone()),
-            Column::new("lw_m", self.lw_m.clone()),
-            Column::new("drive_state", self.drive_state.clone()),
+            Column::new(rec::TIME_S, self.time_s),
+            Column::new(rec::ACC_CAR, self.acc_car_mps2),
+            Column::new(rec::ACC_CW, self.acc_cw_mps2),
+            Column::new(rec::I_A, i_a),
+            Column::new(rec::I_B, i_b),
+            Column::new(rec::I_C, i_c),
+            Column::new(rec::SPEED, self.speed_radps),
+            Column::new(rec::ANGLE, self.angle_rad),
+            Column::new(rec::REF_SPEED, self.ref_speed_mps),
+            Column::new("motor_torque_nm", self.motor_torque_nm),
+            Column::new("ripple_torque_nm", self.ripple_torque_nm),
+            Column::new("shaft_speed_true_radps", self.shaft_speed_radps),
+            Column::new("lw_m", self.lw_m),
+            Column::new("drive_state", self.drive_state),
         ];
         Recording {
             meta: RecordingMeta {
@@ -719,7 +727,7 @@ impl TravelRun {
                     lw_start_m: spec.lw_start_m,
                     lw_end_m: spec.lw_end_m,
                 },
-                sample_rate_hz: self.sample_rate_hz,
+                sample_rate_hz,
                 description: Some(description),
             },
             columns,

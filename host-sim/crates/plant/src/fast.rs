@@ -132,7 +132,9 @@ impl<'a> LineStep<'a> {
 impl Plant {
     /// Node accelerations (m/s^2) into `accel` as
     /// [`super::line::Line::accelerations_of`] gives them (to rounding), with
-    /// the step's coefficients `step`.
+    /// the step's coefficients `step`, and the velocities copied into
+    /// `rates` (`out = (rates, accel)`; a copy in the loop rather than a
+    /// library call for a few dozen values).
     #[allow(clippy::too_many_arguments)]
     fn line_accelerations(
         &self,
@@ -142,11 +144,13 @@ impl Plant {
         shaft_torque_nm: f64,
         brake: BrakeAction,
         car_extra_force_n: f64,
-        accel: &mut [f64],
+        out: (&mut [f64], &mut [f64]),
     ) {
+        let (rates, accel) = out;
         let line = &self.line;
         let lumped = step.lumped;
         if line.effects.sheave_eccentricity.is_some() {
+            rates.copy_from_slice(&velocity[..rates.len()]);
             line.accelerations_of(
                 &self.chain,
                 lumped,
@@ -172,13 +176,16 @@ impl Plant {
         let (k, c, inv_m) = (&lumped.springs_n_per_m[..n], &lumped.damping_kg_per_s[..n], &step.inv_mass[..n]);
         let (x, v, a) = (&position[..n], &velocity[..n], &mut accel[..n]);
         // Net spring force on node i: tension of spring i minus that of i - 1.
+        let rates = &mut rates[..n];
         let mut below = 0.0;
         for i in 0..n - 1 {
             let tension = k[i] * (x[i + 1] - x[i]);
             a[i] = (tension - below - c[i] * v[i]) * inv_m[i];
+            rates[i] = v[i];
             below = tension;
         }
         a[n - 1] = (-below - c[n - 1] * v[n - 1]) * inv_m[n - 1];
+        rates[n - 1] = v[n - 1];
         a[sheave] += (torque - step.out_of_balance_nm) / r * inv_m[sheave];
         if let Some(friction) = &line.effects.coulomb_guide_friction {
             for i in [0, layout.hitch] {
@@ -280,13 +287,19 @@ impl Plant {
         let omega_m = y[n + sheave] / r;
         let p = self.pmsm.pole_pairs;
         let (ripple, c, s) = self.angle.eval(theta_m, &self.ripple, p);
-        let (torque, brake) = self.motor_and_brake(y, dy, p * theta_m, p * omega_m, ripple, |id, iq| {
+        let (torque, brake) = self.motor_and_brake_currents(y, dy, p * theta_m, p * omega_m, ripple, |id, iq| {
             let (va, vb) = self.machine_v_alpha_beta_cs(id, iq, c, s);
             (va * c + vb * s, -va * s + vb * c)
         });
         let (position, velocity) = (&y[..n], &y[n..2 * n]);
         let extra = self.faults.car_extra_force_n;
-        self.line_accelerations(step, position, velocity, torque, brake, extra, &mut dy[n..2 * n]);
+        let (rates, rest) = dy.split_at_mut(n);
+        self.line_accelerations(step, position, velocity, torque, brake, extra, (&mut rates[..n], &mut rest[..n]));
+        // The nodes' velocities as their positions' rates (copied in the
+        // accelerations' loop), the sheave's zero when the brake holds it.
+        if brake == BrakeAction::Held {
+            rates[self.line.layout.sheave] = 0.0;
+        }
     }
 
     /// [`Plant::observe`] with [`super::Integrator::Fast`]: masses and springs at

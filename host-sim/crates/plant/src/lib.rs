@@ -506,6 +506,27 @@ impl Plant {
         vdq: impl FnOnce(f64, f64) -> (f64, f64),
     ) -> (f64, BrakeAction) {
         let n = self.nodes();
+        let (torque, brake) = self.motor_and_brake_currents(y, dy, theta_e, omega_e, ripple_nm, vdq);
+        dy[..n].copy_from_slice(&y[n..2 * n]);
+        if brake == BrakeAction::Held {
+            dy[self.line.layout.sheave] = 0.0;
+        }
+        (torque, brake)
+    }
+
+    /// [`Self::motor_and_brake`] without the nodes' velocities: writes
+    /// `d/dt (i_d, i_q)` into `dy[2n..2n + 2]` only (the general line's fast
+    /// path writes the velocities in its own loop).
+    pub(crate) fn motor_and_brake_currents(
+        &self,
+        y: &[f64],
+        dy: &mut [f64],
+        theta_e: f64,
+        omega_e: f64,
+        ripple_nm: f64,
+        vdq: impl FnOnce(f64, f64) -> (f64, f64),
+    ) -> (f64, BrakeAction) {
+        let n = self.nodes();
         let (id, iq) = (y[2 * n], y[2 * n + 1]);
         let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
             (false, _) => (0.0, 0.0),
@@ -521,10 +542,6 @@ impl Plant {
             (true, false) => BrakeAction::Held,
             (true, true) => BrakeAction::Clamped { angle_rad: self.clamp_angle_rad },
         };
-        dy[..n].copy_from_slice(&y[n..2 * n]);
-        if brake == BrakeAction::Held {
-            dy[self.line.layout.sheave] = 0.0;
-        }
         dy[2 * n] = did;
         dy[2 * n + 1] = diq;
         (torque, brake)

@@ -48,13 +48,13 @@ impl Sensors {
     /// whole counts, as the free-running 32-bit hardware counter holds them
     /// (modulo 2^32).
     pub fn encoder_count(&self, theta_m_rad: f64) -> u32 {
-        let counts = (theta_m_rad / std::f64::consts::TAU * self.encoder_counts_per_rev).floor() as i64;
+        let counts = floor_i64(theta_m_rad / std::f64::consts::TAU * self.encoder_counts_per_rev);
         counts.rem_euclid(1 << 32) as u32
     }
 
     /// Microsecond time stamp of `t_s` (a free-running 32-bit timer).
     pub fn time_us(t_s: f64) -> u32 {
-        ((t_s * 1.0e6).floor() as i64).rem_euclid(1 << 32) as u32
+        floor_i64(t_s * 1.0e6).rem_euclid(1 << 32) as u32
     }
 }
 
@@ -68,22 +68,44 @@ fn round(x: f64) -> f64 {
     if x.abs() < LIMIT {
         let whole = (x as i64) as f64;
         let fraction = x - whole;
-        if fraction >= 0.5 {
-            whole + 1.0
-        } else if fraction <= -0.5 {
-            whole - 1.0
-        } else {
-            // Keeps the sign of a negative x rounding to zero (-0.0).
-            whole.copysign(x)
-        }
+        // Without branches (the fraction is as often above a half as below):
+        // the step away from zero, and the sign of `x` (-0.0 for a
+        // negative `x` that rounds to zero, like `f64::round`).
+        let step = (fraction >= 0.5) as i64 - (fraction <= -0.5) as i64;
+        (whole + step as f64).copysign(x)
     } else {
         x.round()
     }
 }
 
+/// `x.floor() as i64` (saturating, NaN to 0), the same value without the
+/// library call: the conversion truncates towards zero, one less below
+/// zero when that was not whole (exact: below 2^52 in magnitude the
+/// truncated value is exact as a float, above it `x` is whole).
+#[inline]
+fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t.saturating_sub(((t as f64) > x) as i64)
+}
+
 #[cfg(test)]
 mod tests {
-    use super::round;
+    use super::{floor_i64, round};
+
+    /// The same value as `floor() as i64`: whole numbers and their
+    /// neighbours on both sides of zero, the limits and NaN.
+    #[test]
+    fn floor_is_the_standard_one() {
+        let mut values = vec![0.0, -0.0, 0.5, -0.5, 1e300, -1e300, f64::INFINITY, f64::NEG_INFINITY, f64::NAN];
+        values.extend([9.2e18, -9.2e18, 9.3e18, -9.3e18, 4503599627370495.5, -4503599627370495.5]);
+        for k in -20000..20000 {
+            let x = k as f64;
+            values.extend([x, x.next_up(), x.next_down(), x * 0.123456789, x * 1.0e6 + 0.3]);
+        }
+        for x in values {
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+        }
+    }
 
     /// The same value as `f64::round` bit for bit: halves, neighbours of
     /// halves, signed zeros, large values and NaN.
