@@ -300,6 +300,31 @@ fn foreign_rig_rail_joints_are_unexplained_and_located() {
     assert_unexplained_on_the_moving_car(&report);
 }
 
+/// A foreign acquisition whose accelerometers are high-passed by a
+/// second-order Butterworth at 1 Hz (an acquisition's own AC coupling, not
+/// the sensor's single pole) on the nominal rig: the diagnosis finds the
+/// filter's order and corner from each travel, applies them to the model
+/// and keeps the rig `nominal`.
+#[test]
+fn foreign_rig_second_order_accelerometer_highpass_is_found_and_the_rig_stays_nominal() {
+    let model = rig();
+    let mut foreign = foreign_rig(8);
+    let acquisition = foreign.acquisition.as_mut().expect("draw 8 records with its own acquisition");
+    acquisition.highpass_order = 2;
+    acquisition.highpass_hz = 1.0;
+    let report = diagnosed(&model, "second-order high-pass", &foreign_dataset(&model, &foreign, Effects::none()));
+    println!("verdict {:?}, excess {:.2} dB", report.verdict, report.nominal_excess_db);
+    // One step of the candidates' geometric grid of corners.
+    let step = (3.0f64 / 0.05).powf(1.0 / 35.0);
+    assert!(!report.rig_speed_loops.is_empty());
+    for l in &report.rig_speed_loops {
+        let found = l.accelerometer_highpass;
+        println!("{}: {}", l.recording, found.text());
+        assert!(found.order == 2 && (found.corner_hz / 1.0).ln().abs() <= step.ln(), "{}: {found:?}", l.recording);
+    }
+    assert_eq!(report.verdict, Verdict::Nominal);
+}
+
 /// Tension stiffening (alpha 0.437) on a foreign rig: the nominal model
 /// misses the data and the diagnosis names the effect first.
 #[test]

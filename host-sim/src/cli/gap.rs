@@ -198,6 +198,7 @@ fn print_rig_speed_loops(report: &diagnosis::GapReport) {
             }
         }
         outln!("    shaft angle: {}", l.shaft_angle.text());
+        outln!("    accelerometer high-pass: {}", l.accelerometer_highpass.text());
     }
 }
 

@@ -379,32 +379,6 @@ struct NodeState {
     velocity_mps: [f64; MAX_NODES],
 }
 
-/// One classical Runge-Kutta step of `h` s from `state` over the first
-/// `nodes` nodes ([`plant::rk4_step_in_time`], the plant's integrator, on
-/// positions and velocities packed in one slice); `deriv(s, frac)` is the
-/// state's rate at the fraction `frac` of the step.
-fn rk4_step(state: &NodeState, nodes: usize, h: f64, deriv: impl Fn(&NodeState, f64) -> NodeState) -> NodeState {
-    let unpack = |y: &[f64]| {
-        let mut s = NodeState::default();
-        s.position_m[..nodes].copy_from_slice(&y[..nodes]);
-        s.velocity_mps[..nodes].copy_from_slice(&y[nodes..2 * nodes]);
-        s
-    };
-    let mut y = [0.0; 2 * MAX_NODES];
-    y[..nodes].copy_from_slice(&state.position_m[..nodes]);
-    y[nodes..2 * nodes].copy_from_slice(&state.velocity_mps[..nodes]);
-    let mut work = [0.0; 10 * MAX_NODES];
-    plant::rk4_step_in_time(&mut y[..2 * nodes], h, &mut work, |frac, y, dy| {
-        let d = deriv(&unpack(y), frac);
-        dy[..nodes].copy_from_slice(&d.position_m[..nodes]);
-        dy[nodes..].copy_from_slice(&d.velocity_mps[..nodes]);
-    });
-    let mut next = *state;
-    next.position_m[..nodes].copy_from_slice(&y[..nodes]);
-    next.velocity_mps[..nodes].copy_from_slice(&y[nodes..2 * nodes]);
-    next
-}
-
 /// RK4 steps per sample of `h` s for `line` on `chain` over the travel
 /// whose sheave edge moves `travel_m` (m) from the start: enough for
 /// `max_rate_per_step` at the stiffer end of the travel.
@@ -459,10 +433,10 @@ fn true_torque_nm(travel: &DrivenTravel, effects: &Effects) -> Option<Vec<f64>> 
     }
 }
 
-/// An error naming the time `t_s` (s) when the first `nodes` of `state`
-/// are not all finite: the model diverged.
-fn check_finite(state: &NodeState, nodes: usize, t_s: f64) -> Result<()> {
-    if !state.position_m[..nodes].iter().chain(&state.velocity_mps[..nodes]).all(|x| x.is_finite()) {
+/// An error naming the time `t_s` (s) when the packed `state` is not all
+/// finite: the model diverged.
+fn check_finite(state: &[f64], t_s: f64) -> Result<()> {
+    if !state.iter().all(|x| x.is_finite()) {
         bail!("the torque-driven model diverged at t = {t_s:.3} s");
     }
     Ok(())
@@ -561,47 +535,58 @@ fn torque_driven_accelerations_with(
     let theta0 = travel.shaft_angle_rad[0];
     let steps = steps_per_sample(&line, &chain, (travel.shaft_angle_rad[n - 1] - theta0) * r, h, max_rate_per_step);
     let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
-    let (mut state, offset_nm) = start_state(&line, &chain, travel, settings, reference.1[0]);
-    // Accelerations at sample k + frac (the function's comment says how).
-    let deriv =
-        |s: &NodeState, k: usize, frac: f64, (model_estimate, departure_integral): (f64, f64), series: &AngleSeries| {
-            let j = (k + 1).min(n - 1);
-            let moving = travel.motion.contains(&k);
-            let offset = if moving { offset_nm } else { 0.0 };
-            let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset
-                - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
-                - feedback.ki_nm_per_rad * departure_integral;
-            let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
-            let theta = theta0 + s.position_m[layout.sheave] / r;
-            let shaft = torque + series.ripple_nm(theta, &ripple);
-            let lumped = line.lumped(&chain, s.position_m[layout.sheave]);
-            let brake = if moving { BrakeAction::Released } else { BrakeAction::Held };
-            let mut a = [0.0; MAX_NODES];
-            line.accelerations_of(&chain, &lumped, &s.position_m, &s.velocity_mps, shaft, brake, 0.0, &mut a);
-            if moving {
-                let masses = &lumped.masses_kg[..nodes];
-                let total: f64 = masses.iter().sum();
-                let mean = |x: &[f64; MAX_NODES]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
-                let (kp, kd) = tracking;
-                let body = kp * (u - mean(&s.position_m)) + kd * (v - mean(&s.velocity_mps));
-                a[..nodes].iter_mut().for_each(|a| *a += body);
-            }
-            NodeState { position_m: s.velocity_mps, velocity_mps: a }
-        };
+    let (state, offset_nm) = start_state(&line, &chain, travel, settings, reference.1[0]);
+    // Accelerations at sample k + frac (the function's comment says how) of
+    // the packed state `y` (positions, then velocities, `nodes` each) into
+    // `acc`.
+    let deriv = |y: &[f64],
+                 k: usize,
+                 frac: f64,
+                 (model_estimate, departure_integral): (f64, f64),
+                 series: &AngleSeries,
+                 acc: &mut [f64]| {
+        let (position, velocity) = y.split_at(nodes);
+        let j = (k + 1).min(n - 1);
+        let moving = travel.motion.contains(&k);
+        let offset = if moving { offset_nm } else { 0.0 };
+        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset
+            - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
+            - feedback.ki_nm_per_rad * departure_integral;
+        let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
+        let theta = theta0 + position[layout.sheave] / r;
+        let shaft = torque + series.ripple_nm(theta, &ripple);
+        let brake = if moving { BrakeAction::Released } else { BrakeAction::Held };
+        let lumped = line.lumped(&chain, position[layout.sheave]);
+        line.accelerations_of(&chain, &lumped, position, velocity, shaft, brake, 0.0, acc);
+        if moving {
+            let masses = &lumped.masses_kg[..nodes];
+            let total: f64 = masses.iter().sum();
+            let mean = |x: &[f64]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
+            let (kp, kd) = tracking;
+            let body = kp * (u - mean(position)) + kd * (v - mean(velocity));
+            acc[..nodes].iter_mut().for_each(|a| *a += body);
+        }
+    };
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut estimate = ModelEstimate::new(&feedback, fs, travel.speed_estimate_radps[0]);
     // The ripple as a polynomial of the angle about a recent one (refreshed
     // between samples): a few multiply-adds per stage in place of the
     // harmonics' sines.
     let mut series = AngleSeries::default();
+    let mut y = [0.0; 2 * MAX_NODES];
+    y[..nodes].copy_from_slice(&state.position_m[..nodes]);
+    y[nodes..2 * nodes].copy_from_slice(&state.velocity_mps[..nodes]);
+    let y = &mut y[..2 * nodes];
+    let mut work = [0.0; 5 * 2 * MAX_NODES];
+    let mut a = [0.0; MAX_NODES];
     for k in 0..n {
-        series.ensure(theta0 + state.position_m[layout.sheave] / r, &ripple, 0.0);
+        series.ensure(theta0 + y[layout.sheave] / r, &ripple, 0.0);
         if !travel.motion.contains(&k) {
-            state.velocity_mps[layout.sheave] = 0.0;
+            y[nodes + layout.sheave] = 0.0;
             estimate.hold(travel.speed_estimate_radps[k]);
         }
         let e = (estimate.estimate_radps, estimate.departure_integral_rad);
-        let a = deriv(&state, k, 0.0, e, &series).velocity_mps;
+        deriv(y, k, 0.0, e, &series, &mut a);
         car.push(a[layout.body]);
         cw.push(-a[layout.counterweight()]);
         if k + 1 == n {
@@ -610,10 +595,14 @@ fn torque_driven_accelerations_with(
         let sub = 1.0 / steps as f64;
         for j in 0..steps {
             let start = j as f64 * sub;
-            state = rk4_step(&state, nodes, h * sub, |s, frac| deriv(s, k, start + frac * sub, e, &series));
+            plant::rk4_step_in_time(y, h * sub, &mut work, |frac, y, dy| {
+                let (dx, dv) = dy.split_at_mut(nodes);
+                dx.copy_from_slice(&y[nodes..]);
+                deriv(y, k, start + frac * sub, e, &series, dv);
+            });
         }
-        estimate.advance(state.velocity_mps[layout.sheave] / r, travel.speed_estimate_radps[k], h);
-        check_finite(&state, nodes, k as f64 * h)?;
+        estimate.advance(y[nodes + layout.sheave] / r, travel.speed_estimate_radps[k], h);
+        check_finite(y, k as f64 * h)?;
     }
     let split_hz = RIGID_FRACTION * first_mode_hz(&chain, travel, r);
     let rope = rope_acceleration_mps2(travel, effects, r, &reference.1)?;

@@ -70,8 +70,8 @@ use recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
 use rig_config::RigConfig;
 use signals::{chain_signals, decimation_factor, ChainSignals};
 use simulate::{
-    driven_counterpart, highpass_accelerations, model_step_s, simulate_counterpart, Counterpart, DriveRecord,
-    DrivenInputs,
+    driven_accelerations, driven_counterpart, driven_highpass, highpass_accelerations, model_step_s,
+    simulate_counterpart, Counterpart, DriveRecord, DrivenInputs,
 };
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 
@@ -169,6 +169,11 @@ pub struct RigSpeedLoop {
     /// The shaft angle the travel's model follows: its source and its delay
     /// behind the currents ([`travel_signals::travel_shaft_angle`]).
     pub shaft_angle: travel_signals::AngleAlignment,
+    /// The high-pass (order and corner) that brings the model's slow car
+    /// acceleration closest to the measured one: the rig's accelerometers
+    /// as the data show them, applied to every run
+    /// ([`simulate::driven_highpass`]).
+    pub accelerometer_highpass: acquisition::Highpass,
 }
 
 /// Settings of a diagnosis.
@@ -463,6 +468,8 @@ struct Prepared {
     speed_loop: Option<Result<drive_law::SpeedController, String>>,
     /// The shaft angle's source and alignment, where the model is driven.
     shaft_angle: Option<travel_signals::AngleAlignment>,
+    /// The accelerometers' high-pass found, where the model is driven.
+    accelerometer_highpass: acquisition::Highpass,
     /// The direct-axis current's lines of the travel, or why not, where the
     /// model is driven ([`electrical_lines::travel_lines`]).
     direct_axis: Option<Result<electrical_lines::TravelLines, String>>,
@@ -711,14 +718,31 @@ fn counterpart(
         _ => Vec::new(),
     };
     let transducer = if driven { transducer_series(models[0], recording, stem, &measured) } else { None };
-    let drive_record = DriveRecord {
+    let mut drive_record = DriveRecord {
         torque_nm: &torque,
         speed_estimate_radps: &speed,
         controller,
         transducer_lines: &transducer_lines,
         transducer: transducer.as_ref(),
+        highpass: None,
     };
     let none = Effects::none();
+    // The accelerometers' high-pass belongs to the acquisition: found once,
+    // with the nominal model, and applied to every run of the recording.
+    let highpass = if driven {
+        let (car, _) = driven_accelerations(
+            models[0],
+            recording,
+            &measured,
+            drive_record,
+            &driven::DrivenSettings::default(),
+            &none,
+        )?;
+        driven_highpass(&measured, &car)?
+    } else {
+        acquisition::Highpass::NONE
+    };
+    drive_record.highpass = Some(highpass);
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
         driven_counterpart(model, recording, &measured, drive_record, settings, &none)
     };
@@ -740,6 +764,7 @@ fn counterpart(
             controller,
             transducer_lines: transducer_lines.clone(),
             transducer: transducer.clone(),
+            highpass: drive_record.highpass,
         };
         // The nominal run made as the attribution makes every effect's.
         let how = Counterpart::Driven(std::sync::Arc::new(inputs));
@@ -770,6 +795,7 @@ fn counterpart(
         noise_response,
         speed_loop,
         shaft_angle,
+        accelerometer_highpass: highpass,
         direct_axis,
         simulations,
         how,
@@ -791,25 +817,25 @@ fn simulated_counterpart(
     let none = Effects::none();
     let run_closed = |model: &RigConfig| simulate_counterpart(model, &none, recording, stem, model_step_s(model));
     let (mut nominal, mut perturbed) = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
-    let mut highpass_hz = 0.0;
+    let mut highpass = acquisition::Highpass::NONE;
     if drive == DriveModel::Foreign {
-        highpass_hz = decay_highpass_hz(measured, &nominal)?;
+        highpass = decay_highpass(measured, &nominal)?;
         for run in std::iter::once(&mut nominal).chain(perturbed.iter_mut()) {
-            highpass_accelerations(run, highpass_hz);
+            highpass_accelerations(run, highpass);
         }
     }
-    Ok((nominal, perturbed, Counterpart::Simulated { highpass_hz }))
+    Ok((nominal, perturbed, Counterpart::Simulated { highpass }))
 }
 
-/// The first-order high-pass (corner, Hz) that brings the model's car
-/// acceleration closest to the measured one below
+/// The accelerometer high-pass (order and corner) that brings the model's
+/// car acceleration closest to the measured one below
 /// [`acquisition::COMPARISON_LOWPASS_HZ`], the model read at the measured
 /// signal's instants (linear interpolation).
-fn decay_highpass_hz(measured: &ChainSignals, model: &ChainSignals) -> Result<f64> {
+fn decay_highpass(measured: &ChainSignals, model: &ChainSignals) -> Result<acquisition::Highpass> {
     let (Some(data), Some(sim)) =
         (measured.channel(signals::Channel::CarAcceleration), model.channel(signals::Channel::CarAcceleration))
     else {
-        return Ok(0.0);
+        return Ok(acquisition::Highpass::NONE);
     };
     let ratio = model.sample_rate_hz / measured.sample_rate_hz;
     let at = |k: usize| {
@@ -823,7 +849,7 @@ fn decay_highpass_hz(measured: &ChainSignals, model: &ChainSignals) -> Result<f6
         }
     };
     let resampled: Vec<f64> = (0..data.len()).map_while(at).collect();
-    acquisition::identify_highpass_hz(data, &resampled, measured.sample_rate_hz)
+    acquisition::identify_highpass(data, &resampled, measured.sample_rate_hz)
 }
 
 /// The rig drive's speed controller identified from the travel
@@ -1006,7 +1032,13 @@ fn compared(
                 Ok(c) => (Some(*c), None),
                 Err(reason) => (None, Some(reason.clone())),
             };
-            rig_speed_loops.push(RigSpeedLoop { recording: stem.clone(), controller, refused, shaft_angle });
+            rig_speed_loops.push(RigSpeedLoop {
+                recording: stem.clone(),
+                controller,
+                refused,
+                shaft_angle,
+                accelerometer_highpass: prepared.accelerometer_highpass,
+            });
         }
         let lines = prepared.direct_axis.take();
         match target_of(prepared, recording, bands_all.as_ref(), drive, model) {
@@ -1271,7 +1303,12 @@ pub fn diagnose(
     let electrical_lines = electrical_lines_of(&mut compared, drive.drive, options);
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
-    let best = if is_nominal { None } else { mechanical_ranking.first().filter(|c| c.naming.named) };
+    // The mechanics' candidate the verdict rests on: a named one, also when
+    // it explains a gap within the nominal threshold (the verdict says so).
+    let best = mechanical_ranking
+        .first()
+        .filter(|c| c.naming.named)
+        .filter(|c| !is_nominal || (verdict == Verdict::Explained && c.held_out_shrink >= options.explained_shrink));
     let mut simulations = compared.simulations + planned * compared.targets.len();
     let explained_by = (verdict == Verdict::Explained).then(|| explained_by(electrical, best));
     let mut map_after = Vec::new();

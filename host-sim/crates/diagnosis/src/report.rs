@@ -558,6 +558,10 @@ fn speed_loops(s: &mut String, loops: &[super::RigSpeedLoop]) {
     for l in loops {
         let _ = writeln!(s, "- {}: {}", l.recording, l.shaft_angle.text());
     }
+    let _ = writeln!(s, "\nThe accelerometers' high-pass as the data show it (applied to every run of the model):\n");
+    for l in loops {
+        let _ = writeln!(s, "- {}: {}", l.recording, l.accelerometer_highpass.text());
+    }
     let _ = writeln!(s);
 }
 

@@ -139,11 +139,11 @@ fn amplitude_dependent(effects: &Effects) -> bool {
 pub enum Counterpart {
     /// Simulated ([`simulate_counterpart`]: the travel in closed loop with
     /// the project's drive, or the free decay), its accelerations then
-    /// through the rig's accelerometer high-pass of corner `highpass_hz`
+    /// through the rig's accelerometer high-pass `highpass`
     /// (Hz; 0 for none).
     Simulated {
-        /// Corner of the first-order high-pass, Hz.
-        highpass_hz: f64,
+        /// The accelerometers' high-pass found from the data.
+        highpass: acquisition::Highpass,
     },
     /// A travel under another drive: the mechanics driven by its measured
     /// torque ([`driven_counterpart`]).
@@ -165,6 +165,9 @@ pub struct DrivenInputs {
     pub transducer_lines: Vec<driven::TransducerTorqueLine>,
     /// The series that give the true torque under a transducer error.
     pub transducer: Option<crate::transducer::TransducerSeries>,
+    /// The rig's accelerometer high-pass, found once from the nominal model
+    /// ([`driven_highpass`]); `None`: found from each run.
+    pub highpass: Option<acquisition::Highpass>,
 }
 
 impl DrivenInputs {
@@ -176,6 +179,7 @@ impl DrivenInputs {
             controller: self.controller,
             transducer_lines: &self.transducer_lines,
             transducer: self.transducer.as_ref(),
+            highpass: self.highpass,
         }
     }
 }
@@ -193,6 +197,9 @@ pub struct DriveRecord<'a> {
     pub transducer_lines: &'a [driven::TransducerTorqueLine],
     /// The series that give the true torque under a transducer error.
     pub transducer: Option<&'a crate::transducer::TransducerSeries>,
+    /// The rig's accelerometer high-pass; `None`: found from this run
+    /// ([`driven_highpass`]).
+    pub highpass: Option<acquisition::Highpass>,
 }
 
 impl Counterpart {
@@ -205,11 +212,9 @@ impl Counterpart {
         stem: &str,
     ) -> Result<ChainSignals> {
         match self {
-            Counterpart::Simulated { highpass_hz } => {
+            Counterpart::Simulated { highpass } => {
                 let mut run = simulate_counterpart(rig, effects, measured, stem, model_step_s(rig))?;
-                if *highpass_hz > 0.0 {
-                    highpass_accelerations(&mut run, *highpass_hz);
-                }
+                highpass_accelerations(&mut run, *highpass);
                 Ok(run)
             }
             Counterpart::Driven(inputs) => driven_counterpart(
@@ -224,17 +229,19 @@ impl Counterpart {
     }
 }
 
-/// The torque-driven counterpart of the travel `recording` whose measured
-/// chain signals (with the torque and the angle) are `measured`, the model
-/// with `effects` ([`driven::holds_effect`]).
-pub fn driven_counterpart(
+/// The torque-driven car and counterweight accelerations (m/s^2, as the
+/// model records them, before the accelerometers' high-pass) of the travel
+/// `recording` whose measured chain signals (with the torque and the
+/// angle) are `measured`, the model with `effects`
+/// ([`driven::holds_effect`]).
+pub fn driven_accelerations(
     model: &RigConfig,
     recording: &Recording,
     measured: &ChainSignals,
     drive: DriveRecord,
     settings: &driven::DrivenSettings,
     effects: &Effects,
-) -> Result<ChainSignals> {
+) -> Result<(Vec<f64>, Vec<f64>)> {
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         bail!("not a travel");
     };
@@ -256,14 +263,36 @@ pub fn driven_counterpart(
         transducer_lines: drive.transducer_lines,
         transducer: drive.transducer,
     };
-    let (car, cw) = driven::torque_driven_accelerations(model, &travel, settings, effects)?;
-    // The rig's accelerometers high-pass what they record; the model's
-    // accelerations go through the same, its corner found from the data.
-    let fs = measured.sample_rate_hz;
+    driven::torque_driven_accelerations(model, &travel, settings, effects)
+}
+
+/// The rig's accelerometer high-pass ([`acquisition::identify_highpass`])
+/// that brings the torque-driven model's car acceleration `model_car`
+/// (from [`driven_accelerations`]) closest to the measured one: a property
+/// of the acquisition, found once per recording with the nominal model.
+pub fn driven_highpass(measured: &ChainSignals, model_car: &[f64]) -> Result<acquisition::Highpass> {
     let measured_car = measured.channel(signals::Channel::CarAcceleration).unwrap_or(&[]);
-    let corner_hz = acquisition::identify_highpass_hz(measured_car, &car, fs)?;
-    let (car, cw) =
-        (acquisition::first_order_highpass(&car, fs, corner_hz), acquisition::first_order_highpass(&cw, fs, corner_hz));
+    acquisition::identify_highpass(measured_car, model_car, measured.sample_rate_hz)
+}
+
+/// The torque-driven counterpart of the travel `recording`
+/// ([`driven_accelerations`]), its accelerations through the rig's
+/// accelerometer high-pass (`drive.highpass`, or found from this run).
+pub fn driven_counterpart(
+    model: &RigConfig,
+    recording: &Recording,
+    measured: &ChainSignals,
+    drive: DriveRecord,
+    settings: &driven::DrivenSettings,
+    effects: &Effects,
+) -> Result<ChainSignals> {
+    let (car, cw) = driven_accelerations(model, recording, measured, drive, settings, effects)?;
+    let fs = measured.sample_rate_hz;
+    let highpass = match drive.highpass {
+        Some(found) => found,
+        None => driven_highpass(measured, &car)?,
+    };
+    let (car, cw) = (highpass.apply(&car, fs), highpass.apply(&cw, fs));
     let mut channels = vec![(signals::Channel::CarAcceleration, car)];
     if measured.channel(signals::Channel::CounterweightAcceleration).is_some() {
         channels.push((signals::Channel::CounterweightAcceleration, cw));
@@ -277,13 +306,12 @@ pub fn driven_counterpart(
     })
 }
 
-/// `signals`' accelerations through a first-order high-pass of corner
-/// `corner_hz` (none for 0).
-pub fn highpass_accelerations(signals: &mut ChainSignals, corner_hz: f64) {
+/// `signals`' accelerations through the high-pass `highpass`.
+pub fn highpass_accelerations(signals: &mut ChainSignals, highpass: acquisition::Highpass) {
     let fs = signals.sample_rate_hz;
     for (channel, values) in signals.channels.iter_mut() {
         if channel.subsystem() == signals::Subsystem::Mechanical {
-            *values = acquisition::first_order_highpass(values, fs, corner_hz);
+            *values = highpass.apply(values, fs);
         }
     }
 }

@@ -4,9 +4,11 @@
 //! The plant is simulated at a high "analog" rate
 //! ([`Acquisition::analog_rate_hz`]); each channel then goes through:
 //!
-//! 1. accelerometers only: the first-order high-pass of the piezoelectric
-//!    sensor and its charge amplifier, corner [`Acquisition::highpass_hz`]
-//!    (no DC, content below the corner attenuated);
+//! 1. accelerometers only: the high-pass of the piezoelectric sensor and
+//!    its charge amplifier, corner [`Acquisition::highpass_hz`], first order
+//!    or, with an acquisition's own AC coupling or filter, a second-order
+//!    Butterworth ([`Acquisition::highpass_order`]; no DC, content below the
+//!    corner attenuated);
 //! 2. every channel: the anti-alias low-pass, a Butterworth filter of order
 //!    [`Acquisition::antialias_order`] with its corner at
 //!    [`Acquisition::antialias_fraction`] times the sample rate (both
@@ -45,6 +47,8 @@ foreign_params! {
         clock_offset_ppm: f64 = 0.0, [-200.0, 200.0], "ppm", ParamKind::Real;
         /// Corner of the accelerometers' first-order high-pass (sensor and charge amplifier), Hz.
         highpass_hz: f64 = 0.5, [0.2, 1.0], "Hz", ParamKind::Real;
+        /// Order of the accelerometers' high-pass: 1 (sensor and charge amplifier) or 2 (Butterworth, an acquisition's AC coupling); not drawn at random.
+        highpass_order: u32 = 1.0, [1.0, 2.0], "-", ParamKind::Fixed;
         /// Corner of the anti-alias low-pass as a fraction of the sample rate.
         antialias_fraction: f64 = 0.4, [0.2, 0.45], "-", ParamKind::Real;
         /// Order of the anti-alias Butterworth low-pass.
@@ -153,7 +157,11 @@ impl Acquisition {
         let fs = signal.rate_hz;
         let mut x = signal.values.to_vec();
         if channel == Channel::Accelerometer {
-            highpass_first_order(&mut x, self.highpass_hz, fs);
+            if self.highpass_order >= 2 {
+                butterworth_highpass2(self.highpass_hz, fs).filter(&mut x);
+            } else {
+                highpass_first_order(&mut x, self.highpass_hz, fs);
+            }
         }
         for section in
             butterworth_lowpass(self.antialias_order as usize, self.antialias_fraction * self.sample_rate_hz, fs)
@@ -193,6 +201,18 @@ pub fn highpass_first_order(x: &mut [f64], corner_hz: f64, rate_hz: f64) {
         x_prev = *v;
         y_prev = y;
         *v = y;
+    }
+}
+
+/// Second-order Butterworth high-pass `s^2 / (s^2 + sqrt 2 wc s + wc^2)` at
+/// `corner_hz` (Hz) for samples at `rate_hz` (Hz): the bilinear transform
+/// with the corner pre-warped.
+pub fn butterworth_highpass2(corner_hz: f64, rate_hz: f64) -> Section {
+    let k = (std::f64::consts::PI * corner_hz / rate_hz).tan();
+    let norm = 1.0 / (1.0 + std::f64::consts::SQRT_2 * k + k * k);
+    Section {
+        b: [norm, -2.0 * norm, norm],
+        a: [2.0 * (k * k - 1.0) * norm, (1.0 - std::f64::consts::SQRT_2 * k + k * k) * norm],
     }
 }
 
@@ -295,6 +315,16 @@ mod tests {
             let expected = 1.0 / (1.0 + 4f64.powi(order as i32)).sqrt();
             assert!(g <= expected * 1.01 && g > expected * 0.8, "order {order}: {g} vs {expected}");
         }
+    }
+
+    #[test]
+    fn second_order_high_pass_is_3_db_down_at_its_corner_and_falls_40_db_a_decade() {
+        let s = [butterworth_highpass2(1.0, 8192.0)];
+        assert!((gain(&s, 1.0, 8192.0) - 0.5f64.sqrt()).abs() < 1e-9);
+        assert!((gain(&s, 100.0, 8192.0) - 1.0).abs() < 1e-3);
+        // |H| = (f/fc)^2 / sqrt(1 + (f/fc)^4) of the analog filter.
+        let g = gain(&s, 0.1, 8192.0);
+        assert!((g / (0.01 / (1.0f64 + 1e-4).sqrt()) - 1.0).abs() < 1e-3, "{g}");
     }
 
     #[test]
