@@ -12,7 +12,7 @@
 //! the measured acceleration, both low-passed below the chain's elastic
 //! modes.
 
-use dsp::highpass_zero_phase;
+use dsp::{highpass_causal, highpass_zero_phase};
 
 use crate::error::Result;
 
@@ -38,12 +38,13 @@ impl Highpass {
     /// `signal` sampled at `sample_rate_hz` through the filter, causally
     /// (bilinear transform, corner pre-warped), from a state at rest on the
     /// first sample's level, as an analogue AC coupling that has settled.
-    pub fn apply(&self, signal: &[f64], sample_rate_hz: f64) -> Vec<f64> {
-        match self.order {
+    pub fn apply(&self, signal: &[f64], sample_rate_hz: f64) -> Result<Vec<f64>> {
+        Ok(match self.order {
+            _ if signal.is_empty() => Vec::new(),
             0 => signal.to_vec(),
             1 => first_order_highpass(signal, sample_rate_hz, self.corner_hz),
-            _ => second_order_highpass(signal, sample_rate_hz, self.corner_hz),
-        }
+            _ => highpass_causal(signal, sample_rate_hz, self.corner_hz)?,
+        })
     }
 
     /// In words, for the report.
@@ -89,34 +90,6 @@ pub fn first_order_highpass(signal: &[f64], sample_rate_hz: f64, corner_hz: f64)
     out
 }
 
-/// A second-order Butterworth high-pass (`s^2 / (s^2 + sqrt 2 w s + w^2)`,
-/// `w = 2 pi corner_hz`) applied causally to `signal` sampled at
-/// `sample_rate_hz` (bilinear transform, corner pre-warped), its state at
-/// rest on the first sample (none for a corner of 0).
-pub fn second_order_highpass(signal: &[f64], sample_rate_hz: f64, corner_hz: f64) -> Vec<f64> {
-    if corner_hz <= 0.0 {
-        return signal.to_vec();
-    }
-    let k = (std::f64::consts::PI * corner_hz / sample_rate_hz).tan();
-    let root2 = std::f64::consts::SQRT_2;
-    let norm = 1.0 + root2 * k + k * k;
-    let (b0, b1, b2) = (1.0 / norm, -2.0 / norm, 1.0 / norm);
-    let (a1, a2) = (2.0 * (k * k - 1.0) / norm, (1.0 - root2 * k + k * k) / norm);
-    // Transposed direct form II, settled on the first sample's level
-    // (output 0 for a constant input).
-    let x0 = signal.first().copied().unwrap_or(0.0);
-    let (mut s0, mut s1) = (-b0 * x0, b2 * x0);
-    signal
-        .iter()
-        .map(|&x| {
-            let y = b0 * x + s0;
-            s0 = b1 * x - a1 * y + s1;
-            s1 = b2 * x - a2 * y;
-            y
-        })
-        .collect()
-}
-
 /// The accelerometer high-pass ([`candidates`]) that brings the model's
 /// acceleration `model` closest (least squares below
 /// [`COMPARISON_LOWPASS_HZ`]) to the measured `measured`, both at
@@ -133,7 +106,7 @@ pub fn identify_highpass(measured: &[f64], model: &[f64], sample_rate_hz: f64) -
     let model_low = low(&model[..n])?;
     let mut best = (Highpass::NONE, f64::INFINITY);
     for candidate in candidates() {
-        let shaped = candidate.apply(&model_low, sample_rate_hz);
+        let shaped = candidate.apply(&model_low, sample_rate_hz)?;
         let error: f64 = target.iter().zip(&shaped).map(|(a, b)| (a - b).powi(2)).sum();
         if error < best.1 {
             best = (candidate, error);
@@ -171,7 +144,7 @@ mod tests {
             Highpass { order: 2, corner_hz: 0.5 },
             Highpass { order: 2, corner_hz: 1.0 },
         ] {
-            let measured = truth.apply(&a, fs);
+            let measured = truth.apply(&a, fs).unwrap();
             let found = identify_highpass(&measured, &a, fs).unwrap();
             let tolerance = truth.corner_hz * (step - 1.0);
             assert!(
@@ -190,12 +163,13 @@ mod tests {
         let rms = |v: &[f64]| (v.iter().map(|a| a * a).sum::<f64>() / v.len() as f64).sqrt();
         let gain = rms(&y[10_000..]) / rms(&x[10_000..]);
         assert!((gain - 0.5f64.sqrt()).abs() < 2e-3, "{gain}");
-        let y = second_order_highpass(&x, fs, 1.0);
+        let second = Highpass { order: 2, corner_hz: 1.0 };
+        let y = second.apply(&x, fs).unwrap();
         let gain = rms(&y[10_000..]) / rms(&x[10_000..]);
         assert!((gain - 0.5f64.sqrt()).abs() < 2e-3, "second order: {gain}");
         // A decade below the corner a second order passes 1/100, a first 1/10.
         let slow: Vec<f64> = (0..400_000).map(|k| (std::f64::consts::TAU * 0.1 * k as f64 / fs).sin()).collect();
-        let y = second_order_highpass(&slow, fs, 1.0);
+        let y = second.apply(&slow, fs).unwrap();
         let gain = rms(&y[200_000..]) / rms(&slow[200_000..]);
         assert!((gain - 0.01).abs() < 2e-4, "second order at a tenth of its corner: {gain}");
     }

@@ -70,7 +70,7 @@ use recording::{Column, Recording, RecordingKind, ACC_CAR, TIME_S};
 use rig_config::RigConfig;
 use signals::{chain_signals, decimation_factor, ChainSignals};
 use simulate::{
-    driven_accelerations, driven_counterpart, driven_highpass, highpass_accelerations, model_step_s,
+    driven_accelerations, driven_counterpart, driven_highpass, driven_signals, highpass_accelerations, model_step_s,
     simulate_counterpart, Counterpart, DriveRecord, DrivenInputs,
 };
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
@@ -718,35 +718,31 @@ fn counterpart(
         _ => Vec::new(),
     };
     let transducer = if driven { transducer_series(models[0], recording, stem, &measured) } else { None };
-    let mut drive_record = DriveRecord {
+    let drive_record = DriveRecord {
         torque_nm: &torque,
         speed_estimate_radps: &speed,
         controller,
         transducer_lines: &transducer_lines,
         transducer: transducer.as_ref(),
-        highpass: None,
     };
     let none = Effects::none();
-    // The accelerometers' high-pass belongs to the acquisition: found once,
-    // with the nominal model, and applied to every run of the recording.
-    let highpass = if driven {
-        let (car, _) = driven_accelerations(
-            models[0],
-            recording,
-            &measured,
-            drive_record,
-            &driven::DrivenSettings::default(),
-            &none,
-        )?;
-        driven_highpass(&measured, &car)?
+    // The nominal torque-driven run, raw: the accelerometers' high-pass
+    // belongs to the acquisition and is found from it once, then applied to
+    // every run of the recording (this one included).
+    let nominal_driven = if driven {
+        let settings = driven::DrivenSettings::default();
+        Some(driven_accelerations(models[0], recording, &measured, drive_record, &settings, &none)?)
     } else {
-        acquisition::Highpass::NONE
+        None
     };
-    drive_record.highpass = Some(highpass);
+    let highpass = match &nominal_driven {
+        Some((car, _)) => driven_highpass(&measured, car)?,
+        None => acquisition::Highpass::NONE,
+    };
     let run_driven = |model: &RigConfig, settings: &driven::DrivenSettings| {
-        driven_counterpart(model, recording, &measured, drive_record, settings, &none)
+        driven_counterpart(model, recording, &measured, drive_record, highpass, settings, &none)
     };
-    let (nominal, perturbed, how) = if driven {
+    let (nominal, perturbed, how) = if let Some(raw) = nominal_driven {
         let settings = driven::DrivenSettings::default();
         let mut perturbed = vec![run_driven(models[1], &settings)?, run_driven(models[2], &settings)?];
         for alternative in driven::DrivenSettings::alternatives() {
@@ -764,11 +760,12 @@ fn counterpart(
             controller,
             transducer_lines: transducer_lines.clone(),
             transducer: transducer.clone(),
-            highpass: drive_record.highpass,
+            highpass,
         };
-        // The nominal run made as the attribution makes every effect's.
+        // The nominal run shaped as the attribution shapes every effect's
+        // (`Counterpart::simulate` -> `driven_counterpart`).
         let how = Counterpart::Driven(std::sync::Arc::new(inputs));
-        (how.simulate(models[0], &none, recording, stem)?, perturbed, how)
+        (driven_signals(&measured, raw, highpass)?, perturbed, how)
     } else {
         simulated_counterpart(models, drive, recording, stem, &measured, closed)?
     };
@@ -779,6 +776,7 @@ fn counterpart(
             recording,
             &measured,
             DriveRecord { torque_nm: &noisy, ..drive_record },
+            highpass,
             &driven::DrivenSettings::default(),
             &none,
         )?;
@@ -821,7 +819,7 @@ fn simulated_counterpart(
     if drive == DriveModel::Foreign {
         highpass = decay_highpass(measured, &nominal)?;
         for run in std::iter::once(&mut nominal).chain(perturbed.iter_mut()) {
-            highpass_accelerations(run, highpass);
+            highpass_accelerations(run, highpass)?;
         }
     }
     Ok((nominal, perturbed, Counterpart::Simulated { highpass }))

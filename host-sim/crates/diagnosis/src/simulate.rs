@@ -139,8 +139,7 @@ fn amplitude_dependent(effects: &Effects) -> bool {
 pub enum Counterpart {
     /// Simulated ([`simulate_counterpart`]: the travel in closed loop with
     /// the project's drive, or the free decay), its accelerations then
-    /// through the rig's accelerometer high-pass `highpass`
-    /// (Hz; 0 for none).
+    /// through the rig's accelerometer high-pass `highpass`.
     Simulated {
         /// The accelerometers' high-pass found from the data.
         highpass: acquisition::Highpass,
@@ -166,8 +165,8 @@ pub struct DrivenInputs {
     /// The series that give the true torque under a transducer error.
     pub transducer: Option<crate::transducer::TransducerSeries>,
     /// The rig's accelerometer high-pass, found once from the nominal model
-    /// ([`driven_highpass`]); `None`: found from each run.
-    pub highpass: Option<acquisition::Highpass>,
+    /// ([`driven_highpass`]).
+    pub highpass: acquisition::Highpass,
 }
 
 impl DrivenInputs {
@@ -179,7 +178,6 @@ impl DrivenInputs {
             controller: self.controller,
             transducer_lines: &self.transducer_lines,
             transducer: self.transducer.as_ref(),
-            highpass: self.highpass,
         }
     }
 }
@@ -197,9 +195,6 @@ pub struct DriveRecord<'a> {
     pub transducer_lines: &'a [driven::TransducerTorqueLine],
     /// The series that give the true torque under a transducer error.
     pub transducer: Option<&'a crate::transducer::TransducerSeries>,
-    /// The rig's accelerometer high-pass; `None`: found from this run
-    /// ([`driven_highpass`]).
-    pub highpass: Option<acquisition::Highpass>,
 }
 
 impl Counterpart {
@@ -214,7 +209,7 @@ impl Counterpart {
         match self {
             Counterpart::Simulated { highpass } => {
                 let mut run = simulate_counterpart(rig, effects, measured, stem, model_step_s(rig))?;
-                highpass_accelerations(&mut run, *highpass);
+                highpass_accelerations(&mut run, *highpass)?;
                 Ok(run)
             }
             Counterpart::Driven(inputs) => driven_counterpart(
@@ -222,6 +217,7 @@ impl Counterpart {
                 measured,
                 &inputs.measured,
                 inputs.drive_record(),
+                inputs.highpass,
                 &driven::DrivenSettings::default(),
                 effects,
             ),
@@ -277,25 +273,34 @@ pub fn driven_highpass(measured: &ChainSignals, model_car: &[f64]) -> Result<acq
 
 /// The torque-driven counterpart of the travel `recording`
 /// ([`driven_accelerations`]), its accelerations through the rig's
-/// accelerometer high-pass (`drive.highpass`, or found from this run).
+/// accelerometer high-pass `highpass` ([`driven_signals`]).
 pub fn driven_counterpart(
     model: &RigConfig,
     recording: &Recording,
     measured: &ChainSignals,
     drive: DriveRecord,
+    highpass: acquisition::Highpass,
     settings: &driven::DrivenSettings,
     effects: &Effects,
 ) -> Result<ChainSignals> {
-    let (car, cw) = driven_accelerations(model, recording, measured, drive, settings, effects)?;
+    let accelerations = driven_accelerations(model, recording, measured, drive, settings, effects)?;
+    driven_signals(measured, accelerations, highpass)
+}
+
+/// The torque-driven model's car and counterweight accelerations
+/// (`(car, cw)`, from [`driven_accelerations`]) as the rig's acquisition
+/// records them: through its accelerometer high-pass `highpass`, on the
+/// measured chain signals' phases and angle (the counterweight where the
+/// rig records it).
+pub fn driven_signals(
+    measured: &ChainSignals,
+    (car, cw): (Vec<f64>, Vec<f64>),
+    highpass: acquisition::Highpass,
+) -> Result<ChainSignals> {
     let fs = measured.sample_rate_hz;
-    let highpass = match drive.highpass {
-        Some(found) => found,
-        None => driven_highpass(measured, &car)?,
-    };
-    let (car, cw) = (highpass.apply(&car, fs), highpass.apply(&cw, fs));
-    let mut channels = vec![(signals::Channel::CarAcceleration, car)];
+    let mut channels = vec![(signals::Channel::CarAcceleration, highpass.apply(&car, fs)?)];
     if measured.channel(signals::Channel::CounterweightAcceleration).is_some() {
-        channels.push((signals::Channel::CounterweightAcceleration, cw));
+        channels.push((signals::Channel::CounterweightAcceleration, highpass.apply(&cw, fs)?));
     }
     Ok(ChainSignals {
         sample_rate_hz: measured.sample_rate_hz,
@@ -307,11 +312,12 @@ pub fn driven_counterpart(
 }
 
 /// `signals`' accelerations through the high-pass `highpass`.
-pub fn highpass_accelerations(signals: &mut ChainSignals, highpass: acquisition::Highpass) {
+pub fn highpass_accelerations(signals: &mut ChainSignals, highpass: acquisition::Highpass) -> Result<()> {
     let fs = signals.sample_rate_hz;
     for (channel, values) in signals.channels.iter_mut() {
         if channel.subsystem() == signals::Subsystem::Mechanical {
-            *values = highpass.apply(values, fs);
+            *values = highpass.apply(values, fs)?;
         }
     }
+    Ok(())
 }

@@ -80,15 +80,7 @@ fn padding_len(sample_rate_hz: f64, cutoff_hz: f64, len: usize) -> usize {
 /// cutoff, [`AnalysisError::NumericOverflow`] if the signal is so large
 /// (around 1e300) that the filter overflows.
 pub fn highpass_zero_phase(signal: &[f64], sample_rate_hz: f64, cutoff_hz: f64) -> Result<Vec<f64>, AnalysisError> {
-    check_sample_rate(sample_rate_hz)?;
-    if !(cutoff_hz.is_finite() && cutoff_hz > 0.0 && cutoff_hz < 0.5 * sample_rate_hz) {
-        return Err(AnalysisError::InvalidParameter {
-            name: "cutoff_hz",
-            value: cutoff_hz,
-            expected: "a finite cutoff with 0 < cutoff_hz < sample_rate_hz / 2",
-        });
-    }
-    check_signal(signal, 1, "high-pass filtering")?;
+    check_highpass(signal, sample_rate_hz, cutoff_hz)?;
 
     let n = signal.len();
     let pad = padding_len(sample_rate_hz, cutoff_hz, n);
@@ -126,9 +118,55 @@ pub fn highpass_zero_phase(signal: &[f64], sample_rate_hz: f64, cutoff_hz: f64) 
     Ok(buf)
 }
 
+/// The checks of a high-pass's inputs: the sample rate, a cutoff with
+/// `0 < cutoff_hz < sample_rate_hz / 2`, a finite non-empty signal.
+fn check_highpass(signal: &[f64], sample_rate_hz: f64, cutoff_hz: f64) -> Result<(), AnalysisError> {
+    check_sample_rate(sample_rate_hz)?;
+    if !(cutoff_hz.is_finite() && cutoff_hz > 0.0 && cutoff_hz < 0.5 * sample_rate_hz) {
+        return Err(AnalysisError::InvalidParameter {
+            name: "cutoff_hz",
+            value: cutoff_hz,
+            expected: "a finite cutoff with 0 < cutoff_hz < sample_rate_hz / 2",
+        });
+    }
+    check_signal(signal, 1, "high-pass filtering")
+}
+
+/// 2nd-order Butterworth high-pass of `signal` with -3 dB at `cutoff_hz`,
+/// in one causal pass (as an analogue AC coupling filters: the phase is
+/// not undone), the filter settled on the first sample's level so that a
+/// constant input gives 0 from the first sample on.
+///
+/// # Errors
+/// As [`highpass_zero_phase`] for a bad signal, sample rate or cutoff.
+pub fn highpass_causal(signal: &[f64], sample_rate_hz: f64, cutoff_hz: f64) -> Result<Vec<f64>, AnalysisError> {
+    check_highpass(signal, sample_rate_hz, cutoff_hz)?;
+    let mut out = signal.to_vec();
+    // A constant history at the first value: the double zero at DC leaves
+    // no transient from it.
+    Biquad::butterworth_highpass(sample_rate_hz, cutoff_hz).filter_in_place(&mut out, [signal[0], signal[0]]);
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn causal_highpass_starts_settled_and_is_3_db_down_at_its_cutoff() {
+        let fs = 1000.0;
+        // A constant gives 0 from the first sample on.
+        let flat = highpass_causal(&[2.5; 100], fs, 1.0).unwrap();
+        assert!(flat.iter().all(|v| v.abs() < 1e-12), "{flat:?}");
+        // A sine at the cutoff passes at 1/sqrt(2) once settled.
+        let x: Vec<f64> = (0..20_000).map(|k| (std::f64::consts::TAU * k as f64 / fs).sin()).collect();
+        let y = highpass_causal(&x, fs, 1.0).unwrap();
+        let rms = |v: &[f64]| (v.iter().map(|a| a * a).sum::<f64>() / v.len() as f64).sqrt();
+        let gain = rms(&y[10_000..]) / rms(&x[10_000..]);
+        assert!((gain - 0.5f64.sqrt()).abs() < 2e-3, "{gain}");
+        assert!(highpass_causal(&x, fs, 600.0).is_err());
+        assert!(highpass_causal(&[], fs, 1.0).is_err());
+    }
     use std::f64::consts::PI;
 
     fn sine(fs: f64, f: f64, amp: f64, phase: f64, n: usize) -> Vec<f64> {
