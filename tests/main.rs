@@ -12,6 +12,7 @@ mod closed_loop;
 mod commands;
 mod compensation;
 mod docs_layout;
+mod effect_harness;
 mod effects;
 mod faults;
 mod fixed_point;

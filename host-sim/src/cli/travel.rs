@@ -90,8 +90,10 @@ pub enum CompensationArg {
     Adaptive,
 }
 
-/// Runs `travel`.
-pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
+/// The travel `args` ask for: the car mass, the direction, and the rope
+/// lengths at start and end, each checked to leave both rope sides their
+/// shortest length.
+fn travel_spec(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<TravelSpec> {
     let total = rig.mechanics.rope_total_length_m;
     let m_car = car_mass_kg(rig, args.m_car_kg)?;
     let direction = match args.direction {
@@ -114,6 +116,33 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
         check_physical_range("--lw-end", lw, side, total - side, "m", &why)?;
         spec.lw_end_m = lw;
     }
+    Ok(spec)
+}
+
+/// The drive's controller with the ripple compensation `compensation`, and
+/// how the recording describes it.
+fn controller_for(rig: &RigConfig, compensation: CompensationArg) -> (Controller, &'static str) {
+    let mut controller = Controller::new(&rig.drive_config());
+    let description = match compensation {
+        CompensationArg::Off => "no ripple compensation",
+        CompensationArg::RigTable => {
+            let mut c = compensator(rig, Strategy::Table, Some(rig_ripple_table(rig).negated()));
+            c.set_back_off(false);
+            controller.set_compensation(Some(c));
+            "ripple compensation: the rig's ripple as the table (exact cancellation)"
+        }
+        CompensationArg::Adaptive => {
+            controller.set_compensation(Some(compensator(rig, Strategy::Adaptive, None)));
+            "ripple compensation: adaptive harmonics"
+        }
+    };
+    (controller, description)
+}
+
+/// Runs `travel`.
+pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
+    let spec = travel_spec(rig, args)?;
+    let (m_car, direction) = (spec.m_car_kg, spec.direction);
     let mut options = SimOptions::for_rig(rig);
     options.effects = Effects::from_file_and_flags(args.effects_file.as_deref(), &args.effect)?;
     if let Some(step) = args.max_step_s {
@@ -145,20 +174,7 @@ pub fn run(rig: &RigConfig, args: &TravelArgs) -> anyhow::Result<()> {
     );
     bar.set_message("simulating");
     let started = Instant::now();
-    let mut controller = Controller::new(&rig.drive_config());
-    let description = match args.compensation {
-        CompensationArg::Off => "no ripple compensation",
-        CompensationArg::RigTable => {
-            let mut c = compensator(rig, Strategy::Table, Some(rig_ripple_table(rig).negated()));
-            c.set_back_off(false);
-            controller.set_compensation(Some(c));
-            "ripple compensation: the rig's ripple as the table (exact cancellation)"
-        }
-        CompensationArg::Adaptive => {
-            controller.set_compensation(Some(compensator(rig, Strategy::Adaptive, None)));
-            "ripple compensation: adaptive harmonics"
-        }
-    };
+    let (mut controller, description) = controller_for(rig, args.compensation);
     let run = simulate_travel_with(rig, &spec, &options, &mut controller, Some(&bar), None)?;
     let wall = started.elapsed().as_secs_f64();
     outln!(

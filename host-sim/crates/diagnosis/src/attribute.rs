@@ -34,7 +34,7 @@ use super::screen;
 use super::signals::Channel;
 use super::simulate::Counterpart;
 use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers, Segmentation};
-use plant::effects::{EffectKind, Effects, ParamScale};
+use plant::effects::{EffectKind, Effects, Fit as Declared, FromData, Neutral, ParamScale};
 use recording::Recording;
 use rig_config::RigConfig;
 
@@ -151,105 +151,123 @@ pub struct Candidate {
 enum Search {
     /// Simulated at these full parameter vectors.
     Grid(Vec<Vec<f64>>),
-    /// Simulated at these probes; coefficients map to parameters by `map`.
-    Linear { probes: Vec<Vec<f64>>, map: fn(&[f64]) -> Vec<f64>, clamp: fn(&[f64]) -> Vec<f64> },
+    /// Simulated at these probes; the coefficients map to the parameters
+    /// of `kind` by its declared fit ([`linear_parameters`]).
+    Linear { probes: Vec<Vec<f64>>, kind: EffectKind },
 }
 
-const FRICTION_PROBE_N: f64 = 40.0;
-const ECCENTRICITY_PROBE: f64 = 0.005;
-const DEAD_TIME_PROBE_S: f64 = 0.3e-6;
-const OFFSET_PROBE_A: f64 = 0.2;
-const GAIN_PROBE: f64 = 0.01;
-const ENCODER_PROBE_RAD: f64 = 0.002;
-
-fn polar(c: &[f64], probe: f64, max: f64) -> Vec<f64> {
-    let a = (probe * c[0].hypot(c[1])).min(max);
-    vec![a, c[1].atan2(c[0]).rem_euclid(TAU)]
+/// The parameter vector every search of `kind` starts from: its defaults,
+/// a parameter taken from the data ([`FromData`]) at the measured value
+/// within its range.
+fn search_base(kind: EffectKind, reference_tension_n: Option<f64>) -> Vec<f64> {
+    kind.parameters()
+        .iter()
+        .map(|spec| match (spec.from_data, reference_tension_n) {
+            (Some(FromData::StaticRopeTension), Some(t)) => t.clamp(spec.min, spec.max),
+            _ => spec.default,
+        })
+        .collect()
 }
 
-fn clamp_polar(c: &[f64], probe: f64, max: f64) -> Vec<f64> {
-    let r = c[0].hypot(c[1]);
-    let limit = max / probe;
-    if r > limit {
-        vec![c[0] * limit / r, c[1] * limit / r]
-    } else {
-        c.to_vec()
+/// The search of `kind`, as its declaration ([`Declared`]) says: a grid's
+/// points (every combination of its axes, the first outermost), or a
+/// linear effect's probes (each strength alone at its probe, the other
+/// fitted strengths at their neutral value; an amplitude at phase 0 and a
+/// quarter turn).
+fn search(kind: EffectKind, reference_tension_n: Option<f64>) -> Search {
+    let base = search_base(kind, reference_tension_n);
+    let specs = kind.parameters();
+    match kind.fit() {
+        Declared::Grid { axes, .. } => {
+            let mut points = vec![base];
+            for &(i, values) in axes {
+                points = points
+                    .iter()
+                    .flat_map(|p| {
+                        values.iter().map(move |&x| {
+                            let mut q = p.clone();
+                            q[i] = x;
+                            q
+                        })
+                    })
+                    .collect();
+            }
+            Search::Grid(points)
+        }
+        Declared::Linear(strengths) => {
+            let probes = strengths
+                .iter()
+                .map(|&(i, probe)| {
+                    let mut p = base.clone();
+                    for &(j, _) in strengths {
+                        p[j] = match specs[j].neutral {
+                            Neutral::At(v) => v,
+                            _ => 0.0,
+                        };
+                    }
+                    p[i] = probe;
+                    p
+                })
+                .collect();
+            Search::Linear { probes, kind }
+        }
+        Declared::Polar { amplitude, phase, probe } => {
+            let probes = [0.0, 0.25 * TAU]
+                .iter()
+                .map(|&angle| {
+                    let mut p = base.clone();
+                    p[amplitude] = probe;
+                    p[phase] = angle;
+                    p
+                })
+                .collect();
+            Search::Linear { probes, kind }
+        }
     }
 }
 
-fn search(kind: EffectKind, reference_tension_n: Option<f64>) -> Search {
-    let d = kind.defaults();
-    let with = |values: &[(usize, f64)]| {
-        let mut v = d.clone();
-        for &(i, x) in values {
-            v[i] = x;
+/// The parameters of the linear effect `kind` at coefficients `c` (one per
+/// probe, [`search`]): each strength its probe times its coefficient
+/// within its range; an amplitude and phase from the two coefficients as
+/// the components `a cos`, `a sin`.
+fn linear_parameters(kind: EffectKind, c: &[f64]) -> Vec<f64> {
+    let specs = kind.parameters();
+    let mut out = search_base(kind, None);
+    match kind.fit() {
+        Declared::Linear(strengths) => {
+            for (&(i, probe), &ci) in strengths.iter().zip(c) {
+                out[i] = (probe * ci).clamp(specs[i].min, specs[i].max);
+            }
         }
-        v
-    };
-    match kind {
-        EffectKind::TensionStiffening => {
-            let t = reference_tension_n.unwrap_or(d[1]).clamp(10.0, 1.0e4);
-            Search::Grid([0.2, 0.5, 0.85].iter().map(|&a| with(&[(0, a), (1, t)])).collect())
+        Declared::Polar { amplitude, phase, probe } => {
+            out[amplitude] = (probe * c[0].hypot(c[1])).min(specs[amplitude].max);
+            out[phase] = c[1].atan2(c[0]).rem_euclid(TAU);
         }
-        EffectKind::DivertingPulley => {
-            // The pulley's own mode is as strong as it is undamped: its
-            // damping is searched with its inertia.
-            Search::Grid(
-                [0.004, 0.012, 0.035, 0.1]
-                    .iter()
-                    .flat_map(|&j| [0.005, 0.02, 0.08].map(|z| with(&[(0, j), (3, z)])))
-                    .collect(),
-            )
+        Declared::Grid { .. } => {}
+    }
+    out
+}
+
+/// The coefficients `c` of the linear effect `kind` kept where its
+/// parameters stay within their ranges.
+fn clamp_coefficients(kind: EffectKind, c: &[f64]) -> Vec<f64> {
+    let specs = kind.parameters();
+    match kind.fit() {
+        Declared::Linear(strengths) => strengths
+            .iter()
+            .zip(c)
+            .map(|(&(i, probe), &ci)| ci.clamp(specs[i].min / probe, specs[i].max / probe))
+            .collect(),
+        Declared::Polar { amplitude, probe, .. } => {
+            let r = c[0].hypot(c[1]);
+            let limit = specs[amplitude].max / probe;
+            if r > limit {
+                vec![c[0] * limit / r, c[1] * limit / r]
+            } else {
+                c.to_vec()
+            }
         }
-        EffectKind::RopeDiscretization => Search::Grid([2.0, 4.0, 8.0].iter().map(|&n| with(&[(0, n)])).collect()),
-        EffectKind::CarFrameMode => Search::Grid(
-            [120.0, 200.0, 330.0].iter().flat_map(|&f| [0.015, 0.05].map(|z| with(&[(0, f), (1, z)]))).collect(),
-        ),
-        EffectKind::BrakeStop => Search::Grid([4.0e3, 3.0e4, 2.0e5].iter().map(|&k| with(&[(0, k)])).collect()),
-        EffectKind::CoulombGuideFriction => Search::Linear {
-            probes: vec![with(&[(0, FRICTION_PROBE_N)])],
-            map: |c| vec![(FRICTION_PROBE_N * c[0]).clamp(0.0, 150.0), 0.002],
-            clamp: |c| vec![c[0].clamp(0.0, 150.0 / FRICTION_PROBE_N)],
-        },
-        EffectKind::SheaveEccentricity => Search::Linear {
-            probes: vec![with(&[(0, ECCENTRICITY_PROBE), (1, 0.0)]), with(&[(0, ECCENTRICITY_PROBE), (1, 0.25 * TAU)])],
-            map: |c| polar(c, ECCENTRICITY_PROBE, 0.02),
-            clamp: |c| clamp_polar(c, ECCENTRICITY_PROBE, 0.02),
-        },
-        EffectKind::DeadTime => Search::Linear {
-            probes: vec![with(&[(0, DEAD_TIME_PROBE_S)])],
-            map: |c| vec![(DEAD_TIME_PROBE_S * c[0]).clamp(0.0, 5.0e-6), 0.3],
-            clamp: |c| vec![c[0].clamp(0.0, 5.0e-6 / DEAD_TIME_PROBE_S)],
-        },
-        EffectKind::CurrentSensorError => Search::Linear {
-            probes: vec![
-                vec![OFFSET_PROBE_A, 0.0, 0.0, 0.0],
-                vec![0.0, OFFSET_PROBE_A, 0.0, 0.0],
-                vec![0.0, 0.0, GAIN_PROBE, 0.0],
-                vec![0.0, 0.0, 0.0, GAIN_PROBE],
-            ],
-            map: |c| {
-                vec![
-                    (OFFSET_PROBE_A * c[0]).clamp(-1.0, 1.0),
-                    (OFFSET_PROBE_A * c[1]).clamp(-1.0, 1.0),
-                    (GAIN_PROBE * c[2]).clamp(-0.05, 0.05),
-                    (GAIN_PROBE * c[3]).clamp(-0.05, 0.05),
-                ]
-            },
-            clamp: |c| {
-                vec![
-                    c[0].clamp(-1.0 / OFFSET_PROBE_A, 1.0 / OFFSET_PROBE_A),
-                    c[1].clamp(-1.0 / OFFSET_PROBE_A, 1.0 / OFFSET_PROBE_A),
-                    c[2].clamp(-0.05 / GAIN_PROBE, 0.05 / GAIN_PROBE),
-                    c[3].clamp(-0.05 / GAIN_PROBE, 0.05 / GAIN_PROBE),
-                ]
-            },
-        },
-        EffectKind::EncoderError => Search::Linear {
-            probes: vec![with(&[(0, ENCODER_PROBE_RAD), (1, 0.0)]), with(&[(0, ENCODER_PROBE_RAD), (1, 0.25 * TAU)])],
-            map: |c| polar(c, ENCODER_PROBE_RAD, 0.01),
-            clamp: |c| clamp_polar(c, ENCODER_PROBE_RAD, 0.01),
-        },
+        Declared::Grid { .. } => c.to_vec(),
     }
 }
 
@@ -501,8 +519,8 @@ impl Family {
         let mut i = 0;
         for l in &self.linear {
             let n = l.probes.len();
-            if let Search::Linear { clamp, .. } = &l.search {
-                out.extend(clamp(&c[i..i + n]));
+            if let Search::Linear { kind, .. } = &l.search {
+                out.extend(clamp_coefficients(*kind, &c[i..i + n]));
             }
             i += n;
         }
@@ -572,8 +590,8 @@ impl Family {
         let mut i = 0;
         for l in &self.linear {
             let n = l.probes.len();
-            if let Search::Linear { map, .. } = &l.search {
-                out.push((l.kind, map(&c[i..i + n])));
+            if let Search::Linear { kind, .. } = &l.search {
+                out.push((l.kind, linear_parameters(*kind, &c[i..i + n])));
             }
             i += n;
         }
@@ -590,7 +608,6 @@ impl Family {
     /// values the effect accepts left between that end and the neutral
     /// value: the fit could have gone on towards no effect.
     fn search_edge(&self, b: usize) -> Vec<String> {
-        use super::naming::{neutral, Neutral};
         let mut out = Vec::new();
         let best = &self.bases[b].point;
         for (e, (kind, values)) in best.iter().enumerate() {
@@ -618,7 +635,7 @@ impl Family {
                 let v = values[j];
                 let lo = line.iter().copied().fold(f64::INFINITY, f64::min);
                 let hi = line.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                let open_towards_neutral = match neutral(kind.name(), spec.name) {
+                let open_towards_neutral = match spec.neutral {
                     Neutral::At(v0) if v0 < v => {
                         v <= lo && if spec.scale == ParamScale::Integer { v - 1.0 > v0 } else { v > spec.min }
                     }
@@ -1288,8 +1305,8 @@ mod tests {
         assert_eq!(plan.models[0].values(EffectKind::DivertingPulley).unwrap()[0], 0.004);
         assert_eq!(plan.models[1].values(EffectKind::DivertingPulley).unwrap()[3], 0.02);
         assert_eq!(plan.models[11].values(EffectKind::DivertingPulley).unwrap()[0], 0.1);
-        assert_eq!(plan.models[12].values(EffectKind::DeadTime).unwrap()[0], DEAD_TIME_PROBE_S);
-        assert_eq!(plan.models[14].values(EffectKind::SheaveEccentricity).unwrap(), [ECCENTRICITY_PROBE, 0.25 * TAU]);
+        assert_eq!(plan.models[12].values(EffectKind::DeadTime).unwrap()[0], 0.3e-6);
+        assert_eq!(plan.models[14].values(EffectKind::SheaveEccentricity).unwrap(), [0.005, 0.25 * TAU]);
         assert_eq!(plan.models[12].enabled(), [EffectKind::DeadTime]);
     }
 

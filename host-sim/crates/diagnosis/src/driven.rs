@@ -398,7 +398,7 @@ fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_
 /// model, carry it), and `brake_stop`, which acts while the brake holds,
 /// where another drive's start and stop sequence is not compared.
 pub fn holds_effect(kind: EffectKind) -> bool {
-    !matches!(kind, EffectKind::DeadTime | EffectKind::BrakeStop)
+    kind.seen().under_another_drive
 }
 
 /// Car and counterweight accelerations (m/s^2, positive up) of the chain
@@ -527,18 +527,15 @@ fn torque_driven_accelerations_with(
     params.m_cw_kg = travel.m_cw_kg;
     let chain = Chain::new(params, travel.lw_start_m);
     let line = Line::new(effects);
-    let layout = line.layout;
-    let nodes = layout.nodes;
+    let (layout, nodes) = (line.layout, line.layout.nodes);
     let ripple = ripple_of(rig, travel, settings);
     let tracking = tracking_gains(settings.tracking_bandwidth_hz);
-    let h = 1.0 / fs;
-    let theta0 = travel.shaft_angle_rad[0];
+    let (h, theta0) = (1.0 / fs, travel.shaft_angle_rad[0]);
     let steps = steps_per_sample(&line, &chain, (travel.shaft_angle_rad[n - 1] - theta0) * r, h, max_rate_per_step);
     let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
     let (state, offset_nm) = start_state(&line, &chain, travel, settings, reference.1[0]);
-    // Accelerations at sample k + frac (the function's comment says how) of
-    // the packed state `y` (positions, then velocities, `nodes` each) into
-    // `acc`.
+    // Accelerations at sample k + frac of the packed state `y` (positions,
+    // then velocities, `nodes` each) into `acc`.
     let deriv = |y: &[f64],
                  k: usize,
                  frac: f64,
@@ -559,11 +556,7 @@ fn torque_driven_accelerations_with(
         let lumped = line.lumped(&chain, position[layout.sheave]);
         line.accelerations_of(&chain, &lumped, position, velocity, shaft, brake, 0.0, acc);
         if moving {
-            let masses = &lumped.masses_kg[..nodes];
-            let total: f64 = masses.iter().sum();
-            let mean = |x: &[f64]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
-            let (kp, kd) = tracking;
-            let body = kp * (u - mean(position)) + kd * (v - mean(velocity));
+            let body = tracking_acceleration(&lumped.masses_kg[..nodes], position, velocity, (u, v), tracking);
             acc[..nodes].iter_mut().for_each(|a| *a += body);
         }
     };
@@ -573,10 +566,8 @@ fn torque_driven_accelerations_with(
     // between samples): a few multiply-adds per stage in place of the
     // harmonics' sines.
     let mut series = AngleSeries::default();
-    let mut y = [0.0; 2 * MAX_NODES];
-    y[..nodes].copy_from_slice(&state.position_m[..nodes]);
-    y[nodes..2 * nodes].copy_from_slice(&state.velocity_mps[..nodes]);
-    let y = &mut y[..2 * nodes];
+    let mut packed = packed_state(&state, nodes);
+    let y = &mut packed[..2 * nodes];
     let mut work = [0.0; 5 * 2 * MAX_NODES];
     let mut a = [0.0; MAX_NODES];
     for k in 0..n {
@@ -607,6 +598,31 @@ fn torque_driven_accelerations_with(
     let split_hz = RIGID_FRACTION * first_mode_hz(&chain, travel, r);
     let rope = rope_acceleration_mps2(travel, effects, r, &reference.1)?;
     below_from_the_angle((&car, &cw), &rope, fs, split_hz)
+}
+
+/// The acceleration (m/s^2) the tracking force gives every node of the
+/// line: the `(kp, kd)` gains (1/s^2, 1/s) on the departure of the line's
+/// centre of mass (`masses`, kg; `position`, m; `velocity`, m/s) from the
+/// reference `(u, v)` (m, m/s).
+fn tracking_acceleration(
+    masses: &[f64],
+    position: &[f64],
+    velocity: &[f64],
+    (u, v): (f64, f64),
+    (kp, kd): (f64, f64),
+) -> f64 {
+    let total: f64 = masses.iter().sum();
+    let mean = |x: &[f64]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
+    kp * (u - mean(position)) + kd * (v - mean(velocity))
+}
+
+/// The line's state packed for the integrator: the `nodes` positions (m),
+/// then their velocities (m/s).
+fn packed_state(state: &NodeState, nodes: usize) -> [f64; 2 * MAX_NODES] {
+    let mut y = [0.0; 2 * MAX_NODES];
+    y[..nodes].copy_from_slice(&state.position_m[..nodes]);
+    y[nodes..2 * nodes].copy_from_slice(&state.velocity_mps[..nodes]);
+    y
 }
 
 /// Below this fraction of the chain's first elastic mode the chain turns as

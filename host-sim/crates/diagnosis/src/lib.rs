@@ -729,12 +729,10 @@ fn counterpart(
     // The nominal torque-driven run, raw: the accelerometers' high-pass
     // belongs to the acquisition and is found from it once, then applied to
     // every run of the recording (this one included).
-    let nominal_driven = if driven {
-        let settings = driven::DrivenSettings::default();
-        Some(driven_accelerations(models[0], recording, &measured, drive_record, &settings, &none)?)
-    } else {
-        None
-    };
+    let settings = driven::DrivenSettings::default();
+    let nominal_driven = driven
+        .then(|| driven_accelerations(models[0], recording, &measured, drive_record, &settings, &none))
+        .transpose()?;
     let highpass = match &nominal_driven {
         Some((car, _)) => driven_highpass(&measured, car)?,
         None => acquisition::Highpass::NONE,
@@ -743,16 +741,7 @@ fn counterpart(
         driven_counterpart(model, recording, &measured, drive_record, highpass, settings, &none)
     };
     let (nominal, perturbed, how) = if let Some(raw) = nominal_driven {
-        let settings = driven::DrivenSettings::default();
-        let mut perturbed = vec![run_driven(models[1], &settings)?, run_driven(models[2], &settings)?];
-        for alternative in driven::DrivenSettings::alternatives() {
-            perturbed.push(run_driven(models[0], &alternative)?);
-        }
-        if driven::begins_in_motion(&measured.angle_rad, measured.sample_rate_hz) {
-            for alternative in driven::DrivenSettings::start_alternatives() {
-                perturbed.push(run_driven(models[0], &alternative)?);
-            }
-        }
+        let perturbed = driven_perturbed(models, &measured, run_driven)?;
         let inputs = DrivenInputs {
             measured: measured.clone(),
             torque_nm: torque.clone(),
@@ -798,6 +787,28 @@ fn counterpart(
         simulations,
         how,
     })
+}
+
+/// The torque-driven model's perturbed runs (`run` on a model with
+/// settings): the two perturbed rigs of `models`, the settings'
+/// alternatives on the calibrated rig, and the start's alternatives when
+/// the recording begins in motion.
+fn driven_perturbed(
+    models: [&RigConfig; 3],
+    measured: &ChainSignals,
+    run: impl Fn(&RigConfig, &driven::DrivenSettings) -> Result<ChainSignals>,
+) -> Result<Vec<ChainSignals>> {
+    let settings = driven::DrivenSettings::default();
+    let mut perturbed = vec![run(models[1], &settings)?, run(models[2], &settings)?];
+    for alternative in driven::DrivenSettings::alternatives() {
+        perturbed.push(run(models[0], &alternative)?);
+    }
+    if driven::begins_in_motion(&measured.angle_rad, measured.sample_rate_hz) {
+        for alternative in driven::DrivenSettings::start_alternatives() {
+            perturbed.push(run(models[0], &alternative)?);
+        }
+    }
+    Ok(perturbed)
 }
 
 /// The simulated counterpart of a recording (the closed loop's run

@@ -19,34 +19,17 @@
 
 use crate::attribute::Candidate;
 
-/// Where an effect's parameter makes the effect vanish.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Neutral {
-    /// At this value (a friction of 0 N, an inertia of 0, one rope element).
-    At(f64),
-    /// Beyond the parameter's largest value (a frame mode's frequency or
-    /// damping: the mode leaves the band or dies out).
-    AboveRange,
-    /// The parameter is not a strength (a phase).
-    NotAStrength,
-}
+use plant::effects::EffectKind;
+pub use plant::effects::Neutral;
 
 /// The neutral value of parameter `parameter` of effect `effect` (the
-/// library's names, [`plant::effects::EffectKind`]).
+/// library's names), as the effect declares it
+/// ([`plant::effects::ParamSpec::neutral`]); a parameter the library does
+/// not declare (an electrical line's amplitude) vanishes at zero.
 pub fn neutral(effect: &str, parameter: &str) -> Neutral {
-    match (effect, parameter) {
-        (_, p) if p.contains("phase") => Neutral::NotAStrength,
-        ("rope_discretization", "elements") => Neutral::At(1.0),
-        ("car_frame_mode", _) => Neutral::AboveRange,
-        // How strongly the pulley's own mode is damped says nothing on
-        // whether there is a pulley: its inertia does.
-        ("diverting_pulley", "damping_ratio") => Neutral::NotAStrength,
-        // Every other strength of the library vanishes at zero: the
-        // tension-stiffening exponent, the pulley's inertia, the friction
-        // force, the clamp's stiffness, the eccentricities, the dead time,
-        // the transducers' offsets and gain errors, the dead time's line.
-        _ => Neutral::At(0.0),
-    }
+    EffectKind::from_name(effect)
+        .and_then(|kind| kind.parameters().iter().find(|s| s.name == parameter))
+        .map_or(Neutral::At(0.0), |spec| spec.neutral)
 }
 
 /// Whether a candidate may be named, and why not.

@@ -10,15 +10,16 @@
 //! nominal model misses most, and gives the attribution the best of them
 //! with its two neighbours: a bracket that the grid refinement then halves.
 
-use plant::effects::{EffectKind, ParamScale};
+use plant::effects::{EffectKind, Fit, ParamScale};
 
 /// Values of the fitted parameter on a screened effect's dense line.
 pub const SCREEN_POINTS: usize = 24;
 
-/// The effects that are screened: grid effects whose one fitted parameter
-/// (their first) sets a natural frequency.
+/// The effects that are screened: grid effects whose first fitted
+/// parameter sets a natural frequency, as they declare
+/// ([`plant::effects::Fit::Grid`]'s `screened`).
 pub fn is_screened(kind: EffectKind) -> bool {
-    matches!(kind, EffectKind::DivertingPulley | EffectKind::TensionStiffening | EffectKind::BrakeStop)
+    matches!(kind.fit(), Fit::Grid { screened: true, .. })
 }
 
 /// The dense line of `kind`: `template` (the effect's full parameter vector,

@@ -1,5 +1,11 @@
 //! The brake clamps the sheave at the end of the travel through an elastic clamp.
 
+use super::declare::{
+    Effect, Fit, Neutral,
+    ParamScale::{Linear, Log},
+    ParamSpec, Seen,
+};
+
 /// The brake clamps the sheave at the end of the travel through an elastic clamp.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BrakeStop {
@@ -29,6 +35,47 @@ impl BrakeStop {
     /// on the clamp alone: `sqrt(k / I) / 2 pi`.
     pub fn clamp_frequency_hz(&self, inertia_kg_m2: f64) -> f64 {
         (self.clamp_stiffness_nm_per_rad / inertia_kg_m2).sqrt() / std::f64::consts::TAU
+    }
+}
+
+impl Effect for BrakeStop {
+    const NAME: &'static str = "brake_stop";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new(
+            "clamp_stiffness_nm_per_rad",
+            "N m/rad",
+            3.0e4,
+            1.0e3,
+            1.0e6,
+            Log,
+            true,
+            "torsional stiffness of the clamped brake",
+        )
+        // The nominal plant's brake holds the sheave rigidly: the clamp
+        // vanishes as it stiffens.
+        .neutral_at(Neutral::AboveRange),
+        ParamSpec::new(
+            "clamp_damping_nms_per_rad",
+            "N m s/rad",
+            5.0,
+            0.0,
+            200.0,
+            Linear,
+            false,
+            "damping of the clamped brake",
+        ),
+    ];
+    const FIT: Fit = Fit::Grid { axes: &[(0, &[4.0e3, 3.0e4, 2.0e5])], screened: true };
+    // It acts while the brake holds, where another drive's start and stop
+    // sequence is not compared.
+    const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: false };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { clamp_stiffness_nm_per_rad: v[0], clamp_damping_nms_per_rad: v[1] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.clamp_stiffness_nm_per_rad, self.clamp_damping_nms_per_rad]
     }
 }
 

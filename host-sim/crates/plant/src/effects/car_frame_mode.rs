@@ -1,5 +1,11 @@
 //! A flexible mode of the car frame between the rope hitch and the accelerometer (the paper's 235 Hz).
 
+use super::declare::{
+    Effect, Fit, Neutral,
+    ParamScale::{Linear, Log},
+    ParamSpec, Seen,
+};
+
 /// A flexible mode of the car frame between the rope hitch and the accelerometer (the paper's 235 Hz).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CarFrameMode {
@@ -39,6 +45,37 @@ impl CarFrameMode {
     /// both are free: `f / sqrt(1 - beta)` (reduced mass `beta (1 - beta) m`).
     pub fn free_free_frequency_hz(&self) -> f64 {
         self.frequency_hz / (1.0 - self.mass_fraction).sqrt()
+    }
+}
+
+impl Effect for CarFrameMode {
+    const NAME: &'static str = "car_frame_mode";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new("frequency_hz", "Hz", 235.0, 80.0, 500.0, Log, true, "frame mode with the hitch held")
+            .neutral_at(Neutral::AboveRange),
+        ParamSpec::new("damping_ratio", "-", 0.02, 0.005, 0.2, Log, true, "modal damping ratio")
+            .neutral_at(Neutral::AboveRange),
+        ParamSpec::new(
+            "mass_fraction",
+            "-",
+            0.3,
+            0.02,
+            0.8,
+            Linear,
+            false,
+            "share of the car mass on the accelerometer side",
+        )
+        .neutral_at(Neutral::AboveRange),
+    ];
+    const FIT: Fit = Fit::Grid { axes: &[(0, &[120.0, 200.0, 330.0]), (1, &[0.015, 0.05])], screened: false };
+    const SEEN: Seen = Seen { in_free_decay: true, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { frequency_hz: v[0], damping_ratio: v[1], mass_fraction: v[2] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.frequency_hz, self.damping_ratio, self.mass_fraction]
     }
 }
 

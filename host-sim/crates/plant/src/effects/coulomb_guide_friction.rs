@@ -1,5 +1,11 @@
 //! Dry (Coulomb) friction at the guide shoes of car and counterweight, besides the viscous part.
 
+use super::declare::{
+    Effect, Fit,
+    ParamScale::{Linear, Log},
+    ParamSpec, Seen,
+};
+
 /// Dry (Coulomb) friction at the guide shoes of car and counterweight, besides the viscous part.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CoulombGuideFriction {
@@ -21,6 +27,42 @@ impl CoulombGuideFriction {
     /// step must resolve.
     pub fn stiffness_rate_per_s(&self, mass_kg: f64) -> f64 {
         self.friction_n / (self.slip_speed_mps * mass_kg)
+    }
+}
+
+impl Effect for CoulombGuideFriction {
+    const NAME: &'static str = "coulomb_guide_friction";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new(
+            "friction_n",
+            "N",
+            20.0,
+            0.0,
+            150.0,
+            Linear,
+            true,
+            "dry friction force at each guide (car and counterweight)",
+        ),
+        ParamSpec::new(
+            "slip_speed_mps",
+            "m/s",
+            0.002,
+            1.0e-3,
+            0.05,
+            Log,
+            false,
+            "speed over which the friction force builds up (tanh)",
+        ),
+    ];
+    const FIT: Fit = Fit::Linear(&[(0, 40.0)]);
+    const SEEN: Seen = Seen { in_free_decay: true, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { friction_n: v[0], slip_speed_mps: v[1] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.friction_n, self.slip_speed_mps]
     }
 }
 

@@ -1,5 +1,7 @@
 //! Gain and offset errors of the phase-current transducers that the controller trusts.
 
+use super::declare::{Effect, Fit, ParamScale::Linear, ParamSpec, Seen};
+
 /// Gain and offset errors of the phase-current transducers that the controller trusts.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CurrentSensorError {
@@ -23,6 +25,28 @@ impl CurrentSensorError {
             (1.0 + self.gain_error_b) * true_a[1] + self.offset_b_a,
             true_a[2],
         ]
+    }
+}
+
+impl Effect for CurrentSensorError {
+    const NAME: &'static str = "current_sensor_error";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new("offset_a_a", "A", 0.2, -1.0, 1.0, Linear, true, "offset of the phase-a transducer"),
+        ParamSpec::new("offset_b_a", "A", -0.1, -1.0, 1.0, Linear, true, "offset of the phase-b transducer"),
+        ParamSpec::new("gain_error_a", "-", 0.01, -0.05, 0.05, Linear, true, "relative gain error of phase a"),
+        ParamSpec::new("gain_error_b", "-", -0.01, -0.05, 0.05, Linear, true, "relative gain error of phase b"),
+    ];
+    const FIT: Fit = Fit::Linear(&[(0, 0.2), (1, 0.2), (2, 0.01), (3, 0.01)]);
+    // The torque-driven model takes the true torque from the recorded
+    // currents read as the drive's transducer signals.
+    const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { offset_a_a: v[0], offset_b_a: v[1], gain_error_a: v[2], gain_error_b: v[3] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.offset_a_a, self.offset_b_a, self.gain_error_a, self.gain_error_b]
     }
 }
 

@@ -1,5 +1,11 @@
 //! The inverter's dead time distorts the phase voltages.
 
+use super::declare::{
+    Effect, Fit,
+    ParamScale::{Linear, Log},
+    ParamSpec, Seen,
+};
+
 /// The inverter's dead time distorts the phase voltages.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DeadTime {
@@ -29,6 +35,35 @@ impl DeadTime {
     /// fundamental is `(4/pi) dV`, opposing the current.
     pub fn fundamental_drop_v(&self, dc_bus_v: f64, pwm_hz: f64) -> f64 {
         4.0 / std::f64::consts::PI * self.dead_time_s * pwm_hz * dc_bus_v
+    }
+}
+
+impl Effect for DeadTime {
+    const NAME: &'static str = "dead_time";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new("dead_time_s", "s", 1.0e-6, 0.0, 5.0e-6, Linear, true, "dead time per switching edge"),
+        ParamSpec::new(
+            "current_threshold_a",
+            "A",
+            0.3,
+            0.01,
+            5.0,
+            Log,
+            false,
+            "current over which the error reaches its full value",
+        ),
+    ];
+    const FIT: Fit = Fit::Linear(&[(0, 0.3e-6)]);
+    // The recorded currents, and so the torque that drives the diagnosis's
+    // model under another drive, carry it.
+    const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: false };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { dead_time_s: v[0], current_threshold_a: v[1] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.dead_time_s, self.current_threshold_a]
     }
 }
 

@@ -1,5 +1,11 @@
 //! The diverting pulley as a rotational degree of freedom on the car side, between sheave and car.
 
+use super::declare::{
+    Effect, Fit, Neutral,
+    ParamScale::{Linear, Log},
+    ParamSpec, Seen,
+};
+
 /// The diverting pulley as a rotational degree of freedom on the car side, between sheave and car.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DivertingPulley {
@@ -58,6 +64,40 @@ impl DivertingPulley {
     /// `car_side_length_m` (m): `l_c - l_sp`.
     pub fn rope_below_pulley_m(&self, car_side_length_m: f64) -> f64 {
         car_side_length_m - self.sheave_to_pulley_m
+    }
+}
+
+impl Effect for DivertingPulley {
+    const NAME: &'static str = "diverting_pulley";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new("inertia_kg_m2", "kg m^2", 0.02, 0.002, 0.2, Log, true, "pulley inertia"),
+        ParamSpec::new("radius_m", "m", 0.065, 0.02, 0.3, Linear, false, "pulley radius"),
+        ParamSpec::new(
+            "sheave_to_pulley_m",
+            "m",
+            0.5,
+            0.05,
+            0.9,
+            Linear,
+            false,
+            "rope length from the sheave to the pulley",
+        ),
+        // How strongly the pulley's own mode is damped says nothing on
+        // whether there is a pulley: its inertia does.
+        ParamSpec::new("damping_ratio", "-", 0.02, 0.002, 0.5, Log, true, "damping ratio of the pulley's own mode")
+            .neutral_at(Neutral::NotAStrength),
+    ];
+    // The pulley's own mode is as strong as it is undamped: its damping is
+    // searched with its inertia.
+    const FIT: Fit = Fit::Grid { axes: &[(0, &[0.004, 0.012, 0.035, 0.1]), (3, &[0.005, 0.02, 0.08])], screened: true };
+    const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { inertia_kg_m2: v[0], radius_m: v[1], sheave_to_pulley_m: v[2], damping_ratio: v[3] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.inertia_kg_m2, self.radius_m, self.sheave_to_pulley_m, self.damping_ratio]
     }
 }
 

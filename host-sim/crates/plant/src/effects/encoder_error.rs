@@ -1,5 +1,12 @@
 //! Encoder eccentricity: an angle error once per revolution, error = a sin(theta + phase).
 
+use super::declare::{
+    Effect, Fit,
+    ParamScale::{Angle, Linear},
+    ParamSpec, Seen,
+};
+use std::f64::consts::TAU;
+
 /// Encoder eccentricity: an angle error once per revolution, error = a sin(theta + phase).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EncoderError {
@@ -14,6 +21,33 @@ impl EncoderError {
     /// `theta_rad` (rad): `theta + a sin(theta + phase)`.
     pub fn measured_angle_rad(&self, theta_rad: f64) -> f64 {
         theta_rad + self.eccentricity_rad * (theta_rad + self.phase_rad).sin()
+    }
+}
+
+impl Effect for EncoderError {
+    const NAME: &'static str = "encoder_error";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new(
+            "eccentricity_rad",
+            "rad",
+            0.002,
+            0.0,
+            0.01,
+            Linear,
+            true,
+            "angle error amplitude, once per revolution",
+        ),
+        ParamSpec::new("phase_rad", "rad", 0.0, 0.0, TAU, Angle, true, "phase: error = a sin(theta + phase)"),
+    ];
+    const FIT: Fit = Fit::Polar { amplitude: 0, phase: 1, probe: 0.002 };
+    const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { eccentricity_rad: v[0], phase_rad: v[1] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.eccentricity_rad, self.phase_rad]
     }
 }
 

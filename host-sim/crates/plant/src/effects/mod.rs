@@ -1,234 +1,130 @@
-//! The full plant's library of unmodelled effects: each a small module with
-//! named parameters, switched on in any combination through [`Effects`] (a
-//! TOML file, `[name] parameter = value`, or `--effect name:param=value`
+//! The full plant's library of unmodelled effects: each a file that
+//! declares everything about it ([`Effect`]: name, parameters with units
+//! and ranges, how the gap diagnosis fits it, where it can be seen) beside
+//! its physics, switched on in any combination through [`Effects`] (a TOML
+//! file, `[name] parameter = value`, or `--effect name:param=value`
 //! flags). With every effect off the plant is the paper's nominal model.
 //!
-//! The parameters of every effect are listed in [`EffectKind::parameters`]
-//! with their units, ranges and which of them the gap diagnosis fits; the
-//! values of one effect travel as a slice in that order
-//! ([`Effects::set`], [`Effects::values`]).
+//! The library is the one list in [`library!`]'s invocation below: adding
+//! an effect is its file and one line there (docs/model.md, "Adding an
+//! effect"). The values of one effect travel as a slice in the order of its
+//! parameters ([`Effects::set`], [`Effects::values`]).
 
-pub mod brake_stop;
-pub mod car_frame_mode;
-pub mod coulomb_guide_friction;
-pub mod current_sensor_error;
-pub mod dead_time;
-pub mod diverting_pulley;
-pub mod encoder_error;
-pub mod rope_discretization;
-pub mod sheave_eccentricity;
-pub mod tension_stiffening;
+pub mod declare;
 
-pub use brake_stop::BrakeStop;
-pub use car_frame_mode::CarFrameMode;
-pub use coulomb_guide_friction::CoulombGuideFriction;
-pub use current_sensor_error::CurrentSensorError;
-pub use dead_time::DeadTime;
-pub use diverting_pulley::DivertingPulley;
-pub use encoder_error::EncoderError;
-pub use rope_discretization::RopeDiscretization;
-pub use sheave_eccentricity::SheaveEccentricity;
-pub use tension_stiffening::TensionStiffening;
+pub use declare::{Effect, Fit, FromData, Neutral, ParamScale, ParamSpec, Seen};
 
-use std::f64::consts::TAU;
+/// Builds the library from its list, `module::Type,` per effect (the
+/// module is the effect's file and its field in [`Effects`]): the
+/// [`EffectKind`] of each, [`EffectKind::ALL`] in list order, the
+/// [`Effects`] set, and every per-effect dispatch, read from the effects'
+/// [`Effect`] declarations.
+macro_rules! library {
+    ($($module:ident :: $ty:ident),* $(,)?) => {
+        $(pub mod $module;)*
+        $(pub use $module::$ty;)*
 
-/// One effect of the library.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum EffectKind {
-    /// EA grows with rope tension: `EA = EA0 (T / T_ref)^alpha`.
-    TensionStiffening,
-    /// The diverting pulley as a rotational degree of freedom between sheave and car.
-    DivertingPulley,
-    /// `N` lumped rope elements per side instead of one.
-    RopeDiscretization,
-    /// A flexible car-frame mode between the rope hitch and the accelerometer.
-    CarFrameMode,
-    /// Dry friction at the guide shoes of car and counterweight.
-    CoulombGuideFriction,
-    /// The brake clamps the sheave elastically at the end of the travel.
-    BrakeStop,
-    /// The traction sheave's radius varies with its angle.
-    SheaveEccentricity,
-    /// The inverter's dead time distorts the phase voltages.
-    DeadTime,
-    /// Gain and offset errors of the phase-current transducers the drive trusts.
-    CurrentSensorError,
-    /// Encoder eccentricity: an angle error once per revolution.
-    EncoderError,
+        /// One effect of the library.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum EffectKind {
+            $(
+                #[doc = concat!("[`", stringify!($ty), "`]")]
+                $ty,
+            )*
+        }
+
+        const EFFECT_COUNT: usize = [$(stringify!($ty)),*].len();
+
+        impl EffectKind {
+            /// Every effect of the library, in the list's order.
+            pub const ALL: [EffectKind; EFFECT_COUNT] = [$(EffectKind::$ty),*];
+
+            /// The effect's name in files, flags and reports ([`Effect::NAME`]).
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(EffectKind::$ty => <$ty as Effect>::NAME,)*
+                }
+            }
+
+            /// Its parameters, in the order of [`Effects::set`] ([`Effect::PARAMETERS`]).
+            pub fn parameters(self) -> &'static [ParamSpec] {
+                match self {
+                    $(EffectKind::$ty => <$ty as Effect>::PARAMETERS,)*
+                }
+            }
+
+            /// How the gap diagnosis fits it ([`Effect::FIT`]).
+            pub fn fit(self) -> Fit {
+                match self {
+                    $(EffectKind::$ty => <$ty as Effect>::FIT,)*
+                }
+            }
+
+            /// Where it can be seen ([`Effect::SEEN`]).
+            pub fn seen(self) -> Seen {
+                match self {
+                    $(EffectKind::$ty => <$ty as Effect>::SEEN,)*
+                }
+            }
+        }
+
+        /// Which effects the plant has, with their parameters (all off: the
+        /// nominal plant).
+        #[derive(Clone, Copy, Debug, Default, PartialEq)]
+        pub struct Effects {
+            $(
+                #[doc = concat!("[`", stringify!($ty), "`], when on.")]
+                pub $module: Option<$ty>,
+            )*
+        }
+
+        impl Effects {
+            /// Switches `kind` on with `values` (in [`EffectKind::parameters`]
+            /// order), checked against their ranges.
+            pub fn set(&mut self, kind: EffectKind, values: &[f64]) -> Result<(), EffectError> {
+                check_values(kind, values, "effect parameters")?;
+                match kind {
+                    $(EffectKind::$ty => self.$module = Some(<$ty as Effect>::from_values(values)),)*
+                }
+                Ok(())
+            }
+
+            /// Switches `kind` off.
+            pub fn clear(&mut self, kind: EffectKind) {
+                match kind {
+                    $(EffectKind::$ty => self.$module = None,)*
+                }
+            }
+
+            /// The parameter values of `kind` (in [`EffectKind::parameters`]
+            /// order) when it is on.
+            pub fn values(&self, kind: EffectKind) -> Option<Vec<f64>> {
+                match kind {
+                    $(EffectKind::$ty => self.$module.as_ref().map(Effect::values),)*
+                }
+            }
+        }
+    };
 }
 
-/// How a parameter is searched when it is fitted.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ParamScale {
-    /// Evenly over `[min, max]`.
-    Linear,
-    /// Evenly in `log` over `[min, max]` (`min > 0`).
-    Log,
-    /// Whole numbers in `[min, max]`.
-    Integer,
-    /// A phase angle, rad, periodic over `[0, 2 pi)`.
-    Angle,
+// The library: one line per effect.
+library! {
+    tension_stiffening::TensionStiffening,
+    diverting_pulley::DivertingPulley,
+    rope_discretization::RopeDiscretization,
+    car_frame_mode::CarFrameMode,
+    coulomb_guide_friction::CoulombGuideFriction,
+    brake_stop::BrakeStop,
+    sheave_eccentricity::SheaveEccentricity,
+    dead_time::DeadTime,
+    current_sensor_error::CurrentSensorError,
+    encoder_error::EncoderError,
 }
-
-/// One named parameter of an effect.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ParamSpec {
-    /// Name, with its unit as suffix (`_n`, `_hz`, `_s`, `_rad`, ...).
-    pub name: &'static str,
-    /// Unit, as text (`"-"` when dimensionless).
-    pub unit: &'static str,
-    /// Value when the effect is switched on without it.
-    pub default: f64,
-    /// Smallest accepted value.
-    pub min: f64,
-    /// Largest accepted value.
-    pub max: f64,
-    /// How the diagnosis searches it.
-    pub scale: ParamScale,
-    /// Whether the gap diagnosis fits it (otherwise it keeps its default or
-    /// the value the diagnosis derives from the data).
-    pub fitted: bool,
-    /// What it is.
-    pub doc: &'static str,
-}
-
-#[allow(clippy::too_many_arguments)]
-const fn p(
-    name: &'static str,
-    unit: &'static str,
-    default: f64,
-    min: f64,
-    max: f64,
-    scale: ParamScale,
-    fitted: bool,
-    doc: &'static str,
-) -> ParamSpec {
-    ParamSpec { name, unit, default, min, max, scale, fitted, doc }
-}
-
-use ParamScale::{Angle, Integer, Linear, Log};
-
-const TENSION_STIFFENING: [ParamSpec; 2] = [
-    p("alpha", "-", 0.2, 0.0, 1.0, Linear, true, "exponent of EA = EA0 (T / T_ref)^alpha"),
-    p(
-        "reference_tension_n",
-        "N",
-        323.73,
-        10.0,
-        1.0e4,
-        Log,
-        false,
-        "tension at which EA equals the configured EA0 (default: 33 kg hanging)",
-    ),
-];
-const DIVERTING_PULLEY: [ParamSpec; 4] = [
-    p("inertia_kg_m2", "kg m^2", 0.02, 0.002, 0.2, Log, true, "pulley inertia"),
-    p("radius_m", "m", 0.065, 0.02, 0.3, Linear, false, "pulley radius"),
-    p("sheave_to_pulley_m", "m", 0.5, 0.05, 0.9, Linear, false, "rope length from the sheave to the pulley"),
-    p("damping_ratio", "-", 0.02, 0.002, 0.5, Log, true, "damping ratio of the pulley's own mode"),
-];
-const ROPE_DISCRETIZATION: [ParamSpec; 1] =
-    [p("elements", "-", 4.0, 1.0, 8.0, Integer, true, "lumped elements per rope side")];
-const CAR_FRAME_MODE: [ParamSpec; 3] = [
-    p("frequency_hz", "Hz", 235.0, 80.0, 500.0, Log, true, "frame mode with the hitch held"),
-    p("damping_ratio", "-", 0.02, 0.005, 0.2, Log, true, "modal damping ratio"),
-    p("mass_fraction", "-", 0.3, 0.02, 0.8, Linear, false, "share of the car mass on the accelerometer side"),
-];
-const COULOMB_GUIDE_FRICTION: [ParamSpec; 2] = [
-    p("friction_n", "N", 20.0, 0.0, 150.0, Linear, true, "dry friction force at each guide (car and counterweight)"),
-    p("slip_speed_mps", "m/s", 0.002, 1.0e-3, 0.05, Log, false, "speed over which the friction force builds up (tanh)"),
-];
-const BRAKE_STOP: [ParamSpec; 2] = [
-    p(
-        "clamp_stiffness_nm_per_rad",
-        "N m/rad",
-        3.0e4,
-        1.0e3,
-        1.0e6,
-        Log,
-        true,
-        "torsional stiffness of the clamped brake",
-    ),
-    p("clamp_damping_nms_per_rad", "N m s/rad", 5.0, 0.0, 200.0, Linear, false, "damping of the clamped brake"),
-];
-const SHEAVE_ECCENTRICITY: [ParamSpec; 2] = [
-    p(
-        "eccentricity",
-        "-",
-        0.005,
-        0.0,
-        0.02,
-        Linear,
-        true,
-        "relative radius variation: r = r0 (1 + e cos(theta + phase))",
-    ),
-    p("phase_rad", "rad", 0.0, 0.0, TAU, Angle, true, "angle of the largest radius"),
-];
-const DEAD_TIME: [ParamSpec; 2] = [
-    p("dead_time_s", "s", 1.0e-6, 0.0, 5.0e-6, Linear, true, "dead time per switching edge"),
-    p("current_threshold_a", "A", 0.3, 0.01, 5.0, Log, false, "current over which the error reaches its full value"),
-];
-const CURRENT_SENSOR_ERROR: [ParamSpec; 4] = [
-    p("offset_a_a", "A", 0.2, -1.0, 1.0, Linear, true, "offset of the phase-a transducer"),
-    p("offset_b_a", "A", -0.1, -1.0, 1.0, Linear, true, "offset of the phase-b transducer"),
-    p("gain_error_a", "-", 0.01, -0.05, 0.05, Linear, true, "relative gain error of phase a"),
-    p("gain_error_b", "-", -0.01, -0.05, 0.05, Linear, true, "relative gain error of phase b"),
-];
-const ENCODER_ERROR: [ParamSpec; 2] = [
-    p("eccentricity_rad", "rad", 0.002, 0.0, 0.01, Linear, true, "angle error amplitude, once per revolution"),
-    p("phase_rad", "rad", 0.0, 0.0, TAU, Angle, true, "phase: error = a sin(theta + phase)"),
-];
 
 impl EffectKind {
-    /// Every effect of the library, in a fixed order.
-    pub const ALL: [EffectKind; 10] = [
-        EffectKind::TensionStiffening,
-        EffectKind::DivertingPulley,
-        EffectKind::RopeDiscretization,
-        EffectKind::CarFrameMode,
-        EffectKind::CoulombGuideFriction,
-        EffectKind::BrakeStop,
-        EffectKind::SheaveEccentricity,
-        EffectKind::DeadTime,
-        EffectKind::CurrentSensorError,
-        EffectKind::EncoderError,
-    ];
-
-    /// The effect's name in files, flags and reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            EffectKind::TensionStiffening => "tension_stiffening",
-            EffectKind::DivertingPulley => "diverting_pulley",
-            EffectKind::RopeDiscretization => "rope_discretization",
-            EffectKind::CarFrameMode => "car_frame_mode",
-            EffectKind::CoulombGuideFriction => "coulomb_guide_friction",
-            EffectKind::BrakeStop => "brake_stop",
-            EffectKind::SheaveEccentricity => "sheave_eccentricity",
-            EffectKind::DeadTime => "dead_time",
-            EffectKind::CurrentSensorError => "current_sensor_error",
-            EffectKind::EncoderError => "encoder_error",
-        }
-    }
-
     /// The effect named `name`, if any.
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.name() == name)
-    }
-
-    /// Its parameters, in the order of [`Effects::set`].
-    pub fn parameters(self) -> &'static [ParamSpec] {
-        match self {
-            EffectKind::TensionStiffening => &TENSION_STIFFENING,
-            EffectKind::DivertingPulley => &DIVERTING_PULLEY,
-            EffectKind::RopeDiscretization => &ROPE_DISCRETIZATION,
-            EffectKind::CarFrameMode => &CAR_FRAME_MODE,
-            EffectKind::CoulombGuideFriction => &COULOMB_GUIDE_FRICTION,
-            EffectKind::BrakeStop => &BRAKE_STOP,
-            EffectKind::SheaveEccentricity => &SHEAVE_ECCENTRICITY,
-            EffectKind::DeadTime => &DEAD_TIME,
-            EffectKind::CurrentSensorError => &CURRENT_SENSOR_ERROR,
-            EffectKind::EncoderError => &ENCODER_ERROR,
-        }
     }
 
     /// Default values of its parameters.
@@ -286,32 +182,6 @@ pub enum EffectError {
     },
 }
 
-/// Which effects the plant has, with their parameters (all off: the
-/// nominal plant).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Effects {
-    /// EA grows with tension.
-    pub tension_stiffening: Option<TensionStiffening>,
-    /// The diverting pulley's rotation.
-    pub diverting_pulley: Option<DivertingPulley>,
-    /// More rope elements per side.
-    pub rope_discretization: Option<RopeDiscretization>,
-    /// The car frame's first mode.
-    pub car_frame_mode: Option<CarFrameMode>,
-    /// Dry guide friction.
-    pub coulomb_guide_friction: Option<CoulombGuideFriction>,
-    /// Elastic brake clamp at the stop.
-    pub brake_stop: Option<BrakeStop>,
-    /// Eccentric traction sheave.
-    pub sheave_eccentricity: Option<SheaveEccentricity>,
-    /// Inverter dead time.
-    pub dead_time: Option<DeadTime>,
-    /// Current transducer errors.
-    pub current_sensor_error: Option<CurrentSensorError>,
-    /// Encoder eccentricity.
-    pub encoder_error: Option<EncoderError>,
-}
-
 fn check_values(kind: EffectKind, values: &[f64], origin: &str) -> Result<(), EffectError> {
     let specs = kind.parameters();
     if values.len() != specs.len() {
@@ -355,98 +225,6 @@ impl Effects {
     /// The effects switched on, in [`EffectKind::ALL`] order.
     pub fn enabled(&self) -> Vec<EffectKind> {
         EffectKind::ALL.into_iter().filter(|&k| self.values(k).is_some()).collect()
-    }
-
-    /// Switches `kind` on with `values` (in [`EffectKind::parameters`]
-    /// order), checked against their ranges.
-    pub fn set(&mut self, kind: EffectKind, values: &[f64]) -> Result<(), EffectError> {
-        check_values(kind, values, "effect parameters")?;
-        let v = values;
-        match kind {
-            EffectKind::TensionStiffening => {
-                self.tension_stiffening = Some(TensionStiffening { alpha: v[0], reference_tension_n: v[1] })
-            }
-            EffectKind::DivertingPulley => {
-                self.diverting_pulley = Some(DivertingPulley {
-                    inertia_kg_m2: v[0],
-                    radius_m: v[1],
-                    sheave_to_pulley_m: v[2],
-                    damping_ratio: v[3],
-                })
-            }
-            EffectKind::RopeDiscretization => {
-                self.rope_discretization = Some(RopeDiscretization { elements: v[0] as usize })
-            }
-            EffectKind::CarFrameMode => {
-                self.car_frame_mode =
-                    Some(CarFrameMode { frequency_hz: v[0], damping_ratio: v[1], mass_fraction: v[2] })
-            }
-            EffectKind::CoulombGuideFriction => {
-                self.coulomb_guide_friction = Some(CoulombGuideFriction { friction_n: v[0], slip_speed_mps: v[1] })
-            }
-            EffectKind::BrakeStop => {
-                self.brake_stop = Some(BrakeStop { clamp_stiffness_nm_per_rad: v[0], clamp_damping_nms_per_rad: v[1] })
-            }
-            EffectKind::SheaveEccentricity => {
-                self.sheave_eccentricity = Some(SheaveEccentricity { eccentricity: v[0], phase_rad: v[1] })
-            }
-            EffectKind::DeadTime => self.dead_time = Some(DeadTime { dead_time_s: v[0], current_threshold_a: v[1] }),
-            EffectKind::CurrentSensorError => {
-                self.current_sensor_error = Some(CurrentSensorError {
-                    offset_a_a: v[0],
-                    offset_b_a: v[1],
-                    gain_error_a: v[2],
-                    gain_error_b: v[3],
-                })
-            }
-            EffectKind::EncoderError => {
-                self.encoder_error = Some(EncoderError { eccentricity_rad: v[0], phase_rad: v[1] })
-            }
-        }
-        Ok(())
-    }
-
-    /// Switches `kind` off.
-    pub fn clear(&mut self, kind: EffectKind) {
-        match kind {
-            EffectKind::TensionStiffening => self.tension_stiffening = None,
-            EffectKind::DivertingPulley => self.diverting_pulley = None,
-            EffectKind::RopeDiscretization => self.rope_discretization = None,
-            EffectKind::CarFrameMode => self.car_frame_mode = None,
-            EffectKind::CoulombGuideFriction => self.coulomb_guide_friction = None,
-            EffectKind::BrakeStop => self.brake_stop = None,
-            EffectKind::SheaveEccentricity => self.sheave_eccentricity = None,
-            EffectKind::DeadTime => self.dead_time = None,
-            EffectKind::CurrentSensorError => self.current_sensor_error = None,
-            EffectKind::EncoderError => self.encoder_error = None,
-        }
-    }
-
-    /// The parameter values of `kind` (in [`EffectKind::parameters`] order)
-    /// when it is on.
-    pub fn values(&self, kind: EffectKind) -> Option<Vec<f64>> {
-        match kind {
-            EffectKind::TensionStiffening => self.tension_stiffening.map(|e| vec![e.alpha, e.reference_tension_n]),
-            EffectKind::DivertingPulley => {
-                self.diverting_pulley.map(|e| vec![e.inertia_kg_m2, e.radius_m, e.sheave_to_pulley_m, e.damping_ratio])
-            }
-            EffectKind::RopeDiscretization => self.rope_discretization.map(|e| vec![e.elements as f64]),
-            EffectKind::CarFrameMode => {
-                self.car_frame_mode.map(|e| vec![e.frequency_hz, e.damping_ratio, e.mass_fraction])
-            }
-            EffectKind::CoulombGuideFriction => {
-                self.coulomb_guide_friction.map(|e| vec![e.friction_n, e.slip_speed_mps])
-            }
-            EffectKind::BrakeStop => {
-                self.brake_stop.map(|e| vec![e.clamp_stiffness_nm_per_rad, e.clamp_damping_nms_per_rad])
-            }
-            EffectKind::SheaveEccentricity => self.sheave_eccentricity.map(|e| vec![e.eccentricity, e.phase_rad]),
-            EffectKind::DeadTime => self.dead_time.map(|e| vec![e.dead_time_s, e.current_threshold_a]),
-            EffectKind::CurrentSensorError => {
-                self.current_sensor_error.map(|e| vec![e.offset_a_a, e.offset_b_a, e.gain_error_a, e.gain_error_b])
-            }
-            EffectKind::EncoderError => self.encoder_error.map(|e| vec![e.eccentricity_rad, e.phase_rad]),
-        }
     }
 
     /// Switches on the effects of a TOML text (`origin` names it in
@@ -559,15 +337,13 @@ impl Effects {
     }
 
     /// These effects restricted to those a free decay has
-    /// (`tension_stiffening`, `car_frame_mode`, `coulomb_guide_friction`,
-    /// see `free_decay::simulate_free_decay_with`).
+    /// ([`Seen::in_free_decay`]; see `free_decay::simulate_free_decay_with`).
     pub fn for_free_decay(&self) -> Self {
-        Self {
-            tension_stiffening: self.tension_stiffening,
-            car_frame_mode: self.car_frame_mode,
-            coulomb_guide_friction: self.coulomb_guide_friction,
-            ..Self::none()
+        let mut out = *self;
+        for kind in EffectKind::ALL.into_iter().filter(|k| !k.seen().in_free_decay) {
+            out.clear(kind);
         }
+        out
     }
 }
 

@@ -1,5 +1,7 @@
 //! Rope discretization: N lumped elements per rope side instead of one.
 
+use super::declare::{Effect, Fit, Neutral, ParamScale::Integer, ParamSpec, Seen};
+
 /// Rope discretization: N lumped elements per rope side instead of one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RopeDiscretization {
@@ -121,6 +123,23 @@ pub fn spring_n_per_m(
     // End springs cover half an element: 2 N EA / l; inner ones N EA / l.
     let factor = if j == 0 || j == elements { 2.0 * nf } else { nf };
     factor * ea / length_m
+}
+
+impl Effect for RopeDiscretization {
+    const NAME: &'static str = "rope_discretization";
+    const PARAMETERS: &'static [ParamSpec] =
+        &[ParamSpec::new("elements", "-", 4.0, 1.0, 8.0, Integer, true, "lumped elements per rope side")
+            .neutral_at(Neutral::At(1.0))];
+    const FIT: Fit = Fit::Grid { axes: &[(0, &[2.0, 4.0, 8.0])], screened: false };
+    const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { elements: v[0] as usize }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.elements as f64]
+    }
 }
 
 #[cfg(test)]

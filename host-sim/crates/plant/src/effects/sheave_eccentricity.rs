@@ -1,5 +1,12 @@
 //! An eccentric traction sheave: its radius varies with angle, r = r0 (1 + e cos(theta + phase)).
 
+use super::declare::{
+    Effect, Fit,
+    ParamScale::{Angle, Linear},
+    ParamSpec, Seen,
+};
+use std::f64::consts::TAU;
+
 /// An eccentric traction sheave: its radius varies with angle, r = r0 (1 + e cos(theta + phase)).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SheaveEccentricity {
@@ -30,6 +37,33 @@ impl SheaveEccentricity {
     /// `F` at the rope end `g(theta)` is `F dg/du_sh`).
     pub fn lever_ratio(&self, theta_rad: f64) -> f64 {
         1.0 + self.eccentricity * (theta_rad + self.phase_rad).cos()
+    }
+}
+
+impl Effect for SheaveEccentricity {
+    const NAME: &'static str = "sheave_eccentricity";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new(
+            "eccentricity",
+            "-",
+            0.005,
+            0.0,
+            0.02,
+            Linear,
+            true,
+            "relative radius variation: r = r0 (1 + e cos(theta + phase))",
+        ),
+        ParamSpec::new("phase_rad", "rad", 0.0, 0.0, TAU, Angle, true, "angle of the largest radius"),
+    ];
+    const FIT: Fit = Fit::Polar { amplitude: 0, phase: 1, probe: 0.005 };
+    const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { eccentricity: v[0], phase_rad: v[1] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.eccentricity, self.phase_rad]
     }
 }
 

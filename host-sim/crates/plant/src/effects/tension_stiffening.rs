@@ -1,5 +1,11 @@
 //! Tension stiffening: the rope's EA grows with its tension, EA = EA0 (T / T_ref)^alpha.
 
+use super::declare::{
+    Effect, Fit, FromData,
+    ParamScale::{Linear, Log},
+    ParamSpec, Seen,
+};
+
 /// Tension stiffening: the rope's EA grows with its tension, EA = EA0 (T / T_ref)^alpha.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TensionStiffening {
@@ -130,6 +136,34 @@ pub fn rope_ea_n(effect: Option<&TensionStiffening>, ea0_n: f64, tension_n: f64)
 /// at its end, under gravity `gravity_mps2` (m/s^2): `(m + mu l) g`.
 pub fn static_tension_n(end_mass_kg: f64, mu_kg_per_m: f64, rope_below_m: f64, gravity_mps2: f64) -> f64 {
     (end_mass_kg + mu_kg_per_m * rope_below_m) * gravity_mps2
+}
+
+impl Effect for TensionStiffening {
+    const NAME: &'static str = "tension_stiffening";
+    const PARAMETERS: &'static [ParamSpec] = &[
+        ParamSpec::new("alpha", "-", 0.2, 0.0, 1.0, Linear, true, "exponent of EA = EA0 (T / T_ref)^alpha"),
+        ParamSpec::new(
+            "reference_tension_n",
+            "N",
+            323.73,
+            10.0,
+            1.0e4,
+            Log,
+            false,
+            "tension at which EA equals the configured EA0 (default: 33 kg hanging)",
+        )
+        .from_data(FromData::StaticRopeTension),
+    ];
+    const FIT: Fit = Fit::Grid { axes: &[(0, &[0.2, 0.5, 0.85])], screened: true };
+    const SEEN: Seen = Seen { in_free_decay: true, under_another_drive: true };
+
+    fn from_values(v: &[f64]) -> Self {
+        Self { alpha: v[0], reference_tension_n: v[1] }
+    }
+
+    fn values(&self) -> Vec<f64> {
+        vec![self.alpha, self.reference_tension_n]
+    }
 }
 
 #[cfg(test)]
