@@ -18,10 +18,16 @@
 //! torque `Kt i_q` (N m) minus the out-of-balance torque of Eqn 4.
 //!
 //! Determinism: only `f32` add, subtract, multiply and divide (through
-//! nalgebra's matrix products) and the integer sine table of [`crate::trig`],
-//! so the chip and the host compute the same bits.
+//! nalgebra's matrix products and plain loops) and the integer sine table of
+//! [`crate::trig`], so the chip and the host compute the same bits.
+//!
+//! Cost: the covariance is kept exactly symmetric (every update writes both
+//! halves with the same value) and only one triangle is computed; the
+//! Riccati step uses the structure of the transition matrix (the identity
+//! below its first six rows, a rank-one disturbance block `gamma h^T / r`),
+//! about 1 300 multiply-adds a tick instead of 2 600 for the dense products.
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::SVector;
 
 use super::model::{
     discretise, ChainModel, Matrix6, ModelError, ReducedChain, Vector6, CAR_STRETCH, CW_STRETCH, MAX_HARMONICS,
@@ -40,7 +46,8 @@ pub const FIRST_HARMONIC: usize = MECHANICAL_STATES + 2;
 const DISTURBANCE_STATES: usize = STATES - DISTURBANCE_BIAS;
 
 type StateVector = SVector<f32, STATES>;
-type Covariance = SMatrix<f32, STATES, STATES>;
+/// The covariance, `p[i][j]` its entry `(i, j)`; exactly symmetric.
+type Covariance = [[f32; STATES]; STATES];
 
 /// Noise intensities, initial uncertainty and numerical settings of the
 /// filter. The defaults are the tuning of the README's figures.
@@ -166,6 +173,9 @@ pub struct ChainObserver {
     p: Covariance,
     phi: Matrix6,
     psi: Matrix6,
+    /// `Psi b`: the response of the mechanical states to the sheave force
+    /// over one tick, 1/kg s (changes with `psi`).
+    gamma: Vector6,
     chain: ReducedChain,
     ticks_to_schedule: u32,
     restarts: u32,
@@ -193,9 +203,10 @@ impl ChainObserver {
             origin_counts: 0,
             last_torque_nm: 0.0,
             x: StateVector::zeros(),
-            p: Covariance::zeros(),
+            p: [[0.0; STATES]; STATES],
             phi: Matrix6::identity(),
             psi: Matrix6::zeros(),
+            gamma: Vector6::zeros(),
             chain,
             ticks_to_schedule: 0,
             restarts: 0,
@@ -228,24 +239,24 @@ impl ChainObserver {
         self.x[EA_SCALE] = 1.0;
         let t = &self.tuning;
         let step = self.metres_per_count;
-        let mut p = Covariance::zeros();
+        let mut p: Covariance = [[0.0; STATES]; STATES];
         // At rest: position within a count, speeds and stretches tiny.
-        for i in 0..MECHANICAL_STATES {
-            p[(i, i)] = if i % 2 == 0 { step * step } else { 1.0e-6 };
+        for (i, row) in p.iter_mut().enumerate().take(MECHANICAL_STATES) {
+            row[i] = if i % 2 == 0 { step * step } else { 1.0e-6 };
         }
-        p[(EA_SCALE, EA_SCALE)] = t.ea_scale_initial_sd * t.ea_scale_initial_sd;
+        p[EA_SCALE][EA_SCALE] = t.ea_scale_initial_sd * t.ea_scale_initial_sd;
         let d2 = t.disturbance_initial_sd_nm * t.disturbance_initial_sd_nm;
-        p[(DISTURBANCE_BIAS, DISTURBANCE_BIAS)] = d2;
+        p[DISTURBANCE_BIAS][DISTURBANCE_BIAS] = d2;
         for (slot, &order) in self.model.ripple_orders.iter().enumerate() {
             if order != 0 {
                 let i = FIRST_HARMONIC + 2 * slot;
-                p[(i, i)] = d2;
-                p[(i + 1, i + 1)] = d2;
+                p[i][i] = d2;
+                p[i + 1][i + 1] = d2;
             }
         }
         self.p = p;
         self.ticks_to_schedule = 0;
-        self.estimate = self.outputs();
+        self.estimate = self.outputs(&self.disturbance_regressor());
     }
 
     /// True once [`ChainObserver::start`] has been called.
@@ -267,7 +278,7 @@ impl ChainObserver {
     /// Posterior variance of the stiffness scale (dimensionless), from the
     /// diagonal of the covariance.
     pub fn ea_scale_variance(&self) -> f32 {
-        self.p[(EA_SCALE, EA_SCALE)]
+        self.p[EA_SCALE][EA_SCALE]
     }
 
     /// Counterweight-side rope length from the encoder (Eqn 3), m.
@@ -286,7 +297,13 @@ impl ChainObserver {
             if order == 0 {
                 continue;
             }
-            let nth = within_rev as u64 * order as u64 % cpr as u64;
+            let product = within_rev as u64 * order as u64;
+            // The same remainder; in 32 bits (one hardware division on the
+            // chip instead of a 64-bit library call) whenever it fits.
+            let nth = match u32::try_from(product) {
+                Ok(p) => (p % cpr) as u64,
+                Err(_) => product % cpr as u64,
+            };
             let angle = ((nth * self.binary_angle_per_count_q16) >> 16) as u32;
             let (sin, cos) = sin_cos(angle);
             const Q30: f32 = 1.0 / (1u32 << 30) as f32;
@@ -296,11 +313,12 @@ impl ChainObserver {
         h
     }
 
-    fn outputs(&self) -> ObserverEstimate {
+    /// The estimate of the current state; `h` is
+    /// [`ChainObserver::disturbance_regressor`] at the current count.
+    fn outputs(&self, h: &SVector<f32, DISTURBANCE_STATES>) -> ObserverEstimate {
         let mech: Vector6 = self.x.fixed_rows::<MECHANICAL_STATES>(0).into_owned();
         let c = &self.chain;
-        let h = self.disturbance_regressor();
-        let disturbance = self.x.fixed_rows::<DISTURBANCE_STATES>(DISTURBANCE_BIAS).dot(&h);
+        let disturbance = self.x.fixed_rows::<DISTURBANCE_STATES>(DISTURBANCE_BIAS).dot(h);
         ObserverEstimate {
             car_acceleration_mps2: c.car_acceleration_mps2(&mech),
             car_rope_force_n: c.car_stiffness_n_per_m * mech[CAR_STRETCH],
@@ -309,6 +327,65 @@ impl ChainObserver {
             rope_ea_n: self.x[EA_SCALE] * self.model.rope_ea_n,
             sheave_speed_mps: mech[SHEAVE_SPEED],
             counterweight_side_length_m: self.counterweight_side_length_m(),
+        }
+    }
+
+    /// Riccati step without the noise, `P <- F P F^T`, with `F` the identity
+    /// but for its first six rows `[Phi | s | gamma h^T / r]` (`s` the
+    /// derivative of the mechanical prediction with respect to the stiffness
+    /// scale, `h` the disturbance regressor). Rows 6-17 of `F P` are those
+    /// of `P`, so only rows 0-5 of `F P` are computed, with the disturbance
+    /// block as one row `w = (h / r)^T P_{7.., :}` scaled by `gamma`; the
+    /// 6 x 6 corner `F P F^T` is symmetric, one triangle is computed.
+    fn riccati_step(&mut self, s: &Vector6, h: &SVector<f32, DISTURBANCE_STATES>) {
+        const M: usize = MECHANICAL_STATES;
+        let r = self.model.sheave_radius_m;
+        let hr: [f32; DISTURBANCE_STATES] = core::array::from_fn(|d| h[d] / r);
+        let gamma = self.gamma;
+        let phi = &self.phi;
+        let p = &self.p;
+        // w = (h / r)^T P_{7.., :}
+        let mut w = [0.0f32; STATES];
+        for (c, row) in hr.iter().zip(&p[DISTURBANCE_BIAS..]) {
+            for (wk, pk) in w.iter_mut().zip(row) {
+                *wk += c * pk;
+            }
+        }
+        // Rows 0-5 of F P.
+        let mut fp = [[0.0f32; STATES]; M];
+        for (i, fp_row) in fp.iter_mut().enumerate() {
+            let phi_row: [f32; M] = core::array::from_fn(|m| phi[(i, m)]);
+            for (k, out) in fp_row.iter_mut().enumerate() {
+                let mut acc = 0.0;
+                for (f, p_row) in phi_row.iter().zip(&p[..M]) {
+                    acc += f * p_row[k];
+                }
+                *out = acc + s[i] * p[EA_SCALE][k] + gamma[i] * w[k];
+            }
+        }
+        // u = (rows 0-5 of F P)_{:, 7..} h / r
+        let u: [f32; M] = core::array::from_fn(|i| {
+            let mut acc = 0.0;
+            for (f, c) in fp[i][DISTURBANCE_BIAS..].iter().zip(&hr) {
+                acc += f * c;
+            }
+            acc
+        });
+        let p = &mut self.p;
+        for (i, fp_row) in fp.iter().enumerate() {
+            for k in M..STATES {
+                p[i][k] = fp_row[k];
+                p[k][i] = fp_row[k];
+            }
+            for j in i..M {
+                let mut acc = 0.0;
+                for m in 0..M {
+                    acc += fp_row[m] * phi[(j, m)];
+                }
+                let v = acc + fp_row[EA_SCALE] * s[j] + u[i] * gamma[j];
+                p[i][j] = v;
+                p[j][i] = v;
+            }
         }
     }
 
@@ -330,15 +407,25 @@ impl ChainObserver {
             self.last_torque_nm = motor_torque_nm.clamp(-1.0e5, 1.0e5);
         }
 
-        // Measurement update, H = e_0 (sheave-edge position).
+        // Measurement update, H = e_0 (sheave-edge position): the gain is
+        // column 0 of P over the innovation variance, and P loses
+        // `gain p_0^T`, symmetric: one triangle computed, both halves written.
         let measured_m = (self.counts - self.origin_counts) as f32 * self.metres_per_count;
         let step = self.metres_per_count;
-        let innovation_var = self.p[(0, 0)] + step * step / 12.0;
-        let gain: StateVector = self.p.column(SHEAVE_POSITION) / innovation_var;
+        let p0 = self.p[SHEAVE_POSITION];
+        let inverse_innovation_var = 1.0 / (p0[SHEAVE_POSITION] + step * step / 12.0);
         let innovation = measured_m - self.x[SHEAVE_POSITION];
-        self.x += gain * innovation;
-        let p_row = self.p.row(SHEAVE_POSITION).into_owned();
-        self.p -= gain * p_row;
+        let gain: [f32; STATES] = core::array::from_fn(|i| p0[i] * inverse_innovation_var);
+        for (x, g) in self.x.iter_mut().zip(gain) {
+            *x += g * innovation;
+        }
+        for (j, &p0j) in p0.iter().enumerate() {
+            for (i, &g) in gain[..=j].iter().enumerate() {
+                let v = self.p[i][j] - g * p0j;
+                self.p[i][j] = v;
+                self.p[j][i] = v;
+            }
+        }
         self.x[EA_SCALE] = self.x[EA_SCALE].max(self.tuning.ea_scale_min).min(self.tuning.ea_scale_max);
 
         // Keep state 0 within one count of the origin: f32 resolves the
@@ -354,57 +441,41 @@ impl ChainObserver {
             let (psi, phi) = discretise(&self.chain.system_matrix(), self.dt_s, self.tuning.series_terms);
             self.psi = psi;
             self.phi = phi;
+            self.gamma = psi * self.chain.sheave_force_input();
             self.ticks_to_schedule = self.tuning.reschedule_ticks;
         }
         self.ticks_to_schedule -= 1;
-        self.estimate = self.outputs();
+        let h = self.disturbance_regressor();
+        self.estimate = self.outputs(&h);
 
         // Prediction to the next tick.
         let r = self.model.sheave_radius_m;
-        let h = self.disturbance_regressor();
         let mech: Vector6 = self.x.fixed_rows::<MECHANICAL_STATES>(0).into_owned();
         let disturbance = self.x.fixed_rows::<DISTURBANCE_STATES>(DISTURBANCE_BIAS).dot(&h);
         let force_n = (self.last_torque_nm - self.model.out_of_balance_torque_nm(lw, self.m_car_kg) + disturbance) / r;
-        let gamma: Vector6 = self.psi * self.chain.sheave_force_input();
+        let gamma = self.gamma;
         let stiffness_column: Vector6 = self.psi * self.chain.dynamics_per_stiffness_scale(&mech, kappa);
         let next = self.phi * mech + gamma * force_n;
         self.x.fixed_rows_mut::<MECHANICAL_STATES>(0).copy_from(&next);
+        self.riccati_step(&stiffness_column, &h);
 
-        // Riccati step P <- F P F^T + Q, with F the identity but for its
-        // first six rows [Phi | d/dkappa | gamma h^T / r].
-        let mut f_top = SMatrix::<f32, MECHANICAL_STATES, STATES>::zeros();
-        f_top.fixed_view_mut::<MECHANICAL_STATES, MECHANICAL_STATES>(0, 0).copy_from(&self.phi);
-        f_top.fixed_view_mut::<MECHANICAL_STATES, 1>(0, EA_SCALE).copy_from(&stiffness_column);
-        f_top
-            .fixed_view_mut::<MECHANICAL_STATES, DISTURBANCE_STATES>(0, DISTURBANCE_BIAS)
-            .copy_from(&(gamma * (h.transpose() / r)));
-        let fp_top = f_top * self.p; // rows 0-5 of F P
-        let corner = fp_top * f_top.transpose(); // rows and columns 0-5 of F P F^T
-        for i in 0..MECHANICAL_STATES {
-            for j in MECHANICAL_STATES..STATES {
-                self.p[(i, j)] = fp_top[(i, j)];
-                self.p[(j, i)] = fp_top[(i, j)];
-            }
-            for j in 0..MECHANICAL_STATES {
-                // Symmetrised: rounding must not make P drift from symmetry.
-                self.p[(i, j)] = 0.5 * (corner[(i, j)] + corner[(j, i)]);
-            }
-        }
         let t = &self.tuning;
         let dt = self.dt_s;
-        self.p[(SHEAVE_SPEED, SHEAVE_SPEED)] += t.sheave_acceleration_noise * dt;
-        self.p[(EA_SCALE, EA_SCALE)] += t.ea_scale_noise_per_s * dt;
-        self.p[(DISTURBANCE_BIAS, DISTURBANCE_BIAS)] += t.disturbance_noise * dt;
+        self.p[SHEAVE_SPEED][SHEAVE_SPEED] += t.sheave_acceleration_noise * dt;
+        self.p[EA_SCALE][EA_SCALE] += t.ea_scale_noise_per_s * dt;
+        self.p[DISTURBANCE_BIAS][DISTURBANCE_BIAS] += t.disturbance_noise * dt;
         for (slot, &order) in self.model.ripple_orders.iter().enumerate() {
             if order != 0 {
                 let i = FIRST_HARMONIC + 2 * slot;
-                self.p[(i, i)] += t.ripple_noise * dt;
-                self.p[(i + 1, i + 1)] += t.ripple_noise * dt;
+                self.p[i][i] += t.ripple_noise * dt;
+                self.p[i + 1][i + 1] += t.ripple_noise * dt;
             }
         }
 
-        let finite = self.x.iter().chain(self.p.iter()).all(|v| v.is_finite());
-        if !finite || self.p[(0, 0)] < 0.0 {
+        // P is symmetric: its upper triangle holds every value.
+        let finite = self.x.iter().all(|v| v.is_finite())
+            && self.p.iter().enumerate().all(|(i, row)| row[i..].iter().all(|v| v.is_finite()));
+        if !finite || self.p[0][0] < 0.0 {
             self.restarts = self.restarts.saturating_add(1);
             self.origin_counts = self.counts;
             self.reset_filter();
@@ -559,6 +630,48 @@ mod tests {
         println!("after 2000 ticks of garbage: {:?}, restarts {}", observer.estimate(), observer.restarts());
         let ea = observer.estimate().rope_ea_n;
         assert!((0.5e6..=2.0e6).contains(&ea), "EA estimate {ea} outside the tuning bounds");
+    }
+
+    /// The structured Riccati step against `F P F^T` with the dense `F`,
+    /// in f64, on the covariance of a converged filter; the covariance stays
+    /// exactly symmetric.
+    #[test]
+    fn riccati_step_is_the_dense_product_and_keeps_p_symmetric() {
+        let data = simulate_own_model(1.1, 2.0);
+        let mut observer = ChainObserver::new(rig_model(), ObserverTuning::default()).unwrap();
+        observer.start(1.0, 58.0, data[0].0);
+        for &(count, torque, _, _) in &data {
+            observer.update(count, torque);
+            assert!((0..STATES).all(|i| (0..STATES).all(|j| observer.p[i][j].to_bits() == observer.p[j][i].to_bits())));
+        }
+        let s = Vector6::from_fn(|i, _| 1.0e-4 * (i as f32 - 2.5));
+        let h = observer.disturbance_regressor();
+        let r = observer.model.sheave_radius_m as f64;
+        let f: [[f64; STATES]; STATES] = core::array::from_fn(|i| {
+            core::array::from_fn(|k| match k {
+                _ if i >= MECHANICAL_STATES => f64::from(u8::from(i == k)),
+                k if k < MECHANICAL_STATES => observer.phi[(i, k)] as f64,
+                EA_SCALE => s[i] as f64,
+                k => observer.gamma[i] as f64 * h[k - DISTURBANCE_BIAS] as f64 / r,
+            })
+        });
+        let p = observer.p.map(|row| row.map(f64::from));
+        let fp: Vec<Vec<f64>> =
+            (0..STATES).map(|i| (0..STATES).map(|k| (0..STATES).map(|m| f[i][m] * p[m][k]).sum()).collect()).collect();
+        let fpf: Vec<Vec<f64>> =
+            (0..STATES).map(|i| (0..STATES).map(|j| (0..STATES).map(|k| fp[i][k] * f[j][k]).sum()).collect()).collect();
+        observer.riccati_step(&s, &h);
+        let mut worst: f64 = 0.0;
+        for i in 0..STATES {
+            for j in 0..STATES {
+                let v = observer.p[i][j];
+                assert_eq!(v.to_bits(), observer.p[j][i].to_bits(), "({i}, {j})");
+                let scale = (fpf[i][i] * fpf[j][j]).sqrt();
+                worst = worst.max((v as f64 - fpf[i][j]).abs() / scale);
+            }
+        }
+        println!("largest difference to the dense f64 product, relative to sqrt(P_ii P_jj): {worst:.2e}");
+        assert!(worst < 1.0e-4, "{worst}");
     }
 
     #[test]
