@@ -124,12 +124,11 @@ pub fn simulate_recording(
 }
 
 /// Whether `effects` make a free decay's shape depend on its amplitude
-/// (a rope stiffening with its instantaneous tension, dry guide friction):
-/// then the model's decay is released at the test's level instead of
-/// being a scaled unit decay.
+/// (a rope stiffening with its instantaneous tension, a force at the
+/// guides such as dry friction): then the model's decay is released at the
+/// test's level instead of being a scaled unit decay.
 fn amplitude_dependent(effects: &Effects) -> bool {
-    effects.tension_stiffening.is_some_and(|e| e.alpha != 0.0)
-        || effects.coulomb_guide_friction.is_some_and(|f| f.force_n(1.0) != 0.0)
+    effects.tension_stiffening.is_some_and(|e| e.alpha != 0.0) || effects.guide_force_n(1.0) != 0.0
 }
 
 /// How the model's counterpart of a recording is made, as the diagnosis

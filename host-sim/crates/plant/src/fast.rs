@@ -187,9 +187,9 @@ impl Plant {
         a[n - 1] = (-below - c[n - 1] * v[n - 1]) * inv_m[n - 1];
         rates[n - 1] = v[n - 1];
         a[sheave] += (torque - step.out_of_balance_nm) / r * inv_m[sheave];
-        if let Some(friction) = &line.effects.coulomb_guide_friction {
+        if line.effects.acts_at_guides() {
             for i in [0, layout.hitch] {
-                a[i] += friction.force_n(v[i]) * inv_m[i];
+                a[i] += line.effects.guide_force_n(v[i]) * inv_m[i];
             }
         }
         if layout.body != layout.hitch && lumped.frame_damping_kg_per_s != 0.0 {
@@ -206,13 +206,13 @@ impl Plant {
     }
 
     /// True when the fixed-size nominal path applies: the 5-DOF layout, no
-    /// mechanical effect beyond the lumped values (dry friction, the brake
-    /// clamp, the eccentric sheave), no dead time, no open phase.
+    /// mechanical effect beyond the lumped values (a force at the guides,
+    /// the brake clamp, the eccentric sheave), no dead time, no open phase.
     pub(crate) fn nominal_path(&self) -> bool {
         let e = &self.effects;
         self.line.layout.nodes == DOF
             && self.line.layout.body == CAR
-            && e.coulomb_guide_friction.is_none()
+            && !e.acts_at_guides()
             && e.brake_stop.is_none()
             && e.sheave_eccentricity.is_none()
             && e.dead_time.is_none()

@@ -8,7 +8,7 @@
 //! tends to the continuous rope's, the root of Eqn 9.
 
 use super::effects::tension_stiffening::{static_tension_n, StiffeningSegment};
-use super::effects::{CoulombGuideFriction, Effects, TensionStiffening};
+use super::effects::{Effects, TensionStiffening};
 use super::Rk4;
 
 /// One free-decay test.
@@ -81,7 +81,8 @@ pub fn simulate_free_decay(
 ///   carries the accelerometer; the static force of the release is spread
 ///   over both in proportion to their masses, so that they start with the
 ///   same acceleration;
-/// - `coulomb_guide_friction`: `-F tanh(v / v_slip)` on the mass (hitch).
+/// - `coulomb_guide_friction` (and any effect acting at the guides):
+///   `-F tanh(v / v_slip)` on the mass (hitch).
 ///
 /// The other effects concern the sheave, the pulley, the travel's rope
 /// discretisation (the decay has its own `spec.elements`), the brake, the
@@ -160,7 +161,9 @@ struct DecayChain {
     c: f64,
     stiffening: Option<TensionStiffening>,
     frame: bool,
-    friction: Option<CoulombGuideFriction>,
+    /// The effects acting at the guides ([`Effects::guide_force_n`]), on
+    /// the car only (the counterweight is not in the decay).
+    guides: Option<Effects>,
 }
 
 impl DecayChain {
@@ -220,7 +223,7 @@ impl DecayChain {
             c: spec.damping_kg_per_s,
             stiffening,
             frame: frame.is_some(),
-            friction: effects.coulomb_guide_friction,
+            guides: effects.acts_at_guides().then_some(*effects),
         }
     }
 
@@ -244,8 +247,8 @@ impl DecayChain {
                 .max((2.0 * k_frame / body_mass).sqrt())
                 .max(2.0 * c_frame / body_mass.min(masses[n - 1]));
         }
-        if let Some(f) = &self.friction {
-            w_max = w_max.max(f.stiffness_rate_per_s(masses[n - 1]));
+        if let Some(g) = &self.guides {
+            w_max = w_max.max(g.guide_force_rate_per_s(masses[n - 1]));
         }
         w_max
     }
@@ -298,8 +301,8 @@ impl DecayChain {
             };
             if i == n - 1 {
                 f -= self.c * y[nodes + i];
-                if let Some(friction) = &self.friction {
-                    f += friction.force_n(y[nodes + i]);
+                if let Some(g) = &self.guides {
+                    f += g.guide_force_n(y[nodes + i]);
                 }
                 if self.frame {
                     f += k_frame * (y[n] - y[i]) + c_frame * (y[nodes + n] - y[nodes + i]);

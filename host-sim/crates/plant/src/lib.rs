@@ -672,19 +672,13 @@ impl Plant {
         self.advance(t_end_s - self.time_s, max_step_s);
     }
 
-    /// The sensor readings a drive takes now (with the transducer errors
-    /// of `current_sensor_error` and the encoder's of `encoder_error`).
+    /// The sensor readings a drive takes now, through the effects that are
+    /// on (the transducers' errors, the encoder's).
     pub fn sensor_readings(&self) -> SensorReadings {
         let shaft_angle_rad = self.shaft_angle_rad(&self.state);
         let phase_currents_a = self.leg_currents_a(self.machine_phase_currents_a());
-        let currents = match &self.effects.current_sensor_error {
-            None => phase_currents_a,
-            Some(e) => e.measured_a(phase_currents_a),
-        };
-        let angle = match &self.effects.encoder_error {
-            None => shaft_angle_rad,
-            Some(e) => e.measured_angle_rad(shaft_angle_rad),
-        };
+        let currents = self.effects.measured_currents_a(phase_currents_a);
+        let angle = self.effects.measured_angle_rad(shaft_angle_rad);
         SensorReadings {
             phase_current_codes: currents.map(|i| self.sensors.current_code(i)),
             encoder_count: self.sensors.encoder_count(angle),

@@ -321,9 +321,9 @@ impl Line {
             };
             accel[i] = (force - lumped.damping_kg_per_s[i] * velocity_mps[i] - elastic) / lumped.masses_kg[i];
         }
-        if let Some(friction) = &self.effects.coulomb_guide_friction {
+        if self.effects.acts_at_guides() {
             for i in [0, layout.hitch] {
-                accel[i] += friction.force_n(velocity_mps[i]) / lumped.masses_kg[i];
+                accel[i] += self.effects.guide_force_n(velocity_mps[i]) / lumped.masses_kg[i];
             }
         }
         if layout.body != layout.hitch && lumped.frame_damping_kg_per_s != 0.0 {
@@ -369,8 +369,8 @@ impl Line {
             let m = lumped.masses_kg[i];
             elastic = elastic.max(row / m);
             rate = rate.max(c / m);
-            if let (Some(f), true) = (&self.effects.coulomb_guide_friction, i == 0 || i == layout.hitch) {
-                rate = rate.max(f.stiffness_rate_per_s(m));
+            if i == 0 || i == layout.hitch {
+                rate = rate.max(self.effects.guide_force_rate_per_s(m));
             }
         }
         elastic.sqrt().max(rate)

@@ -64,6 +64,16 @@ impl Effect for CoulombGuideFriction {
     fn values(&self) -> Vec<f64> {
         vec![self.friction_n, self.slip_speed_mps]
     }
+
+    const AT_GUIDES: bool = true;
+
+    fn guide_force_n(&self, velocity_mps: f64) -> f64 {
+        self.force_n(velocity_mps)
+    }
+
+    fn guide_force_rate_per_s(&self, mass_kg: f64) -> f64 {
+        self.stiffness_rate_per_s(mass_kg)
+    }
 }
 
 #[cfg(test)]

@@ -48,6 +48,10 @@ impl Effect for CurrentSensorError {
     fn values(&self) -> Vec<f64> {
         vec![self.offset_a_a, self.offset_b_a, self.gain_error_a, self.gain_error_b]
     }
+
+    fn measured_currents_a(&self, currents_a: [f64; 3]) -> [f64; 3] {
+        self.measured_a(currents_a)
+    }
 }
 
 #[cfg(test)]

@@ -163,4 +163,42 @@ pub trait Effect: Copy + std::fmt::Debug + PartialEq {
     fn from_values(v: &[f64]) -> Self;
     /// Its parameter values, in [`Effect::PARAMETERS`] order.
     fn values(&self) -> Vec<f64>;
+
+    // The physics hooks: what the plant asks of every effect that is on,
+    // in the list's order. The defaults leave the nominal plant as it is;
+    // an effect overrides those where it acts. Effects that change the
+    // line's layout or springs (rope elements, the pulley, the frame mode,
+    // the stiffening rope), the sheave's geometry, the brake or the
+    // inverter are built into the line and the inverter instead
+    // (`plant/src/line.rs`, `plant/src/lib.rs`).
+
+    /// Whether the effect puts a force on the car and the counterweight at
+    /// their guides ([`Effect::guide_force_n`]); the plant leaves its fast
+    /// nominal path when one does.
+    const AT_GUIDES: bool = false;
+
+    /// The force (N) at a guide whose body moves at `velocity_mps` (m/s,
+    /// the force in the same coordinate).
+    fn guide_force_n(&self, _velocity_mps: f64) -> f64 {
+        0.0
+    }
+
+    /// Largest slope `|dF/dv| / m` (1/s) of [`Effect::guide_force_n`] on a
+    /// body of `mass_kg` (kg): the rate an explicit integrator's step must
+    /// resolve.
+    fn guide_force_rate_per_s(&self, _mass_kg: f64) -> f64 {
+        0.0
+    }
+
+    /// The phase currents (A) the drive's transducers read when
+    /// `currents_a` (A) flow.
+    fn measured_currents_a(&self, currents_a: [f64; 3]) -> [f64; 3] {
+        currents_a
+    }
+
+    /// The shaft angle (rad) the encoder reads at the true angle
+    /// `angle_rad` (rad).
+    fn measured_angle_rad(&self, angle_rad: f64) -> f64 {
+        angle_rad
+    }
 }

@@ -49,6 +49,10 @@ impl Effect for EncoderError {
     fn values(&self) -> Vec<f64> {
         vec![self.eccentricity_rad, self.phase_rad]
     }
+
+    fn measured_angle_rad(&self, angle_rad: f64) -> f64 {
+        EncoderError::measured_angle_rad(self, angle_rad)
+    }
 }
 
 #[cfg(test)]

@@ -103,6 +103,62 @@ macro_rules! library {
                     $(EffectKind::$ty => self.$module.as_ref().map(Effect::values),)*
                 }
             }
+
+            /// Whether an effect that is on acts at the guides
+            /// ([`Effect::AT_GUIDES`]).
+            pub fn acts_at_guides(&self) -> bool {
+                false $(|| (<$ty as Effect>::AT_GUIDES && self.$module.is_some()))*
+            }
+
+            /// The force (N) at a guide whose body moves at `velocity_mps`
+            /// (m/s): the sum of the effects' that act there
+            /// ([`Effect::guide_force_n`]).
+            pub fn guide_force_n(&self, velocity_mps: f64) -> f64 {
+                let mut force = 0.0;
+                $(
+                    if let (true, Some(e)) = (<$ty as Effect>::AT_GUIDES, &self.$module) {
+                        force += e.guide_force_n(velocity_mps);
+                    }
+                )*
+                force
+            }
+
+            /// The largest rate (1/s) of the guide forces on a body of
+            /// `mass_kg` ([`Effect::guide_force_rate_per_s`]).
+            pub fn guide_force_rate_per_s(&self, mass_kg: f64) -> f64 {
+                let mut rate = 0.0f64;
+                $(
+                    if let (true, Some(e)) = (<$ty as Effect>::AT_GUIDES, &self.$module) {
+                        rate = rate.max(e.guide_force_rate_per_s(mass_kg));
+                    }
+                )*
+                rate
+            }
+
+            /// The phase currents (A) the drive's transducers read when
+            /// `currents_a` flow, through every effect that is on
+            /// ([`Effect::measured_currents_a`]).
+            pub fn measured_currents_a(&self, currents_a: [f64; 3]) -> [f64; 3] {
+                let mut out = currents_a;
+                $(
+                    if let Some(e) = &self.$module {
+                        out = e.measured_currents_a(out);
+                    }
+                )*
+                out
+            }
+
+            /// The shaft angle (rad) the encoder reads at `angle_rad`,
+            /// through every effect that is on ([`Effect::measured_angle_rad`]).
+            pub fn measured_angle_rad(&self, angle_rad: f64) -> f64 {
+                let mut out = angle_rad;
+                $(
+                    if let Some(e) = &self.$module {
+                        out = e.measured_angle_rad(out);
+                    }
+                )*
+                out
+            }
         }
     };
 }
