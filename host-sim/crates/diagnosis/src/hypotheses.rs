@@ -13,21 +13,25 @@
 //!   the decays' (tension, `EA`) by least squares (`T_ref` their geometric
 //!   mean tension): `EA0` replaces the calibrated `EA`, `alpha` (with its
 //!   standard error) centres the effect's grid;
-//! - `coulomb_guide_friction`: each decay's first-mode peaks, one a cycle,
-//!   follow `A_{n+1} = p A_n + q` with `p = exp(-2 pi zeta)` (viscous) and
-//!   `q = -4 F / m` (dry friction `F` on the mass `m`: `4 F / k` of
-//!   displacement a cycle, `k = m omega^2`); the viscous part replaces the
+//! - `coulomb_guide_friction`: each decay's acceleration extremes, one a
+//!   half cycle, follow `B_{k+1} = p B_k + q` with `p = exp(-pi zeta)`
+//!   (viscous) and `q = -2 F / m` (dry friction `F` on the mass `m`: the
+//!   acceleration jumps by `2 F / m` where the friction reverses, at every
+//!   turning point), read on the signal itself, not on its first-mode
+//!   band-pass ([`half_cycle_extremes`]); the viscous part replaces the
 //!   calibrated guide damping, the friction centres the effect's grid, and
 //!   the travels' torque balance (Eqn 13) is read again with both to give
-//!   the sheave damping.
+//!   the sheave damping (`2 F r`: the friction acts on car and
+//!   counterweight alike).
 //!
 //! The effect is then fitted on these re-calibrated parameters
 //! ([`super::attribute`]), its strength starting from what the decays gave.
 
 use crate::calibrate::Calibration;
-use crate::identify::first_mode_peaks;
 use crate::travel_signals::torque_balance;
+use dsp::filter::highpass_zero_phase;
 use plant::effects::EffectKind;
+use plant::free_decay::eqn9_first_frequency_hz;
 use recording::{Recording, RecordingKind, ACC_CAR};
 use rig_config::RigConfig;
 
@@ -134,21 +138,117 @@ fn tension_stiffening(model: &RigConfig, calibration: &Calibration) -> Option<Re
     })
 }
 
+/// A lobe of a decay counts for the friction while its speed amplitude
+/// (acceleration over `omega`) is at least this many times the effect's
+/// default slip speed: below it the smoothed friction has not built up
+/// (`tanh 4` = 0.9993) and the mass is about to stick.
+const LOBE_SPEED_OVER_SLIP: f64 = 4.0;
+
+/// Largest ratio of a decay's extremes a cycle apart still read as
+/// a decay without viscous damping (a fitted ratio above 1 is the
+/// least-squares scatter of one that holds at 1; well above it the
+/// recording is not a decay).
+const MAX_CYCLE_RATIO: f64 = 1.05;
+
+/// The magnitudes of a decay's half-cycle extremes after its release,
+/// one per lobe (half cycle) of the first mode.
+///
+/// Under dry friction `F` the acceleration of a mass `m` is, over each half
+/// cycle, a cosine about the friction's shifted equilibrium, and it jumps
+/// by `2 F / m` at every turning point (the friction reverses there), so
+/// the half-cycle extremes follow `B_{k+1} = p B_k - 2 F / m` (`p` the
+/// viscous decay over half a cycle). A first-mode band-pass of that
+/// signal does not: the jumps form a square wave in quadrature with the
+/// motion whose fundamental (`4 F / (pi m)`) lies in the band and props
+/// the filtered envelope up as it decays (on a 58 kg decay with 20 N and
+/// no viscous damping, the filtered peaks read 15.7 N and 36 kg/s). The
+/// lobes are therefore told by the band-passed first mode's zero
+/// crossings, and each extreme is read on the signal only high-passed at
+/// `f1 / 5` (its offset removed, the jumps kept). The release's lobe is
+/// left out (the friction builds up only once the mass moves), and the
+/// lobes end at the first one slower than [`LOBE_SPEED_OVER_SLIP`] slip
+/// speeds or below three times the noise.
+fn half_cycle_extremes(acceleration_mps2: &[f64], sample_rate_hz: f64, f1_hz: f64, slip_mps: f64) -> Vec<f64> {
+    let Ok(release) = crate::identify::release_index(acceleration_mps2) else { return Vec::new() };
+    let top = (2.0 * f1_hz).min(0.45 * sample_rate_hz);
+    let (Ok(above_fifth), Ok(above_half)) = (
+        highpass_zero_phase(acceleration_mps2, sample_rate_hz, 0.2 * f1_hz),
+        highpass_zero_phase(acceleration_mps2, sample_rate_hz, 0.5 * f1_hz),
+    ) else {
+        return Vec::new();
+    };
+    let Ok(above_double) = highpass_zero_phase(&above_half, sample_rate_hz, top) else { return Vec::new() };
+    let mode: Vec<f64> = above_half.iter().zip(&above_double).map(|(a, b)| a - b).collect();
+    // Noise: the signal before the release (zero-phase filters smear the
+    // release backwards by a few cycles), when there is one.
+    let quiet_end = release.saturating_sub((3.0 * sample_rate_hz / f1_hz) as usize);
+    let noise_rms = if quiet_end >= (0.05 * sample_rate_hz) as usize {
+        (above_fifth[..quiet_end].iter().map(|v| v * v).sum::<f64>() / quiet_end as f64).sqrt()
+    } else {
+        0.0
+    };
+    let mut lobes = Vec::new();
+    let mut current: Option<(bool, f64)> = None;
+    for (m, x) in mode[release..].iter().zip(&above_fifth[release..]) {
+        let sign = *m > 0.0;
+        match current {
+            Some((s, e)) if s == sign => current = Some((s, e.max(if sign { *x } else { -*x }))),
+            Some((_, e)) => {
+                lobes.push(e);
+                current = Some((sign, if sign { *x } else { -*x }));
+            }
+            None => current = Some((sign, if sign { *x } else { -*x })),
+        }
+    }
+    let floor = (LOBE_SPEED_OVER_SLIP * slip_mps * std::f64::consts::TAU * f1_hz).max(3.0 * noise_rms);
+    lobes.into_iter().skip(1).take_while(|e| *e > floor).collect()
+}
+
 /// One decay's viscous damping (kg/s) and dry friction (N) from its
-/// first-mode peaks.
-fn viscous_and_dry(recording: &Recording, f1_hz: f64, mass_kg: f64) -> Option<(f64, f64)> {
+/// half-cycle extremes ([`half_cycle_extremes`]): `B_{k+1} = p B_k + q`
+/// with `p = exp(-pi zeta)`, `q = -2 F / m`, fitted by least squares a
+/// cycle apart over the extremes from a cycle after the release on, when
+/// four or more are left; with fewer (a decay that stops dead within
+/// three cycles), the viscous damping stays `viscous_kg_per_s` (the
+/// calibration's) and only `F` is read, from every extreme. The viscous
+/// damping is `None` when it was not read.
+fn viscous_and_dry(
+    recording: &Recording,
+    f1_hz: f64,
+    mass_kg: f64,
+    viscous_kg_per_s: f64,
+    slip_mps: f64,
+) -> Option<(Option<f64>, f64)> {
     let acc = recording.column(ACC_CAR)?;
-    let peaks = first_mode_peaks(&acc.values, recording.meta.sample_rate_hz, f1_hz).ok()?;
-    if peaks.len() < 4 {
-        return None;
-    }
-    let (q, p, _) = line_fit(&peaks[..peaks.len() - 1], &peaks[1..])?;
-    if !(p > 0.0 && p < 1.0 + 1e-9) {
-        return None;
-    }
-    let zeta = (-p.min(1.0).ln() / std::f64::consts::TAU).max(0.0);
+    let b = half_cycle_extremes(&acc.values, recording.meta.sample_rate_hz, f1_hz, slip_mps);
     let omega = std::f64::consts::TAU * f1_hz;
-    Some((2.0 * zeta * omega * mass_kg, (-q * mass_kg / 4.0).max(0.0)))
+    let dry = |q: f64| (-q * mass_kg / 2.0).max(0.0);
+    // Over a cycle (lobes of one sign, which the higher rope modes and the
+    // sensor's offset shift alike): `B_{k+2} = p^2 B_k + q (1 + p)`, from
+    // a cycle after the release on (the release's transient, the hold
+    // letting go and an acquisition's filters, lies within it).
+    if b.len() >= 5 {
+        let b = &b[1..];
+        if let Some((q2, p2, _)) = line_fit(&b[..b.len() - 2], &b[2..]) {
+            // A decrement that grows (`p^2` above 1) reads as no viscous
+            // damping: `q` is then the mean drop a cycle, halved.
+            let (p, q) = if p2 > 1.0 {
+                (1.0, b.windows(3).map(|w| w[2] - w[0]).sum::<f64>() / (b.len() - 2) as f64 / 2.0)
+            } else {
+                (p2.sqrt(), q2 / (1.0 + p2.sqrt()))
+            };
+            if p > 0.0 && p2 < MAX_CYCLE_RATIO {
+                let zeta = (-p.ln() / std::f64::consts::PI).max(0.0);
+                return Some((Some(2.0 * zeta * omega * mass_kg), dry(q)));
+            }
+        }
+    }
+    if b.len() < 2 {
+        return None;
+    }
+    let p = (-std::f64::consts::PI * viscous_kg_per_s / (2.0 * omega * mass_kg)).exp();
+    let q = b.windows(2).map(|w| w[1] - p * w[0]).sum::<f64>() / (b.len() - 1) as f64;
+    Some((None, dry(q)))
 }
 
 /// `coulomb_guide_friction` under its hypothesis: viscous and dry guide
@@ -160,19 +260,37 @@ fn coulomb_guide_friction(
     dataset: &[(String, Recording)],
 ) -> Option<Refit> {
     let kind = EffectKind::CoulombGuideFriction;
-    let per_decay: Vec<(f64, f64)> = calibration
-        .decays
+    let m = &model.mechanics;
+    let slip = kind.parameters()[1].default;
+    // Every decay, also one the calibration left out (a decay that stops
+    // dead within two cycles gives no decrement, but its extremes still
+    // drop by the friction): its first frequency measured, or Eqn 9's on
+    // the calibrated EA.
+    let decays: Vec<(&Recording, f64, f64)> = dataset
         .iter()
-        .filter_map(|d| {
-            let (_, r) = dataset.iter().find(|(s, _)| *s == d.recording)?;
-            viscous_and_dry(r, d.first_frequency_hz, d.mass_kg)
+        .filter_map(|(stem, r)| {
+            let RecordingKind::FreeDecay { mass_kg, rope_length_m } = r.meta.kind else { return None };
+            let f1 = calibration.decays.iter().find(|d| d.recording == *stem).map_or_else(
+                || eqn9_first_frequency_hz(m.rope_ea_n, m.rope_mass_per_length_kg_per_m, rope_length_m, mass_kg),
+                |d| d.first_frequency_hz,
+            );
+            Some((r, f1, mass_kg))
         })
         .collect();
+    let read = |viscous_kg_per_s: f64| -> Vec<(Option<f64>, f64)> {
+        decays.iter().filter_map(|&(r, f1, mass)| viscous_and_dry(r, f1, mass, viscous_kg_per_s, slip)).collect()
+    };
+    // The viscous damping of the decays long enough to tell it; without
+    // any, the rig's own (the calibration's reading of decays that stop
+    // dead is the friction taken for viscous damping). The decays too short
+    // to tell it are read again with it.
+    let viscous: Vec<f64> = read(calibration.nominal.1).iter().filter_map(|v| v.0).collect();
+    let c = if viscous.is_empty() { calibration.nominal.1 } else { viscous.iter().sum::<f64>() / viscous.len() as f64 };
+    let per_decay = read(c);
     if per_decay.is_empty() {
         return None;
     }
     let n = per_decay.len() as f64;
-    let c = per_decay.iter().map(|v| v.0).sum::<f64>() / n;
     let f = per_decay.iter().map(|v| v.1).sum::<f64>() / n;
     let f_se = if per_decay.len() > 1 {
         (per_decay.iter().map(|v| (v.1 - f).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
@@ -183,7 +301,6 @@ fn coulomb_guide_friction(
     if f.is_nan() || f <= spec.min {
         return None;
     }
-    let m = &model.mechanics;
     // Eqn 13 with the dry friction: tau - tau_e = (c_sh + 2 c r^2) w + 2 F r sign(w).
     let sheave: Vec<f64> = dataset
         .iter()
@@ -201,7 +318,6 @@ fn coulomb_guide_friction(
     rig.mechanics.c_car_kg_per_s = c;
     rig.mechanics.c_cw_kg_per_s = c;
     rig.mechanics.c_sheave_nms_per_rad = sheave_damping;
-    let slip = kind.parameters()[1].default;
     Some(Refit {
         effect: kind.name(),
         rope_ea_n: m.rope_ea_n,
@@ -209,9 +325,10 @@ fn coulomb_guide_friction(
         sheave_damping_nms_per_rad: sheave_damping,
         strength: (f, f_se),
         note: format!(
-            "decay envelopes A(n+1) = p A(n) + q over {} decays: viscous {c:.1} kg/s, dry {f:.2} +- {f_se:.2} N; \
-             sheave damping {sheave_damping:.3} N m s/rad over {} travels",
+            "decay half-cycle extremes B(k+1) = p B(k) + q over {} decays: viscous {c:.1} kg/s ({} of them), \
+             dry {f:.2} +- {f_se:.2} N; sheave damping {sheave_damping:.3} N m s/rad over {} travels",
             per_decay.len(),
+            if viscous.is_empty() { "the calibration's".to_string() } else { format!("from {}", viscous.len()) },
             sheave.len()
         ),
         grid: strength_grid(kind, f, (0.5 * f).max(2.0 * f_se), &[slip]),
@@ -250,22 +367,58 @@ mod tests {
         assert!(line_fit(&[1.0], &[0.0]).is_none());
     }
 
-    #[test]
-    fn viscous_and_dry_envelopes_are_told_apart() {
-        // A_{n+1} = p A_n - 4 F / m, p for zeta 0.01, F 6 N on 33 kg.
-        let (m, f) = (33.0, 6.0);
-        let p = (-std::f64::consts::TAU * 0.01f64).exp();
-        let mut a = vec![12.0];
-        for _ in 0..20 {
-            let next = p * a.last().unwrap() - 4.0 * f / m;
-            if next <= 0.5 {
-                break;
-            }
-            a.push(next);
+    /// A free decay of `mass_kg` on 4 m of the rig's rope (EA 1e6 N),
+    /// released from `a0` m/s^2, with viscous damping `c` kg/s and dry
+    /// friction `f` N (slip 2 mm/s), after 0.1 s at rest, as a recording.
+    fn decay(mass_kg: f64, c: f64, f: f64, a0: f64) -> (Recording, f64) {
+        use plant::free_decay::{simulate_free_decay_with, FreeDecaySpec};
+        let fs = 16384.0;
+        let spec = FreeDecaySpec {
+            mass_kg,
+            rope_length_m: 4.0,
+            rope_ea_n: 1.0e6,
+            rope_mass_per_length_kg_per_m: 0.095,
+            damping_kg_per_s: c,
+            initial_acceleration_mps2: a0,
+            elements: 40,
+        };
+        let mut effects = plant::effects::Effects::none();
+        if f > 0.0 {
+            effects.set(EffectKind::CoulombGuideFriction, &[f, 0.002]).unwrap();
         }
-        let (q, p_fit, _) = line_fit(&a[..a.len() - 1], &a[1..]).unwrap();
-        assert!((p_fit - p).abs() < 1e-9);
-        assert!((-q * m / 4.0 - f).abs() < 1e-9);
+        let mut acc = vec![0.0; (0.1 * fs) as usize];
+        acc.extend(simulate_free_decay_with(&spec, &effects, fs, 3.0).unwrap());
+        let recording = Recording {
+            meta: recording::RecordingMeta {
+                kind: RecordingKind::FreeDecay { mass_kg, rope_length_m: 4.0 },
+                sample_rate_hz: fs,
+                description: None,
+            },
+            columns: vec![recording::Column::new(ACC_CAR, acc)],
+        };
+        (recording, eqn9_first_frequency_hz(1.0e6, 0.095, 4.0, mass_kg))
+    }
+
+    #[test]
+    fn viscous_and_dry_friction_are_read_back_from_simulated_decays() {
+        // Viscous and dry together.
+        let (r, f1) = decay(33.0, 160.0, 6.0, 6.2);
+        let (c, f) = viscous_and_dry(&r, f1, 33.0, 148.0, 0.002).unwrap();
+        let c = c.unwrap();
+        assert!((c / 160.0 - 1.0).abs() < 0.05 && (f / 6.0 - 1.0).abs() < 0.1, "{c} {f}");
+        // Dry friction alone (the filtered peaks: 36 kg/s and 15.7 N).
+        let (r, f1) = decay(58.0, 0.0, 20.0, 10.0);
+        let (c, f) = viscous_and_dry(&r, f1, 58.0, 148.0, 0.002).unwrap();
+        assert!(c.unwrap() < 5.0 && (f / 20.0 - 1.0).abs() < 0.05, "{c:?} {f}");
+        // Viscous alone: no friction.
+        let (r, f1) = decay(33.0, 160.0, 0.0, 6.2);
+        let (c, f) = viscous_and_dry(&r, f1, 33.0, 148.0, 0.002).unwrap();
+        assert!((c.unwrap() / 160.0 - 1.0).abs() < 0.05 && f < 0.3, "{c:?} {f}");
+        // A decay that stops dead after a cycle and a half (two lobes past
+        // the release): the viscous damping given, the friction read.
+        let (r, f1) = decay(58.0, 148.0, 20.0, 2.0);
+        let (c, f) = viscous_and_dry(&r, f1, 58.0, 148.0, 0.002).unwrap();
+        assert!(c.is_none() && (f / 20.0 - 1.0).abs() < 0.1, "{c:?} {f}");
     }
 
     #[test]
