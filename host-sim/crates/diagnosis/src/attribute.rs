@@ -195,16 +195,17 @@ fn search(kind: EffectKind, reference_tension_n: Option<f64>) -> Search {
             Search::Grid(points)
         }
         Declared::Linear(strengths) => {
+            let mut neutral = base;
+            for &(j, _) in strengths {
+                neutral[j] = match specs[j].neutral {
+                    Neutral::At(v) => v,
+                    _ => 0.0,
+                };
+            }
             let probes = strengths
                 .iter()
                 .map(|&(i, probe)| {
-                    let mut p = base.clone();
-                    for &(j, _) in strengths {
-                        p[j] = match specs[j].neutral {
-                            Neutral::At(v) => v,
-                            _ => 0.0,
-                        };
-                    }
+                    let mut p = neutral.clone();
                     p[i] = probe;
                     p
                 })

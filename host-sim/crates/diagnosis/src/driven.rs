@@ -387,16 +387,14 @@ fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_
     ((h * omega / max_rate_per_step).ceil() as usize).max(1)
 }
 
-/// The effects of the library the torque-driven model can hold: the
-/// mechanical ones of [`Line`] while the rig moves, the encoder's angle
-/// error (the model reads the true angle from the recorded one) and the
-/// current transducers' errors (the model takes the true torque from the
-/// recorded currents, read as the drive's transducer signals:
-/// [`crate::transducer`]; recorded by independent clamps, the currents
-/// carry the error themselves and the direct-axis lines show it). Not:
-/// `dead_time` (the recorded currents, and so the torque that drives the
-/// model, carry it), and `brake_stop`, which acts while the brake holds,
-/// where another drive's start and stop sequence is not compared.
+/// The effects of the library the torque-driven model can hold, as each
+/// declares ([`plant::effects::Seen::under_another_drive`]): the mechanical
+/// ones of [`Line`] while the rig moves, the encoder's angle error (the
+/// model reads the true angle from the recorded one) and the current
+/// transducers' errors (the model takes the true torque from the recorded
+/// currents, read as the drive's transducer signals: [`crate::transducer`]);
+/// not an error the recorded currents carry themselves, nor an effect of
+/// the stop.
 pub fn holds_effect(kind: EffectKind) -> bool {
     kind.seen().under_another_drive
 }

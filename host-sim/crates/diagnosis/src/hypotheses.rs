@@ -28,6 +28,7 @@
 //! ([`super::attribute`]), its strength starting from what the decays gave.
 
 use crate::calibrate::Calibration;
+use crate::identify::first_mode_signal;
 use crate::travel_signals::torque_balance;
 use dsp::filter::highpass_zero_phase;
 use plant::effects::EffectKind;
@@ -170,15 +171,12 @@ const MAX_CYCLE_RATIO: f64 = 1.05;
 /// speeds or below three times the noise.
 fn half_cycle_extremes(acceleration_mps2: &[f64], sample_rate_hz: f64, f1_hz: f64, slip_mps: f64) -> Vec<f64> {
     let Ok(release) = crate::identify::release_index(acceleration_mps2) else { return Vec::new() };
-    let top = (2.0 * f1_hz).min(0.45 * sample_rate_hz);
-    let (Ok(above_fifth), Ok(above_half)) = (
+    let (Ok(above_fifth), Ok((mode, _))) = (
         highpass_zero_phase(acceleration_mps2, sample_rate_hz, 0.2 * f1_hz),
-        highpass_zero_phase(acceleration_mps2, sample_rate_hz, 0.5 * f1_hz),
+        first_mode_signal(acceleration_mps2, release, sample_rate_hz, f1_hz),
     ) else {
         return Vec::new();
     };
-    let Ok(above_double) = highpass_zero_phase(&above_half, sample_rate_hz, top) else { return Vec::new() };
-    let mode: Vec<f64> = above_half.iter().zip(&above_double).map(|(a, b)| a - b).collect();
     // Noise: the signal before the release (zero-phase filters smear the
     // release backwards by a few cycles), when there is one.
     let quiet_end = release.saturating_sub((3.0 * sample_rate_hz / f1_hz) as usize);

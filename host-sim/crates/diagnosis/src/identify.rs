@@ -193,7 +193,7 @@ fn first_mode_hz(released: &[f64], sample_rate_hz: f64, top_hz: f64) -> Result<f
 /// `f1/2`, less what a high-pass at `2 f1` keeps: the higher rope modes), and
 /// the band-limited pre-trigger before `release` when it is long enough to
 /// tell the noise.
-fn first_mode_signal(
+pub(crate) fn first_mode_signal(
     acceleration_mps2: &[f64],
     release: usize,
     sample_rate_hz: f64,
