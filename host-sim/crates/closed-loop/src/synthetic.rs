@@ -11,8 +11,8 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-use crate::foreign::{simulate_commercial_travel, AnalogSignal, Channel, ForeignError, ForeignRig};
-use crate::{simulate_travel, simulate_travel_faulted, FaultHook, SimError, SimOptions, TravelSpec};
+use crate::foreign::{simulate_commercial_travel, Acquisition, AnalogSignal, Channel, ForeignError, ForeignRig};
+use crate::{simulate_travel, simulate_travel_faulted, FaultHook, SimError, SimOptions, TravelRun, TravelSpec};
 use plant::effects::Effects;
 use plant::free_decay::{simulate_free_decay_with, FreeDecayError, FreeDecaySpec};
 use recording::{
@@ -324,13 +324,14 @@ fn foreign_travel(
         let signal = AnalogSignal { start_s: signal_start_s, rate_hz: fs, values: &analog };
         acq.record(&signal, channel, start_s, count, &mut *rng)
     };
+    let currents = recorded_currents_a(&run, acq, &options.effects);
     let columns = vec![
         Column::new(TIME_S, acq.time_column(count)),
         Column::new(ACC_CAR, record(&run.acc_car_mps2, Channel::Accelerometer)),
         Column::new(ACC_CW, record(&run.acc_cw_mps2, Channel::Accelerometer)),
-        Column::new(I_A, record(&run.phase_currents_a[0], Channel::Current)),
-        Column::new(I_B, record(&run.phase_currents_a[1], Channel::Current)),
-        Column::new(I_C, record(&run.phase_currents_a[2], Channel::Current)),
+        Column::new(I_A, record(&currents[0], Channel::Current)),
+        Column::new(I_B, record(&currents[1], Channel::Current)),
+        Column::new(I_C, record(&currents[2], Channel::Current)),
         Column::new(SPEED, record(&run.speed_radps, Channel::Drive)),
         Column::new(ANGLE, record(&run.angle_rad, Channel::Drive)),
         Column::new(REF_SPEED, record(&run.ref_speed_mps, Channel::Drive)),
@@ -339,6 +340,23 @@ fn foreign_travel(
     recording.meta.sample_rate_hz = acq.sample_rate_hz;
     recording.columns = columns;
     Ok(recording)
+}
+
+/// The phase currents (A, at the run's rate) that `acq` records of `run`:
+/// the machine's true currents, or with
+/// [`drive_transducer_currents`](crate::foreign::Acquisition::drive_transducer_currents)
+/// what the drive's transducers read of them through `effects` (the plant's
+/// [`Effects::measured_currents_a`], before the drive's own ADC), the
+/// currents the drive regulates.
+pub fn recorded_currents_a(run: &TravelRun, acq: &Acquisition, effects: &Effects) -> [Vec<f64>; 3] {
+    let mut currents = run.phase_currents_a.clone();
+    if acq.drive_transducer_currents {
+        let [a, b, c] = &mut currents;
+        for k in 0..a.len() {
+            [a[k], b[k], c[k]] = effects.measured_currents_a([a[k], b[k], c[k]]);
+        }
+    }
+    currents
 }
 
 /// The free decay of `spec` on `rig` for the hanging mass `mass_kg`: the

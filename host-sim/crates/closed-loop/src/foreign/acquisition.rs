@@ -24,6 +24,11 @@
 //!    [`Acquisition::current_bits`] over `+-`[`Acquisition::current_full_scale_a`]
 //!    (values clipped to its range).
 //!
+//! The phase currents recorded are the machine's true currents (independent
+//! clamps) or, with [`Acquisition::drive_transducer_currents`], the drive's
+//! own transducer signals: the currents it senses and regulates, which
+//! differ from the true ones by the plant's `current_sensor_error`.
+//!
 //! The drive's own signals (speed estimate, encoder angle, reference speed)
 //! go through steps 2 and 3 only. A recording starts
 //! [`Acquisition::pre_trigger_s`] before its trigger (travels: the start of
@@ -45,10 +50,10 @@ foreign_params! {
             ParamKind::Choice(&[4096.0, 5000.0, 8192.0, 10000.0, 12800.0, 16384.0]);
         /// Error of the acquisition's sample clock, ppm (positive: it runs fast, its samples are closer in true time).
         clock_offset_ppm: f64 = 0.0, [-200.0, 200.0], "ppm", ParamKind::Real;
-        /// Corner of the accelerometers' first-order high-pass (sensor and charge amplifier), Hz.
+        /// Corner of the accelerometers' high-pass (sensor and charge amplifier, or the acquisition's AC coupling: `highpass_order`), Hz.
         highpass_hz: f64 = 0.5, [0.2, 1.0], "Hz", ParamKind::Real;
-        /// Order of the accelerometers' high-pass: 1 (sensor and charge amplifier) or 2 (Butterworth, an acquisition's AC coupling); not drawn at random.
-        highpass_order: u32 = 1.0, [1.0, 2.0], "-", ParamKind::Fixed;
+        /// Order of the accelerometers' high-pass: 1 (sensor and charge amplifier) or 2 (Butterworth, an acquisition's AC coupling); drawn 1 or 2 with equal probability, after the other parameters.
+        highpass_order: u32 = 1.0, [1.0, 2.0], "-", ParamKind::DrawnLast(&ParamKind::IntegerChoice(&[1.0, 2.0]));
         /// Corner of the anti-alias low-pass as a fraction of the sample rate.
         antialias_fraction: f64 = 0.4, [0.2, 0.45], "-", ParamKind::Real;
         /// Order of the anti-alias Butterworth low-pass.
@@ -67,6 +72,8 @@ foreign_params! {
         duration_s: f64 = 0.0, [0.0, 120.0], "s", ParamKind::Fixed;
         /// Free decays: acceleration of the mass just after its release (sets how far it is held), m/s^2.
         release_acceleration_mps2: f64 = 2.0, [0.5, 4.0], "m/s^2", ParamKind::Real;
+        /// Which phase currents are recorded: 0 (off) the machine's true currents, as independent clamps measure them; 1 (on) the drive's own transducer signals, the currents it senses and regulates (a transducer gain or offset error then leaves the recorded currents clean and shows in the mechanics); drawn on with probability 0.5, after the other parameters.
+        drive_transducer_currents: bool = 0.0, [0.0, 1.0], "-", ParamKind::DrawnLast(&ParamKind::Switch { p_on: 0.5 });
     }
 }
 
@@ -357,6 +364,24 @@ mod tests {
         for p in [1.0, 2.25, 4.5, 7.75] {
             assert!((catmull_rom(&x, p) - f(p)).abs() < 1e-12, "{p}");
         }
+    }
+
+    #[test]
+    fn variants_drawn_last_leave_the_other_draws_as_they_were_and_take_both_values() {
+        use rand::SeedableRng;
+        let mut seen = (Vec::new(), Vec::new());
+        for seed in 0..40 {
+            let drawn = Acquisition::random(&mut rand::rngs::StdRng::seed_from_u64(seed));
+            // The parameters drawn first, one after the other from the same seed.
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            for p in Acquisition::PARAMS.iter().filter(|p| !p.kind.drawn_last()) {
+                assert_eq!(drawn.get(p.name), Some(p.draw(&mut rng)), "seed {seed}: {}", p.name);
+            }
+            seen.0.push(drawn.highpass_order);
+            seen.1.push(drawn.drive_transducer_currents);
+        }
+        assert!(seen.0.contains(&1) && seen.0.contains(&2), "{:?}", seen.0);
+        assert!(seen.1.contains(&false) && seen.1.contains(&true), "{:?}", seen.1);
     }
 
     #[test]

@@ -64,7 +64,10 @@ impl ForeignRig {
         Self { drive: Some(ForeignDrive::default()), acquisition: Some(Acquisition::default()) }
     }
 
-    /// Both parts drawn at random within their ranges.
+    /// Both parts drawn at random within their ranges: the drive's
+    /// parameters, then the acquisition's, those drawn last
+    /// ([`ParamKind::DrawnLast`]: its high-pass order and current source)
+    /// at the very end, so that a seed's earlier values do not depend on them.
     pub fn random<R: rand::Rng + ?Sized>(rng: &mut R) -> Self {
         let drive = ForeignDrive::random(rng);
         Self { drive: Some(drive), acquisition: Some(Acquisition::random(rng)) }

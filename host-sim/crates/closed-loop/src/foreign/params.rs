@@ -22,6 +22,26 @@ pub enum ParamKind {
     IntegerChoice(&'static [f64]),
     /// A real number in `[min, max]` that random draws leave at its default.
     Fixed,
+    /// Checked and drawn as the kind it holds, but after every other
+    /// parameter of its part: a parameter whose random draw was added later,
+    /// so that the values drawn before it for a given seed stay what they were.
+    DrawnLast(&'static ParamKind),
+}
+
+impl ParamKind {
+    /// The kind that checks and draws the value: the held kind of
+    /// [`ParamKind::DrawnLast`], else this one.
+    pub fn resolved(self) -> ParamKind {
+        match self {
+            ParamKind::DrawnLast(kind) => kind.resolved(),
+            kind => kind,
+        }
+    }
+
+    /// Whether random draws take this parameter after the others of its part.
+    pub fn drawn_last(self) -> bool {
+        matches!(self, ParamKind::DrawnLast(_))
+    }
 }
 
 /// One named parameter of a foreign rig part.
@@ -58,7 +78,7 @@ impl ParamInfo {
     /// for [`ParamKind::Integer`], 0 or 1 for [`ParamKind::Switch`].
     pub fn accepts(&self, value: f64) -> bool {
         let in_range = value.is_finite() && value >= self.min && value <= self.max;
-        match self.kind {
+        match self.kind.resolved() {
             ParamKind::Integer | ParamKind::IntegerChoice(_) => in_range && value.fract() == 0.0,
             ParamKind::Switch { .. } => value == 0.0 || value == 1.0,
             _ => in_range,
@@ -67,7 +87,7 @@ impl ParamInfo {
 
     /// What an accepted value looks like, for error messages and help.
     pub fn expected(&self) -> String {
-        match self.kind {
+        match self.kind.resolved() {
             ParamKind::Switch { .. } => "0 (off) or 1 (on)".to_string(),
             ParamKind::Integer | ParamKind::IntegerChoice(_) => {
                 format!("a whole number in [{}, {}]", self.min, self.max)
@@ -78,18 +98,18 @@ impl ParamInfo {
 
     /// A value drawn at random as [`ParamKind`] says.
     pub fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
-        match self.kind {
+        match self.kind.resolved() {
             ParamKind::Real => rng.gen_range(self.min..=self.max),
             ParamKind::Integer => rng.gen_range(self.min as i64..=self.max as i64) as f64,
             ParamKind::Switch { p_on } => f64::from(u8::from(rng.gen_bool(p_on))),
             ParamKind::Choice(values) | ParamKind::IntegerChoice(values) => values[rng.gen_range(0..values.len())],
-            ParamKind::Fixed => self.default,
+            ParamKind::Fixed | ParamKind::DrawnLast(_) => self.default,
         }
     }
 
     /// One line of help: `name = default (unit; range): doc`.
     pub fn help_line(&self) -> String {
-        let range = match self.kind {
+        let range = match self.kind.resolved() {
             ParamKind::Switch { .. } => "0 off / 1 on".to_string(),
             _ => format!("{}..{} {}", self.min, self.max, self.unit),
         };
@@ -283,10 +303,12 @@ macro_rules! foreign_params {
             }
 
             /// A plausible set drawn at random within the ranges ([`ParamKind`](crate::foreign::ParamKind)
-            /// says how each is drawn).
+            /// says how each is drawn): in the order of [`Self::PARAMS`], those
+            /// [`drawn last`](crate::foreign::ParamKind::DrawnLast) after all the others.
             pub fn random<R: rand::Rng + ?Sized>(rng: &mut R) -> Self {
                 let mut out = Self::default();
-                for info in Self::PARAMS {
+                let first = Self::PARAMS.iter().filter(|p| !p.kind.drawn_last());
+                for info in first.chain(Self::PARAMS.iter().filter(|p| p.kind.drawn_last())) {
                     let value = info.draw(rng);
                     // Every drawn value lies in its range.
                     let _ = out.set(info.name, value);
