@@ -6,11 +6,14 @@
 //!
 //! CI runs two cases on one draw (tension stiffening, and guide-rail joints
 //! that are not in the library) and the direct-axis lines of the nominal
-//! rig, the electrical effects and every mechanical one on that draw; the
-//! sweep over draws, the nominal and
-//! parameter-only rigs, every effect of the library and the rail joints is
-//! an ignored test that prints the whole table (`GAP_FOREIGN_CASES` picks
-//! cases: effect names, `nominal` and `rail_joints`):
+//! rig, the electrical effects and every mechanical one on that draw, with
+//! its currents recorded by clamps and by the drive's transducers; the
+//! sweep over draws, the nominal and parameter-only rigs, every effect of
+//! the library and the rail joints is an ignored test that prints the
+//! whole table, each draw with its acquisition's variant (the
+//! accelerometers' high-pass order, the currents recorded by clamps or by
+//! the drive's transducers; `GAP_FOREIGN_CASES` picks cases: effect names,
+//! `nominal` and `rail_joints`):
 //! `cargo test --release -p host-sim --test integration gap_foreign:: -- --ignored --nocapture`
 //! (`GAP_FOREIGN_DRAWS=N` draws, default 2, from `GAP_FOREIGN_FIRST`,
 //! default 100: the foreign rig of `--foreign-seed 100` and on).
@@ -20,10 +23,10 @@ use closed_loop::synthetic::{make_foreign_dataset_hooked, DatasetSpec, TravelHoo
 use diagnosis::driven::holds_effect;
 use diagnosis::{diagnose, GapOptions, GapReport, Verdict};
 use dsp::welch_psd;
-use plant::effects::{EffectKind, Effects};
+use plant::effects::{CurrentSensorError, EffectKind, Effects};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use recording::{Recording, ACC_CAR};
+use recording::{Recording, ACC_CAR, I_A, I_B, I_C};
 use rig_config::RigConfig;
 
 use crate::gap::{car_change, draw};
@@ -32,6 +35,8 @@ use crate::support::{assert_unexplained_on_the_moving_car, rig, RailJoints};
 /// One case of the sweep: what was drawn, what the diagnosis said.
 struct Case {
     draw: u64,
+    /// The acquisition's variant ([`acquisition_variant`]).
+    variant: String,
     truth: String,
     change: Change,
     /// RMS white noise of the draw's accelerometers, m/s^2.
@@ -143,6 +148,30 @@ fn foreign_rig(d: u64) -> ForeignRig {
     ForeignRig::random(&mut StdRng::seed_from_u64(d))
 }
 
+/// The foreign rig of draw 8 with its acquisition's accelerometers
+/// high-passed in first order and its currents recorded by clamps (the
+/// machine's true currents): draw 8 itself draws a second-order high-pass
+/// and the drive's transducer currents. The CI tests on draw 8 are about
+/// effects, not about those two variants, and keep the rig they were
+/// measured on; the direct-axis lines of the transducers' errors also need
+/// the true currents (recorded as the drive's transducer signals they are
+/// clean: [`foreign_rig_current_sensor_error_recorded_by_the_drive_leaves_its_currents_clean`]).
+fn draw_8_first_order_clamps() -> ForeignRig {
+    let mut foreign = foreign_rig(8);
+    let acquisition = foreign.acquisition.as_mut().expect("draw 8 records with its own acquisition");
+    acquisition.highpass_order = 1;
+    acquisition.drive_transducer_currents = false;
+    foreign
+}
+
+/// The acquisition's variant of `foreign`: the order of the
+/// accelerometers' high-pass and which currents it records.
+fn acquisition_variant(foreign: &ForeignRig) -> String {
+    foreign.acquisition.map_or("project".to_string(), |a| {
+        format!("hp{} {}", a.highpass_order, if a.drive_transducer_currents { "drive" } else { "clamps" })
+    })
+}
+
 fn diagnosed(model: &RigConfig, name: &str, data: &[(String, Recording)]) -> GapReport {
     diagnose(model, name, data, &GapOptions::default(), &|_, _, _| {}).expect("the diagnosis runs")
 }
@@ -161,15 +190,16 @@ fn parameter_only(nominal: &RigConfig, rng: &mut StdRng) -> RigConfig {
 
 fn print_table(cases: &[Case]) {
     println!(
-        "{:>4} {:<70} {:>10} {:>9} {:<12} {:<24} {:>7} {:>8} {:>10}  calibration error EA / guide / sheave",
-        "draw", "truth", "car change", "sig/noise", "verdict", "first", "shrink", "excess", "persistent"
+        "{:>4} {:<10} {:<70} {:>10} {:>9} {:<12} {:<24} {:>7} {:>8} {:>10}  calibration error EA / guide / sheave",
+        "draw", "daq", "truth", "car change", "sig/noise", "verdict", "first", "shrink", "excess", "persistent"
     );
     for c in cases {
         let (first, shrink) =
             c.report.ranking.first().map_or(("-".to_string(), 0.0), |b| (b.name.clone(), b.held_out_shrink));
         println!(
-            "{:>4} {:<70} {:>10.4} {:>9.1} {:<12} {:<24} {:>6.0}% {:>6.2}dB {:>8.2}dB  {}",
+            "{:>4} {:<10} {:<70} {:>10.4} {:>9.1} {:<12} {:<24} {:>6.0}% {:>6.2}dB {:>8.2}dB  {}",
             c.draw,
+            c.variant,
             c.truth,
             c.change.rms_mps2,
             c.change.signature_mps2 / c.noise_mps2,
@@ -216,6 +246,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
     let mut rng = StdRng::seed_from_u64(1000 + d);
     let nominal = foreign_dataset(&model, &foreign, Effects::none());
     let noise_mps2 = foreign.acquisition.map_or(0.0, |a| a.acc_noise_mps2);
+    let variant = acquisition_variant(&foreign);
     let truth_of = |r: &RigConfig| {
         let m = &r.mechanics;
         Some((m.rope_ea_n, m.c_car_kg_per_s, m.c_sheave_nms_per_rad))
@@ -225,6 +256,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
         let report = diagnosed(&model, "nominal", &nominal);
         cases.push(Case {
             draw: d,
+            variant: variant.clone(),
             truth: "nominal".into(),
             change: Change::default(),
             noise_mps2,
@@ -239,7 +271,16 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
         );
         let report = diagnosed(&model, &name, &data);
         let change = Change::between(&data, &nominal);
-        cases.push(Case { draw: d, truth: name, change, noise_mps2, calibration_truth: truth_of(&truth), report });
+        let calibration_truth = truth_of(&truth);
+        cases.push(Case {
+            draw: d,
+            variant: variant.clone(),
+            truth: name,
+            change,
+            noise_mps2,
+            calibration_truth,
+            report,
+        });
     }
     // The acquisition's noise is drawn from the same seed in both datasets,
     // so it cancels in the change.
@@ -271,13 +312,22 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
         let truth = format!("{} [{}]", kind.name(), values_text.join(", "));
         let report = diagnosed(&model, &truth, &data);
         let change = Change::between(&data, reference);
-        cases.push(Case { draw: d, truth, change, noise_mps2, calibration_truth: None, report });
+        cases.push(Case {
+            draw: d,
+            variant: variant.clone(),
+            truth,
+            change,
+            noise_mps2,
+            calibration_truth: None,
+            report,
+        });
     }
     if selected("rail_joints") {
         let data = rail_joints_dataset(&model, &foreign);
         let report = diagnosed(&model, OUTSIDE, &data);
         let change = Change::between(&data, &nominal);
-        cases.push(Case { draw: d, truth: OUTSIDE.into(), change, noise_mps2, calibration_truth: None, report });
+        let truth = OUTSIDE.into();
+        cases.push(Case { draw: d, variant, truth, change, noise_mps2, calibration_truth: None, report });
     }
 }
 
@@ -296,7 +346,7 @@ fn rail_joints_dataset(model: &RigConfig, foreign: &ForeignRig) -> Vec<(String, 
 #[test]
 fn foreign_rig_rail_joints_are_unexplained_and_located() {
     let model = rig();
-    let report = diagnosed(&model, OUTSIDE, &rail_joints_dataset(&model, &foreign_rig(8)));
+    let report = diagnosed(&model, OUTSIDE, &rail_joints_dataset(&model, &draw_8_first_order_clamps()));
     assert_unexplained_on_the_moving_car(&report);
 }
 
@@ -308,7 +358,7 @@ fn foreign_rig_rail_joints_are_unexplained_and_located() {
 #[test]
 fn foreign_rig_second_order_accelerometer_highpass_is_found_and_the_rig_stays_nominal() {
     let model = rig();
-    let mut foreign = foreign_rig(8);
+    let mut foreign = draw_8_first_order_clamps();
     let acquisition = foreign.acquisition.as_mut().expect("draw 8 records with its own acquisition");
     acquisition.highpass_order = 2;
     acquisition.highpass_hz = 1.0;
@@ -330,7 +380,7 @@ fn foreign_rig_second_order_accelerometer_highpass_is_found_and_the_rig_stays_no
 #[test]
 fn foreign_rig_tension_stiffening_is_named_first() {
     let model = rig();
-    let foreign = foreign_rig(8);
+    let foreign = draw_8_first_order_clamps();
     let mut effects = Effects::none();
     effects.set(EffectKind::TensionStiffening, &[0.437, EffectKind::TensionStiffening.defaults()[1]]).unwrap();
     let report = diagnosed(&model, "tension stiffening", &foreign_dataset(&model, &foreign, effects));
@@ -354,7 +404,7 @@ fn foreign_rig_tension_stiffening_is_named_first() {
 #[test]
 fn foreign_rig_diverting_pulley_is_explained() {
     let model = rig();
-    let foreign = foreign_rig(8);
+    let foreign = draw_8_first_order_clamps();
     let mut effects = Effects::none();
     let mut values = EffectKind::DivertingPulley.defaults();
     values[0] = 0.06;
@@ -376,11 +426,12 @@ fn foreign_rig_diverting_pulley_is_explained() {
 }
 
 /// The direct-axis lines of a foreign rig's travels (its drive turned to a
-/// rotor start at 0 degrees, as the library's electrical effects need)
-/// with `effects`.
+/// rotor start at 0 degrees, as the library's electrical effects need;
+/// its currents recorded by clamps, in which the drive's transducer errors
+/// show) with `effects`.
 fn direct_axis_lines(effects: Effects) -> diagnosis::electrical_lines::ElectricalLines {
     let model = rig();
-    let mut foreign = foreign_rig(8);
+    let mut foreign = draw_8_first_order_clamps();
     if let Some(drive) = foreign.drive.as_mut() {
         drive.rotor_start_angle_deg = 0.0;
     }
@@ -438,6 +489,60 @@ fn foreign_rig_mechanical_effects_leave_the_direct_axis_clean() {
         let found = direct_axis_lines(effects);
         assert!(!found.present(), "{}: lines at orders {:?}", kind.name(), found.present_orders);
     }
+}
+
+/// A rig whose export records the drive's own transducer signals: under a
+/// current-sensor error the drive regulates what its transducers report, so
+/// the recorded currents are those it senses, `(1 + g) i + o` of the true
+/// currents `i` on phases a and b (phase c exact), and their direct-axis
+/// lines are clean, as on `../shared/rig-dev/current_sensor_error`; the
+/// same travels recorded by clamps carry the true currents, whose lines
+/// show the error. Checked sample by sample: the drive's recording is the
+/// sensor error applied to the clamps' recording (same acquisition and
+/// noise), within what the acquisition's quantiser and the error's gain
+/// on the noise leave.
+#[test]
+fn foreign_rig_current_sensor_error_recorded_by_the_drive_leaves_its_currents_clean() {
+    let model = rig();
+    let error = CurrentSensorError { offset_a_a: 0.15, offset_b_a: -0.05, gain_error_a: 0.008, gain_error_b: -0.005 };
+    let effects = Effects { current_sensor_error: Some(error), ..Effects::none() };
+    let mut foreign = draw_8_first_order_clamps();
+    if let Some(drive) = foreign.drive.as_mut() {
+        drive.rotor_start_angle_deg = 0.0;
+    }
+    let spec = DatasetSpec { m_car_kg: vec![70.5], decay_masses_kg: vec![], effects, ..DatasetSpec::rig(&model) };
+    let record = |drive_transducer_currents: bool| {
+        let mut rig = foreign;
+        rig.acquisition.as_mut().expect("a foreign acquisition").drive_transducer_currents = drive_transducer_currents;
+        make_foreign_dataset_hooked(&model, &spec, &rig, None).expect("foreign dataset")
+    };
+    let (by_drive, by_clamps) = (record(true), record(false));
+    let acquisition = foreign.acquisition.expect("a foreign acquisition");
+    let tolerance_a = (1.0 + error.gain_error_a.abs()) * acquisition.current_step_a()
+        + error.gain_error_a.abs().max(error.gain_error_b.abs()) * 6.0 * acquisition.current_noise_a;
+    for ((stem, drive), (_, clamps)) in by_drive.iter().zip(&by_clamps) {
+        let phases = |r: &Recording| [I_A, I_B, I_C].map(|n| r.column(n).expect("a current column").values.clone());
+        let (sensed, true_currents) = (phases(drive), phases(clamps));
+        let mut worst = 0.0f64;
+        for k in 0..sensed[0].len() {
+            let expected = error.measured_a([0, 1, 2].map(|p| true_currents[p][k]));
+            for p in 0..3 {
+                worst = worst.max((sensed[p][k] - expected[p]).abs());
+            }
+        }
+        let offset: f64 =
+            (0..sensed[0].len()).map(|k| sensed[0][k] - true_currents[0][k]).sum::<f64>() / sensed[0].len() as f64;
+        println!("{stem}: sensed - error(true) up to {worst:.2e} A (tolerance {tolerance_a:.2e}); phase a differs by {offset:+.3} A on average");
+        assert!(worst <= tolerance_a, "{stem}: the drive's recording is {worst} A off the sensor error of the clamps'");
+    }
+    let lines = |data: &[(String, Recording)]| {
+        let travels: Vec<(&str, &Recording)> = data.iter().map(|(s, r)| (s.as_str(), r)).collect();
+        diagnosis::electrical_lines::electrical_lines(&model, &travels, &EffectKind::ALL)
+    };
+    let (sensed, true_lines) = (lines(&by_drive), lines(&by_clamps));
+    println!("lines: drive's transducers {:?}, clamps {:?}", sensed.present_orders, true_lines.present_orders);
+    assert!(!sensed.present(), "the drive's transducer currents carry lines at orders {:?}", sensed.present_orders);
+    assert!(true_lines.present_orders.contains(&1.0), "clamps: lines at {:?}", true_lines.present_orders);
 }
 
 /// The sweep over foreign draws (about 18 minutes a draw on two cores): every
