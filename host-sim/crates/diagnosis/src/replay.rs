@@ -6,6 +6,8 @@
 //! when the replay misses them too, it lies in the mechanics.
 
 use dsp::highpass_zero_phase;
+use plant::effects::Effects;
+use plant::line::{BrakeAction, Line};
 use plant::rope::{CAR, CW, DOF, SHEAVE};
 use plant::{Chain, ChainParams, ChainState};
 use rig_config::RigConfig;
@@ -46,7 +48,12 @@ pub fn replay_accelerations(
     state.position_m[SHEAVE] = sheave[0];
     let mut car = Vec::with_capacity(n);
     let mut cw = Vec::with_capacity(n);
-    let accel_at = |s: &ChainState| chain.acceleration_mps2(s, 0.0, false);
+    let line = Line::new(&Effects::none());
+    let accel_at = |s: &ChainState| {
+        let mut a = [0.0; DOF];
+        line.accelerations(&chain, &s.position_m, &s.velocity_mps, 0.0, BrakeAction::Released, 0.0, &mut a);
+        a
+    };
     let mut work = [0.0; 10 * DOF];
     for k in 0..n {
         let a = accel_at(&state);

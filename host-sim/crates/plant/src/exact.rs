@@ -43,6 +43,7 @@ use super::line::Lumped;
 use super::mechanics::MIN_ROPE_LENGTH_M;
 use super::pmsm::phase_currents_cs_a;
 use super::rope::{CAR, CW, DOF, SHEAVE};
+use super::spring_line::{self, NodeForce};
 use super::{Plant, PlantObservation, STATE_LEN};
 
 /// Mechanical states: five positions, five velocities.
@@ -95,11 +96,8 @@ impl Coefficients {
     /// Accelerations (m/s^2) at positions `u` (m), velocities `v` (m/s),
     /// drive force on the sheave edge `f` (N) and extra car force `f_car` (N).
     fn accel(&self, u: &[f64], v: &[f64], f: f64, f_car: f64) -> [f64; DOF] {
-        let k = &self.spring;
-        let t = [k[0] * (u[1] - u[0]), k[1] * (u[2] - u[1]), k[2] * (u[3] - u[2]), k[3] * (u[4] - u[3])];
         let sheave = f + self.out_of_balance_n + self.out_of_balance_n_per_m * u[SHEAVE];
-        let force = [t[0], t[1] - t[0], t[2] - t[1] + sheave, t[3] - t[2], -t[3] + f_car];
-        self.respond(force, v)
+        self.respond(u, v, sheave, f_car)
     }
 
     /// The change of the accelerations (m/s^2) when the springs and masses
@@ -128,18 +126,21 @@ impl Coefficients {
     /// Jerks (m/s^3) at velocities `v` (m/s), accelerations `a` (m/s^2) and
     /// drive force rate `f_rate` (N/s) on the sheave edge.
     fn jerk(&self, v: &[f64], a: &[f64; DOF], f_rate: f64) -> [f64; DOF] {
-        let k = &self.spring;
-        let t = [k[0] * (v[1] - v[0]), k[1] * (v[2] - v[1]), k[2] * (v[3] - v[2]), k[3] * (v[4] - v[3])];
         let sheave = f_rate + self.out_of_balance_n_per_m * v[SHEAVE];
-        self.respond([t[0], t[1] - t[0], t[2] - t[1] + sheave, t[3] - t[2], -t[3]], a)
+        self.respond(v, a, sheave, 0.0)
     }
 
-    /// `(force_i - c_i rate_i) / m_i`, the sheave's zero when held.
-    fn respond(&self, force: [f64; DOF], rate: &[f64]) -> [f64; DOF] {
+    /// The line's response ([`spring_line::accelerations`]) to the
+    /// displacements `u` (m) and rates `rate` (m/s) with the force `sheave`
+    /// (N) on the sheave edge and `f_car` (N) on the car: `(force_i - c_i
+    /// rate_i) / m_i`, the sheave's zero when held. Accelerations from
+    /// positions and velocities; differentiated, jerks from velocities and
+    /// accelerations.
+    fn respond(&self, u: &[f64], rate: &[f64], sheave: f64, f_car: f64) -> [f64; DOF] {
         let mut out = [0.0; DOF];
-        for i in 0..DOF {
-            out[i] = (force[i] - self.damping[i] * rate[i]) * self.inv_mass[i];
-        }
+        let k = &self.spring;
+        let applied = [NodeForce { node: SHEAVE, force_n: sheave }, NodeForce { node: CAR, force_n: f_car }];
+        spring_line::accelerations(|i, e| k[i] * e, &self.damping, &self.inv_mass, u, rate, &applied, &mut out);
         if self.held {
             out[SHEAVE] = 0.0;
         }

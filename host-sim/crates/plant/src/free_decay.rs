@@ -9,6 +9,7 @@
 
 use super::effects::tension_stiffening::{static_tension_n, StiffeningSegment};
 use super::effects::{Effects, TensionStiffening};
+use super::spring_line::{self, NodeForce};
 use super::Rk4;
 
 /// One free-decay test.
@@ -152,13 +153,15 @@ struct DecayChain {
     segment_length: f64,
     /// Node masses, kg.
     masses: Vec<f64>,
+    /// `1 / m_i`, 1/kg.
+    inv_mass: Vec<f64>,
+    /// Viscous damping on each node, kg/s (the guides' on the hitch).
+    damping: Vec<f64>,
     /// The body's mass (car-frame mode), kg.
     body_mass: f64,
     /// Frame spring (N/m) and damper (kg/s), zero without the frame.
     k_frame: f64,
     c_frame: f64,
-    /// Guide damping on the hitch, kg/s.
-    c: f64,
     stiffening: Option<TensionStiffening>,
     frame: bool,
     /// The effects acting at the guides ([`Effects::guide_force_n`]), on
@@ -208,6 +211,9 @@ impl DecayChain {
         if frame.is_some() {
             masses[n] = body_mass;
         }
+        let inv_mass = masses.iter().map(|m| 1.0 / m).collect();
+        let mut damping = vec![0.0; nodes];
+        damping[n - 1] = spec.damping_kg_per_s;
         Self {
             n,
             nodes,
@@ -217,10 +223,11 @@ impl DecayChain {
             segments,
             segment_length,
             masses,
+            inv_mass,
+            damping,
             body_mass,
             k_frame,
             c_frame,
-            c: spec.damping_kg_per_s,
             stiffening,
             frame: frame.is_some(),
             guides: effects.acts_at_guides().then_some(*effects),
@@ -281,38 +288,34 @@ impl DecayChain {
     }
 
     /// The nodes' accelerations `out` (m/s^2) at the state `y` (positions
-    /// then velocities).
+    /// then velocities): the line's forces ([`spring_line::accelerations`];
+    /// kernel spring `i` is the rope's spring `i + 1`, the frame spring
+    /// last, the top spring's tension on node 0 as a force), the guides
+    /// and the frame damper.
     fn acceleration(&self, y: &[f64], out: &mut [f64]) {
-        let (n, nodes, springs, segments) = (self.n, self.nodes, &self.springs, &self.segments);
-        let (k_frame, c_frame) = (self.k_frame, self.c_frame);
-        // Stiffening: the tension change of the spring above node i, carried
-        // from node i - 1 (each spring's law evaluated once).
-        let mut upper = segments.first().map_or(0.0, |s| s.tension_change_n(-y[0]));
-        for i in 0..n {
-            let below = if i == 0 { 0.0 } else { y[i - 1] };
-            let mut f = if self.stiffening.is_none() {
-                let (above, k_above) = if i + 1 < n { (y[i + 1], springs[i + 1]) } else { (y[i], springs[i]) };
-                -springs[i] * (y[i] - below) + k_above * (above - y[i])
-            } else {
-                let lower = if i + 1 < n { segments[i + 1].tension_change_n(y[i] - y[i + 1]) } else { 0.0 };
-                let f = upper - lower;
-                upper = lower;
-                f
-            };
-            if i == n - 1 {
-                f -= self.c * y[nodes + i];
-                if let Some(g) = &self.guides {
-                    f += g.guide_force_n(y[nodes + i]);
-                }
-                if self.frame {
-                    f += k_frame * (y[n] - y[i]) + c_frame * (y[nodes + n] - y[nodes + i]);
-                }
-            }
-            out[i] = f / self.masses[i];
+        let (n, nodes) = (self.n, self.nodes);
+        let (position, velocity) = (&y[..nodes], &y[nodes..2 * nodes]);
+        let inv_mass = &self.inv_mass;
+        let top = NodeForce { node: 0, force_n: -self.rope_tension_n(0, position[0]) };
+        let tension = |i: usize, e: f64| if i + 1 < n { self.rope_tension_n(i + 1, e) } else { self.k_frame * e };
+        spring_line::accelerations(tension, &self.damping, inv_mass, position, velocity, &[top], out);
+        if let Some(g) = &self.guides {
+            spring_line::add_guide_forces(g, &[n - 1], velocity, inv_mass, out);
         }
         if self.frame {
-            let f = -k_frame * (y[n] - y[n - 1]) - c_frame * (y[nodes + n] - y[nodes + n - 1]);
-            out[n] = f / self.masses[n];
+            spring_line::add_damper((n - 1, n), self.c_frame, velocity, inv_mass, out);
+        }
+    }
+
+    /// The tension (N, beyond the static one) of the rope's spring `i`
+    /// (joining node `i - 1`, the fixed top for `i = 0`, and node `i`) at
+    /// the extension `e` (m, the lower node's displacement less the
+    /// upper's).
+    fn rope_tension_n(&self, i: usize, e: f64) -> f64 {
+        if self.stiffening.is_none() {
+            self.springs[i] * e
+        } else {
+            -self.segments[i].tension_change_n(-e)
         }
     }
 }

@@ -38,6 +38,7 @@ pub mod pmsm;
 pub mod ripple;
 pub mod rope;
 pub mod sensors;
+pub mod spring_line;
 
 pub use mechanics::{Chain, ChainState};
 pub use rope::ChainParams;
@@ -134,8 +135,8 @@ pub enum Integrator {
     /// The default: masses, springs and the out-of-balance torque evaluated
     /// once per step at the step's predicted midpoint (second order in the
     /// slow change of the rope lengths), the angle-locked terms from Taylor
-    /// polynomials ([`angle::AngleSeries`]), and for the nominal 5-DOF line
-    /// a fixed-size path without the general line's loops.
+    /// polynomials ([`angle::AngleSeries`]); on the nominal 5-DOF chain
+    /// [`Plant::advance_until`] discretises it exactly ([`exact`]).
     #[default]
     Fast,
     /// The plant as it was first written: every stage re-evaluates masses

@@ -4,7 +4,9 @@
 //! sign convention) so that stiffness and rope masses change as the car
 //! moves. Coordinates are displacements from the static equilibrium at the
 //! start; the drive's shaft torque minus the out-of-balance torque of Eqn 4
-//! acts on the sheave (Eqn 5: `dF_sh = tau_d / r`).
+//! acts on the sheave (Eqn 5: `dF_sh = tau_d / r`). The accelerations are
+//! the line's ([`super::line::Line`] without effects is this chain); here
+//! the chain's state, lengths and energy.
 
 use super::rope::{ChainParams, DOF, SHEAVE};
 
@@ -44,28 +46,6 @@ impl Chain {
         } else {
             self.lw_start_m
         }
-    }
-
-    /// Accelerations (m/s^2) for the shaft torque `shaft_torque_nm` (N m,
-    /// positive lifts the car); with the brake engaged the sheave is held.
-    pub fn acceleration_mps2(&self, state: &ChainState, shaft_torque_nm: f64, brake_engaged: bool) -> [f64; DOF] {
-        let p = &self.params;
-        let lw =
-            self.counterweight_side_length_m(state).clamp(MIN_ROPE_LENGTH_M, p.rope_total_length_m - MIN_ROPE_LENGTH_M);
-        let masses = p.masses_kg(lw);
-        let k = p.stiffness_matrix(lw);
-        let c = p.damping_kg_per_s();
-        let mut force = [0.0; DOF];
-        force[SHEAVE] = (shaft_torque_nm - p.out_of_balance_torque_nm(lw)) / p.sheave_radius_m;
-        let mut accel = [0.0; DOF];
-        for i in 0..DOF {
-            let elastic: f64 = (0..DOF).map(|j| k[i][j] * state.position_m[j]).sum();
-            accel[i] = (force[i] - c[i] * state.velocity_mps[i] - elastic) / masses[i];
-        }
-        if brake_engaged {
-            accel[SHEAVE] = 0.0;
-        }
-        accel
     }
 
     /// Kinetic plus elastic energy, J, at the current lengths (for checks).
