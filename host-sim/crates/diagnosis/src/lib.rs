@@ -537,7 +537,8 @@ fn start_stop_torque_gap_db(measured: &ChainSignals, closed: &ChainSignals) -> O
     let (mut measured, mut closed) = (measured.clone(), closed.clone());
     align_phases(&mut measured, &mut closed);
     let seg = Segmentation::of(&measured);
-    let bands = Bands::new(measured.sample_rate_hz, seg.segment_len);
+    // The torque's start and stop cells only: no lines.
+    let bands = Bands::new(measured.sample_rate_hz, seg.segment_len, Vec::new());
     let m = cell_powers(&[(&ChainSpectra::compute(&measured, &seg, &bands), 1.0)], &bands);
     let c = cell_powers(&[(&ChainSpectra::compute(&closed, &Segmentation::of(&closed), &bands), 1.0)], &bands);
     let cells = cell_gaps(&m, &measured.noise_density, &Vec::new(), &c);
@@ -974,7 +975,7 @@ fn target_of(
     }
     let seg_measured = Segmentation::of(&measured);
     let seg_model = Segmentation::of(&nominal);
-    let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len);
+    let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len, spectra::line_orders(model));
     if bands_so_far.is_some_and(|b| b.edges_hz != bands.edges_hz) {
         return Err(format!(
             "its sample rate ({} Hz) gives other analysis bands than the dataset's first recording; \

@@ -276,7 +276,7 @@ fn phase_gaps(on_channel: &[&CellGap]) -> Vec<PhaseGap> {
 /// [`Bands::label`].
 fn band_gaps(on_channel: &[&CellGap], bands: &Bands) -> Vec<SliceGap> {
     let mut band_slices = Vec::new();
-    for b in 0..bands.len() + super::spectra::LINE_ORDERS.len() {
+    for b in 0..bands.len() + bands.line_orders.len() {
         let d: Vec<f64> = on_channel.iter().filter(|c| c.band == b).map(|c| c.d_db).collect();
         if !d.is_empty() {
             band_slices.push(slice_gap(bands.label(b), d));
@@ -365,7 +365,7 @@ mod tests {
     }
 
     fn bands() -> Bands {
-        Bands { edges_hz: vec![(1.0, 2.0), (2.0, 4.0)], bin_band: Vec::new() }
+        Bands { edges_hz: vec![(1.0, 2.0), (2.0, 4.0)], bin_band: Vec::new(), line_orders: Vec::new() }
     }
 
     fn recording(closed: Option<f64>, replay: Option<f64>) -> RecordingGap {

@@ -297,7 +297,7 @@ mod tests {
 
     #[test]
     fn a_cell_beyond_in_every_recording_is_persistent_unless_chance_explains_it() {
-        let bands = Bands::new(4096.0, 4096);
+        let bands = Bands::new(4096.0, 4096, Vec::new());
         // Band 1 beyond (|d| - 2 sigma - tolerance = 2 dB) in all four
         // recordings, with either sign; band 2 in three of four; forty
         // cells inside.

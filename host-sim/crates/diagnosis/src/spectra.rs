@@ -11,6 +11,8 @@ use realfft::num_complex::Complex64;
 use realfft::RealFftPlanner;
 
 use super::signals::{ChainSignals, Channel, Phase};
+use plant::ripple::unit_power;
+use rig_config::RigConfig;
 
 /// Lowest band edge, Hz (accelerometers are not trusted below 0.5 Hz).
 pub const LOWEST_BAND_HZ: f64 = 1.0;
@@ -19,26 +21,47 @@ pub const HIGHEST_BAND_HZ: f64 = 1000.0;
 /// Segment length, s (1 Hz bins).
 pub const SEGMENT_S: f64 = 1.0;
 
-/// Mechanical orders whose angle-locked lines are cells of their own in the
-/// constant-speed stage (machine imbalance and eccentricities at 1, the
-/// ripple orders of the rig): a 1 s segment cannot resolve a 1 Hz line.
-pub const LINE_ORDERS: [u32; 7] = [1, 2, 3, 6, 12, 36, 72];
+/// Mechanical orders below the rig's own whose angle-locked lines are cells
+/// of their own in the constant-speed stage: the once-per-revolution line
+/// and its first harmonics (eccentricities of the sheave and the machine,
+/// the encoder's error). A 1 s segment cannot resolve a 1 Hz line.
+pub const REVOLUTION_ORDERS: [u32; 3] = [1, 2, 3];
+
+/// The mechanical orders whose lines are cells of their own for `rig`:
+/// [`REVOLUTION_ORDERS`], the rig file's ripple orders (paper 3.3) and the
+/// machine's first two electrical orders (`p` and `2 p`: a current
+/// transducer's offset and gain error), ascending, each once.
+pub fn line_orders(rig: &RigConfig) -> Vec<u32> {
+    let p = rig.motor.pole_pairs;
+    let mut orders: Vec<u32> = REVOLUTION_ORDERS
+        .into_iter()
+        .chain(rig.ripple.iter().map(|r| r.mechanical_order))
+        .chain([p, 2 * p])
+        .filter(|&o| o > 0)
+        .collect();
+    orders.sort_unstable();
+    orders.dedup();
+    orders
+}
 
 /// Third-octave bands from [`LOWEST_BAND_HZ`] to [`HIGHEST_BAND_HZ`] (or 45 %
 /// of the sample rate), each holding at least one bin of the segment's
-/// transform; after them, as cells `len()..len() + LINE_ORDERS.len()`, the
-/// lines of [`LINE_ORDERS`].
+/// transform; after them, as cells `len()..len() + line_orders.len()`, the
+/// angle-locked lines of `line_orders` ([`line_orders`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bands {
     /// `[lo, hi)` edges of every band, Hz.
     pub edges_hz: Vec<(f64, f64)>,
     /// For every bin of the transform, its band.
     pub bin_band: Vec<Option<usize>>,
+    /// The mechanical orders whose lines follow the bands as cells.
+    pub line_orders: Vec<u32>,
 }
 
 impl Bands {
-    /// The bands for segments of `segment_len` samples at `sample_rate_hz`.
-    pub fn new(sample_rate_hz: f64, segment_len: usize) -> Self {
+    /// The bands for segments of `segment_len` samples at `sample_rate_hz`,
+    /// followed by the lines of `line_orders` (mechanical orders).
+    pub fn new(sample_rate_hz: f64, segment_len: usize, line_orders: Vec<u32>) -> Self {
         let df = sample_rate_hz / segment_len as f64;
         let top = HIGHEST_BAND_HZ.min(0.45 * sample_rate_hz);
         let bins = segment_len / 2 + 1;
@@ -61,7 +84,7 @@ impl Bands {
             }
             k += 1;
         }
-        Self { edges_hz, bin_band }
+        Self { edges_hz, bin_band, line_orders }
     }
 
     /// Number of bands.
@@ -83,7 +106,7 @@ impl Bands {
     pub fn label(&self, b: usize) -> String {
         match self.edges_hz.get(b) {
             Some((lo, hi)) => format!("{lo:.1}-{hi:.1} Hz"),
-            None => format!("order {}", LINE_ORDERS.get(b - self.len()).copied().unwrap_or(0)),
+            None => format!("order {}", self.line_orders.get(b - self.len()).copied().unwrap_or(0)),
         }
     }
 }
@@ -145,7 +168,7 @@ pub struct ChannelSpectra {
     pub scale: Vec<f64>,
     /// Segment-major transforms, `bins` per segment.
     pub data: Vec<Complex64>,
-    /// Complex amplitudes of the [`LINE_ORDERS`] over the constant-speed
+    /// Complex amplitudes of the bands' line orders over the constant-speed
     /// stage (empty without one), unit.
     pub lines: Vec<Complex64>,
     /// Noise scale of a line, `2 / T` (1/s, T the stage's duration): a
@@ -162,6 +185,49 @@ pub struct ChainSpectra {
     pub channels: Vec<(Channel, ChannelSpectra)>,
 }
 
+/// Hann windows by length, each with its energy `sum(w^2)`, made once per
+/// length (a recording's segments share one or two lengths).
+#[derive(Default)]
+struct HannWindows {
+    by_len: Vec<(usize, Vec<f64>, f64)>,
+}
+
+impl HannWindows {
+    /// The window of `len` samples and its energy.
+    fn of(&mut self, len: usize) -> (&[f64], f64) {
+        let at = match self.by_len.iter().position(|(l, _, _)| *l == len) {
+            Some(at) => at,
+            None => {
+                let window: Vec<f64> =
+                    (0..len).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / len as f64).cos()).collect();
+                let energy = window.iter().map(|w| w * w).sum();
+                self.by_len.push((len, window, energy));
+                self.by_len.len() - 1
+            }
+        };
+        let (_, window, energy) = &self.by_len[at];
+        (window, *energy)
+    }
+}
+
+/// Complex amplitudes (unit of `x`) of the mechanical `orders`' lines in
+/// `x` (its mean removed) along the shaft angle `theta` (rad): `2 / n sum
+/// (x - mean) e^(-i k (theta - theta_0))`, one `sin_cos` per sample and the
+/// orders by powers of it ([`unit_power`]).
+fn angle_locked_lines(x: &[f64], theta: &[f64], orders: &[u32]) -> Vec<Complex64> {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let mut sums = vec![Complex64::new(0.0, 0.0); orders.len()];
+    for (v, t) in x.iter().zip(theta) {
+        let (s, c) = (t - theta[0]).sin_cos();
+        for (sum, &order) in sums.iter_mut().zip(orders) {
+            let (ck, sk) = unit_power(c, s, order);
+            *sum += Complex64::new(ck, -sk) * (v - mean);
+        }
+    }
+    sums.into_iter().map(|a| a * (2.0 / n)).collect()
+}
+
 impl ChainSpectra {
     /// Spectra of `signals` on `segmentation` (samples beyond the end of a
     /// signal count as zero).
@@ -172,14 +238,14 @@ impl ChainSpectra {
         let bins = bands.bin_band.iter().rposition(|b| b.is_some()).map_or(0, |b| b + 1);
         let mut input = fft.make_input_vec();
         let mut output = fft.make_output_vec();
+        let mut windows = HannWindows::default();
         let mut channels = Vec::new();
         for (channel, values) in &signals.channels {
             let mut scale = Vec::with_capacity(segmentation.segments.len());
             let mut data = Vec::with_capacity(segmentation.segments.len() * bins);
             for (_, range) in &segmentation.segments {
                 let len = range.len();
-                let window: Vec<f64> =
-                    (0..len).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / len as f64).cos()).collect();
+                let (window, w2) = windows.of(len);
                 let seg: Vec<f64> = range.clone().map(|i| values.get(i).copied().unwrap_or(0.0)).collect();
                 let mean = seg.iter().sum::<f64>() / len as f64;
                 input.iter_mut().for_each(|x| *x = 0.0);
@@ -190,28 +256,16 @@ impl ChainSpectra {
                 if fft.process(&mut input, &mut output).is_err() {
                     output.iter_mut().for_each(|x| *x = Complex64::new(0.0, 0.0));
                 }
-                let w2: f64 = window.iter().map(|w| w * w).sum();
                 scale.push(2.0 / (segmentation.sample_rate_hz * w2.max(1e-12)));
                 data.extend_from_slice(&output[..bins]);
             }
             let (lines, line_noise_scale) = match &segmentation.constant {
                 Some(r) if signals.angle_rad.len() >= r.end => {
-                    let x = &values[r.clone()];
-                    let theta = &signals.angle_rad[r.clone()];
-                    let mean = x.iter().sum::<f64>() / x.len() as f64;
-                    let n = x.len() as f64;
-                    let lines = LINE_ORDERS
-                        .iter()
-                        .map(|&order| {
-                            let mut a = Complex64::new(0.0, 0.0);
-                            for (v, t) in x.iter().zip(theta) {
-                                let (s, c) = (order as f64 * (t - theta[0])).sin_cos();
-                                a += Complex64::new(c, -s) * (v - mean);
-                            }
-                            a * (2.0 / n)
-                        })
-                        .collect();
-                    (lines, 2.0 * segmentation.sample_rate_hz / n)
+                    let n = r.len() as f64;
+                    (
+                        angle_locked_lines(&values[r.clone()], &signals.angle_rad[r.clone()], &bands.line_orders),
+                        2.0 * segmentation.sample_rate_hz / n,
+                    )
                 }
                 _ => (Vec::new(), 0.0),
             };
@@ -318,8 +372,8 @@ impl CrossPowers {
                     }
                 }
             }
-            if all.iter().all(|c| c.lines.len() == LINE_ORDERS.len()) {
-                for j in 0..LINE_ORDERS.len() {
+            if all.iter().all(|c| c.lines.len() == bands.line_orders.len()) {
+                for j in 0..bands.line_orders.len() {
                     let mut m = vec![0.0; n * n];
                     for i in 0..n {
                         for k in 0..n {
@@ -351,5 +405,45 @@ impl CrossPowers {
             })
             .collect();
         CellPowers { cells }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The reference rig's lines: the revolution's, its ripple orders 1, 6,
+    /// 12, 36, 72 and its electrical orders 6 and 12 (6 pole pairs); a rig
+    /// with 4 pole pairs and other ripple orders gets its own.
+    #[test]
+    fn line_orders_come_from_the_rig_file() {
+        let mut rig = RigConfig::embedded_default().unwrap();
+        assert_eq!(line_orders(&rig), vec![1, 2, 3, 6, 12, 36, 72]);
+        rig.motor.pole_pairs = 4;
+        for (r, order) in rig.ripple.iter_mut().zip([1, 8, 24, 48, 48]) {
+            r.mechanical_order = order;
+        }
+        assert_eq!(line_orders(&rig), vec![1, 2, 3, 4, 8, 24, 48]);
+    }
+
+    /// The lines by powers of one rotation against each order's own
+    /// `sin_cos` (the naive sum), on an irregular angle.
+    #[test]
+    fn angle_locked_lines_match_the_naive_sum() {
+        let theta: Vec<f64> = (0..5000).map(|i| 0.01 * i as f64 + 0.3 * (0.002 * i as f64).sin()).collect();
+        let x: Vec<f64> = theta.iter().map(|t| 0.7 * (6.0 * t + 0.4).cos() + 0.2 * (72.0 * t).sin() + 0.1).collect();
+        let orders = [1, 6, 12, 72];
+        let got = angle_locked_lines(&x, &theta, &orders);
+        let mean = x.iter().sum::<f64>() / x.len() as f64;
+        for (g, &k) in got.iter().zip(&orders) {
+            let mut a = Complex64::new(0.0, 0.0);
+            for (v, t) in x.iter().zip(&theta) {
+                let (s, c) = (k as f64 * (t - theta[0])).sin_cos();
+                a += Complex64::new(c, -s) * (v - mean);
+            }
+            let naive = a * (2.0 / x.len() as f64);
+            assert!((g - naive).norm() < 1e-12, "order {k}: {g} against {naive}");
+        }
+        assert!((got[1].norm() - 0.7).abs() < 0.02 && (got[3].norm() - 0.2).abs() < 0.02, "{got:?}");
     }
 }
