@@ -29,13 +29,11 @@ use std::f64::consts::TAU;
 use rayon::prelude::*;
 
 use super::hypotheses::Refit;
-use super::measure::{gap, Tolerances};
+use super::measure::gap;
 use super::screen;
-use super::signals::Channel;
-use super::simulate::Counterpart;
-use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers, Segmentation};
+use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers};
+use super::target::Target;
 use plant::effects::{EffectKind, Effects, Fit as Declared, FromData, Neutral, ParamScale};
-use recording::Recording;
 use rig_config::RigConfig;
 
 /// Relative penalty per fitted parameter on the held-out gap when ranking.
@@ -50,30 +48,6 @@ pub const REFINE_IF_BELOW: f64 = 0.9;
 /// A pair is kept only when its held-out gap after the fit is below this
 /// fraction of its better member's.
 pub const PAIR_MARGIN: f64 = 0.8;
-
-/// One recording as the attribution sees it.
-#[derive(Clone, Debug)]
-pub struct Target {
-    /// Recording name.
-    pub stem: String,
-    /// Cross-validation group (car mass).
-    pub group: String,
-    /// What the simulation needs of the measured recording (metadata; for a
-    /// decay its acceleration).
-    pub recording: Recording,
-    /// Measured cell powers.
-    pub measured: CellPowers,
-    /// Measured noise densities, unit^2/Hz.
-    pub noise: Vec<(Channel, f64)>,
-    /// The model's reproducibility per cell, dB.
-    pub tolerances: Tolerances,
-    /// Segmentation of the model's runs (the nominal run's, aligned).
-    pub segmentation: Segmentation,
-    /// Spectra of the nominal model's run.
-    pub nominal: ChainSpectra,
-    /// How the model's counterpart is made (each effect's the same way).
-    pub counterpart: Counterpart,
-}
 
 /// What the attribution works on.
 pub struct Lab<'a> {

@@ -6,8 +6,9 @@
 //! 1. [`calibrate`]: EA, guide and sheave damping identified from the data.
 //! 2. [`simulate`] (closed loop) and [`replay`] (measured shaft motion into
 //!    the mechanics) of every recording with the calibrated nominal model.
-//! 3. [`measure`]: the gap in cells of channel x travel phase x band,
-//!    located along the signal chain, in time and in frequency ([`locate`]).
+//! 3. [`measure`]: the gap in cells of channel x travel phase x band, each
+//!    recording prepared once for it ([`target`]), located along the signal
+//!    chain, in time and in frequency ([`locate`]).
 //! 4. [`attribute`]: every effect fitted and cross-validated; an effect
 //!    that the calibration can absorb on the calibration re-done under its
 //!    hypothesis ([`hypotheses`]).
@@ -49,6 +50,7 @@ pub mod screen;
 pub mod signals;
 pub mod simulate;
 pub mod spectra;
+pub mod target;
 pub mod transducer;
 pub mod travel_signals;
 
@@ -60,7 +62,7 @@ pub use error::DiagnosisError;
 
 use crate::error::{bail, Result};
 use crate::identify_dataset::LeftOut;
-use attribute::{attribute, Candidate, Lab, Target};
+use attribute::{attribute, Candidate, Lab};
 use calibrate::{calibrate, Calibration};
 use locate::{locate, Location};
 use measure::{cell_gaps, gap_of_cells, persistent_cell, CellGap, GapValue, PersistentCell};
@@ -74,6 +76,7 @@ use simulate::{
     simulate_counterpart, Counterpart, DriveRecord, DrivenInputs,
 };
 use spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
+use target::Target;
 
 /// Largest nominal excess gap (dB, mean over the recordings) that the
 /// verdict still calls `nominal`.

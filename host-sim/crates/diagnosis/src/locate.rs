@@ -3,10 +3,10 @@
 //! phases) and in frequency (bands; the strongest cells; the natural
 //! frequencies found in the data against the model's).
 
-use super::attribute::Target;
 use super::measure::{gap_of_cells, CellGap};
 use super::signals::{ChainSignals, Channel, Phase, Subsystem};
 use super::spectra::Bands;
+use super::target::Target;
 use super::RecordingGap;
 
 /// A channel's share of the gap.

@@ -111,7 +111,7 @@ pub fn replay_cells(
     recording: &recording::Recording,
     stem: &str,
     measured: &super::signals::ChainSignals,
-    target: &super::attribute::Target,
+    target: &super::target::Target,
     bands: &super::spectra::Bands,
 ) -> Result<Vec<super::measure::CellGap>> {
     use super::signals::{decimation_factor, ChainSignals, Channel};
