@@ -365,7 +365,7 @@ mod tests {
     }
 
     fn bands() -> Bands {
-        Bands { edges_hz: vec![(1.0, 2.0), (2.0, 4.0)], bin_band: Vec::new(), line_orders: Vec::new() }
+        Bands { edges_hz: vec![(1.0, 2.0), (2.0, 4.0)], bin_band: Vec::new(), line_orders: vec![1] }
     }
 
     fn recording(closed: Option<f64>, replay: Option<f64>) -> RecordingGap {
