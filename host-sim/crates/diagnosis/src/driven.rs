@@ -3,10 +3,12 @@
 //! currents acts on the sheave together with the rig's torque ripple
 //! (angle-locked, paper 3.3); a slow tracking loop on the measured shaft
 //! angle keeps the model's rigid-body motion on the measured one (a torque
-//! integrated open loop drifts), and the sheave is held while the rig
-//! stands still. Nothing of the rig's drive is assumed: its gains, speed
-//! estimate, pre-torque and start and stop sequence are all in the
-//! recording.
+//! integrated open loop drifts). The brake holds the sheave before the
+//! motion; after it the drive holds it (the measured torque, the rig's
+//! speed loop answering the model's departures) until the brake takes it
+//! where the recording shows that ([`brake_engagement`]). Nothing of the
+//! rig's drive is assumed: its gains, speed estimate, pre-torque and start
+//! and stop sequence are all in the recording.
 //!
 //! Below a quarter of the chain's first elastic mode ([`RIGID_FRACTION`])
 //! the chain turns as one rigid body, and the car and counterweight
@@ -202,6 +204,94 @@ pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<
     }
 }
 
+/// Low-pass of the shaft angle and the torque in which the brake's torque
+/// on the sheave is read ([`brake_engagement`]), Hz: a brake that catches a
+/// moving sheave stops it within milliseconds, and the encoder's
+/// quantisation, twice differentiated, swamps the reading above.
+pub const BRAKE_READING_LOWPASS_HZ: f64 = 50.0;
+/// The brake's torque counts where it departs from its level at the end of
+/// the motion by more than this many times its RMS departure from its mean
+/// over the constant-speed stage (the chain's elastic vibration and the
+/// ripple, which the rigid chain leaves in the reading).
+pub const BRAKE_NOISE_FACTOR: f64 = 4.0;
+/// ... and by more than this fraction of the machine torque's RMS over the
+/// constant-speed stage (what the drive's torque does at standstill that
+/// is not a brake: an encoder count's step, static friction).
+pub const BRAKE_TORQUE_FLOOR_FRACTION: f64 = 0.25;
+/// Span before the search for the brake over which the brake's reading
+/// gives its level at the end of the motion, s: the model's errors of the
+/// out-of-balance torque and the damping, which the drive's holding torque
+/// shares, cancel.
+pub const BRAKE_LEVEL_SPAN_S: f64 = 0.25;
+
+/// The torque on the rigid chain at the sheave (N m, one per sample) that
+/// neither the machine nor the nominal chain gives,
+/// `J theta'' + c theta' + tau_ob(l_w) - T`, with `J` the rigid chain's inertia
+/// ([`rigid_inertia_kg_m2`]), `c` its viscous damping at the sheave,
+/// `tau_ob` the out-of-balance torque at the rope length reached and `T`
+/// the measured torque, the angle and torque low-passed at
+/// [`BRAKE_READING_LOWPASS_HZ`]. Zero while the drive alone moves or
+/// holds the chain (up to the model's errors); a brake's torque where it
+/// holds the sheave.
+pub fn unexplained_torque_nm(params: &ChainParams, travel: &DrivenTravel) -> Result<Vec<f64>> {
+    let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
+    let (fs, r) = (travel.sample_rate_hz, params.sheave_radius_m);
+    let theta0 = travel.shaft_angle_rad[0];
+    let relative: Vec<f64> = travel.shaft_angle_rad[..n].iter().map(|a| a - theta0).collect();
+    let angle = lowpassed(&relative, fs, BRAKE_READING_LOWPASS_HZ).context("low-passing the shaft angle")?;
+    let torque = lowpassed(&travel.torque_nm[..n], fs, BRAKE_READING_LOWPASS_HZ).context("low-passing the torque")?;
+    let speed = central_difference(&angle, fs);
+    let acceleration = central_difference(&speed, fs);
+    let inertia = rigid_inertia_kg_m2(params);
+    let damping = params.c_sheave_nms_per_rad + (params.c_car_kg_per_s + params.c_cw_kg_per_s) * r * r;
+    Ok((0..n)
+        .map(|k| {
+            let out_of_balance = params.out_of_balance_torque_nm(travel.lw_start_m + r * angle[k]);
+            inertia * acceleration[k] + damping * speed[k] + out_of_balance - torque[k]
+        })
+        .collect())
+}
+
+/// The sample at which the rig's brake takes the sheave at the end of the
+/// travel, where the recording shows it: the first sample, from
+/// `2 x` [`STANDSTILL_WINDOW_S`] before the encoder's standstill on, at
+/// which the torque on the sheave that the machine does not give
+/// ([`unexplained_torque_nm`]) leaves its level over the
+/// [`BRAKE_LEVEL_SPAN_S`] before by more than [`BRAKE_NOISE_FACTOR`] times
+/// its RMS departure over the constant-speed stage and
+/// [`BRAKE_TORQUE_FLOOR_FRACTION`] of the torque's RMS there, taken back to
+/// where the departure was a quarter of that. A brake that catches
+/// the sheave still turning stops it faster than the torque can; a drive
+/// that hands the load to its brake releases its torque while the sheave
+/// stands still. `None`: the drive holds the sheave to the end (or the
+/// travel has no constant-speed stage to read the level from).
+pub fn brake_engagement(params: &ChainParams, travel: &DrivenTravel) -> Result<Option<usize>> {
+    let stage = travel.constant_speed.clone();
+    if stage.len() < 2 || travel.motion.is_empty() {
+        return Ok(None);
+    }
+    let unexplained = unexplained_torque_nm(params, travel)?;
+    let n = unexplained.len();
+    let stage = stage.start.min(n)..stage.end.min(n);
+    let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len().max(1) as f64;
+    let stage_mean = mean(&unexplained[stage.clone()]);
+    let spread = mean(&unexplained[stage.clone()].iter().map(|b| (b - stage_mean).powi(2)).collect::<Vec<_>>()).sqrt();
+    let torque_rms = mean(&travel.torque_nm[stage.clone()].iter().map(|t| t * t).collect::<Vec<_>>()).sqrt();
+    let threshold = (BRAKE_NOISE_FACTOR * spread).max(BRAKE_TORQUE_FLOOR_FRACTION * torque_rms);
+    let fs = travel.sample_rate_hz;
+    let w = ((STANDSTILL_WINDOW_S * fs).round() as usize).max(1);
+    let from = travel.motion.end.saturating_sub(2 * w).max(stage.end).min(n);
+    let span = ((BRAKE_LEVEL_SPAN_S * fs).round() as usize).max(1);
+    let before = from.saturating_sub(span).max(stage.end).min(from)..from;
+    let level = if before.is_empty() { stage_mean } else { mean(&unexplained[before]) };
+    let departure = |k: usize| (unexplained[k] - level).abs();
+    let Some(first) = (from..n).find(|&k| departure(k) > threshold) else {
+        return Ok(None);
+    };
+    let onset = (from..first).rev().find(|&k| departure(k) <= 0.25 * threshold).map_or(from, |k| k + 1);
+    Ok(Some(onset))
+}
+
 /// What the counterpart needs of a travel recording, at one sample rate.
 pub struct DrivenTravel<'a> {
     /// Car mass, kg.
@@ -233,6 +323,20 @@ pub struct DrivenTravel<'a> {
     /// currents under a transducer error (`current_sensor_error`), when
     /// the recorded currents are the drive's own transducer signals.
     pub transducer: Option<&'a crate::transducer::TransducerSeries>,
+}
+
+impl<'a> DrivenTravel<'a> {
+    /// The same travel with the torque (N m) and the shaft angle (rad)
+    /// replaced where given.
+    fn with<'b>(&'b self, torque_nm: Option<&'b [f64]>, shaft_angle_rad: Option<&'b [f64]>) -> DrivenTravel<'b> {
+        DrivenTravel {
+            torque_nm: torque_nm.unwrap_or(self.torque_nm),
+            shaft_angle_rad: shaft_angle_rad.unwrap_or(self.shaft_angle_rad),
+            motion: self.motion.clone(),
+            constant_speed: self.constant_speed.clone(),
+            ..*self
+        }
+    }
 }
 
 /// An angle-locked line of the torque that the rig drive's current
@@ -371,6 +475,15 @@ impl ModelEstimate {
     }
 }
 
+impl SpeedController {
+    /// The loop's answer (N m) to the model's departure from the rig's
+    /// speed estimate `rig_estimate_radps` (rad/s): `-Kp de - Ki integral(de)`.
+    fn answer_nm(&self, model: &ModelEstimate, rig_estimate_radps: f64) -> f64 {
+        -self.kp_nms_per_rad * (model.estimate_radps - rig_estimate_radps)
+            - self.ki_nm_per_rad * model.departure_integral_rad
+    }
+}
+
 /// Positions (m) and velocities (m/s) of the line's nodes
 /// ([`plant::line::Layout`]; the first `nodes` are used).
 #[derive(Clone, Copy, Debug, Default)]
@@ -381,9 +494,10 @@ struct NodeState {
 
 /// RK4 steps per sample of `h` s for `line` on `chain` over the travel
 /// whose sheave edge moves `travel_m` (m) from the start: enough for
-/// `max_rate_per_step` at the stiffer end of the travel.
-fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_per_step: f64) -> usize {
-    let omega = [0.0, travel_m].map(|u| line.omega_max_radps(chain, u, false)).into_iter().fold(0.0, f64::max);
+/// `max_rate_per_step` at the stiffer end of the travel (with the brake's
+/// clamp where `clamped`).
+fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_per_step: f64, clamped: bool) -> usize {
+    let omega = [0.0, travel_m].map(|u| line.omega_max_radps(chain, u, clamped)).into_iter().fold(0.0, f64::max);
     ((h * omega / max_rate_per_step).ceil() as usize).max(1)
 }
 
@@ -393,8 +507,10 @@ fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_
 /// model reads the true angle from the recorded one) and the current
 /// transducers' errors (the model takes the true torque from the recorded
 /// currents, read as the drive's transducer signals: [`crate::transducer`]);
-/// not an error the recorded currents carry themselves, nor an effect of
-/// the stop.
+/// not an error the recorded currents carry themselves, nor the brake's
+/// clamp: the model takes the brake where the recording shows it
+/// ([`brake_engagement`]), but the diagnosis does not compare another
+/// drive's stop.
 pub fn holds_effect(kind: EffectKind) -> bool {
     kind.seen().under_another_drive
 }
@@ -488,16 +604,81 @@ fn start_state(
     (state, offset_nm)
 }
 
+/// How the sheave is held at one sample of the travel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Hold {
+    /// Before the motion: the brake holds it (rigid, as in the nominal
+    /// plant; the brake's lift is not compared).
+    BeforeMotion,
+    /// The machine torque drives it, with the tracking loop; `at_rest`:
+    /// after the motion, where the drive holds it at standstill with its
+    /// speed loop.
+    Drive {
+        /// After the motion.
+        at_rest: bool,
+    },
+    /// The brake has taken it at the end of the travel
+    /// ([`brake_engagement`]): rigid, or through the clamp of `brake_stop`.
+    Brake,
+}
+
+/// Who holds the sheave when: the motion (from the encoder) and the
+/// sample the brake takes it at the end, if it does.
+struct StopSequence {
+    motion: Range<usize>,
+    brake: Option<usize>,
+}
+
+impl Hold {
+    /// What the brake does to the sheave, clamped at `clamp` (rad) with
+    /// `brake_stop` once the brake has taken it.
+    fn brake(self, clamp: Option<f64>) -> BrakeAction {
+        match (self, clamp) {
+            (Hold::Drive { .. }, _) => BrakeAction::Released,
+            (Hold::Brake, Some(angle_rad)) => BrakeAction::Clamped { angle_rad },
+            _ => BrakeAction::Held,
+        }
+    }
+
+    /// The rig drive's speed loop acting on the model: at rest after the
+    /// motion where identified, in the motion where the settings ask for it.
+    fn speed_loop(self, travel: &DrivenTravel, settings: &DrivenSettings) -> SpeedController {
+        match self {
+            Hold::Drive { at_rest: true } => travel.controller.unwrap_or_default(),
+            Hold::Drive { at_rest: false } if settings.speed_feedback => travel.controller.unwrap_or_default(),
+            _ => SpeedController::default(),
+        }
+    }
+}
+
+impl StopSequence {
+    fn at(&self, k: usize) -> Hold {
+        if self.motion.is_empty() || k < self.motion.start {
+            Hold::BeforeMotion
+        } else if self.brake.is_some_and(|b| k >= b) {
+            Hold::Brake
+        } else {
+            Hold::Drive { at_rest: k >= self.motion.end }
+        }
+    }
+}
+
 /// [`torque_driven_accelerations`] with `max_rate_per_step` in place of
 /// [`MAX_RATE_PER_STEP`].
 ///
-/// While the rig moves, the tracking loop acts on the rigid-body
-/// coordinate (the mass-weighted mean of the line's displacements) as a
-/// force spread in proportion to mass: it moves the rigid-body mode alone
-/// and neither drives nor damps the elastic modes. At standstill the brake
-/// holds the sheave (rigid, as in the nominal plant). The rig drive's
-/// answer to the model's speed where it departs from the rig's is
-/// `-Kp de - Ki integral(de)`, `de` the model's estimate minus the rig's.
+/// While the machine torque drives the chain, the tracking loop acts on
+/// the rigid-body coordinate (the mass-weighted mean of the line's
+/// displacements) as a force spread in proportion to mass: it moves the
+/// rigid-body mode alone and neither drives nor damps the elastic modes.
+/// Before the motion the brake holds the sheave (rigid, as in the nominal
+/// plant). After the motion the drive holds it, its speed loop (where
+/// identified) answering the model's departures from the rig's speed
+/// estimate (`-Kp de - Ki integral(de)`, `de` the model's estimate minus
+/// the rig's), until the brake takes it where the recording shows it
+/// ([`brake_engagement`]): from there the sheave is held rigidly, or with
+/// `brake_stop` clamped at the angle it has then, the measured torque (the
+/// drive's release) acting on it. The same speed loop acts during the
+/// motion when the settings ask for it.
 fn torque_driven_accelerations_with(
     rig: &RigConfig,
     travel: &DrivenTravel,
@@ -507,59 +688,53 @@ fn torque_driven_accelerations_with(
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let corrected = true_shaft_angle_rad(travel.shaft_angle_rad, effects);
     let true_torque = true_torque_nm(travel, effects);
-    let travel = &DrivenTravel {
-        torque_nm: true_torque.as_deref().unwrap_or(travel.torque_nm),
-        shaft_angle_rad: corrected.as_deref().unwrap_or(travel.shaft_angle_rad),
-        motion: travel.motion.clone(),
-        constant_speed: travel.constant_speed.clone(),
-        ..*travel
-    };
+    let travel = &travel.with(true_torque.as_deref(), corrected.as_deref());
     let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
     if n < 2 {
         bail!("the travel has {n} samples; expected at least 2");
     }
-    let fs = travel.sample_rate_hz;
-    let r = rig.mechanics.sheave_radius_m;
-    let reference = tracking_reference_m(&travel.shaft_angle_rad[..n], fs, r)?;
+    let (fs, r) = (travel.sample_rate_hz, rig.mechanics.sheave_radius_m);
     let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
     params.m_cw_kg = travel.m_cw_kg;
+    let sequence = StopSequence { motion: travel.motion.clone(), brake: brake_engagement(&params, travel)? };
+    let (reference, tracked) = tracking_references(&travel.shaft_angle_rad[..n], sequence.brake, fs, r)?;
     let chain = Chain::new(params, travel.lw_start_m);
     let line = Line::new(effects);
     let (layout, nodes) = (line.layout, line.layout.nodes);
     let ripple = ripple_of(rig, travel, settings);
     let tracking = tracking_gains(settings.tracking_bandwidth_hz);
     let (h, theta0) = (1.0 / fs, travel.shaft_angle_rad[0]);
-    let steps = steps_per_sample(&line, &chain, (travel.shaft_angle_rad[n - 1] - theta0) * r, h, max_rate_per_step);
-    let feedback = travel.controller.filter(|_| settings.speed_feedback).unwrap_or_default();
+    let moved_m = (travel.shaft_angle_rad[n - 1] - theta0) * r;
+    let steps = steps_per_sample(&line, &chain, moved_m, h, max_rate_per_step, effects.brake_stop.is_some());
     let (state, offset_nm) = start_state(&line, &chain, travel, settings, reference.1[0]);
-    // Accelerations at sample k + frac of the packed state `y` (positions,
-    // then velocities, `nodes` each) into `acc`.
+    // The clamp's angle once the brake has taken the sheave (`brake_stop`);
+    // accelerations at sample k + frac of the packed state `y` into `acc`,
+    // the speed loop's answer `feedback_nm` (N m) held over the sample.
+    let mut clamp_angle_rad: Option<f64> = None;
     let deriv = |y: &[f64],
                  k: usize,
                  frac: f64,
-                 (model_estimate, departure_integral): (f64, f64),
+                 feedback_nm: f64,
+                 clamp: Option<f64>,
                  series: &AngleSeries,
                  acc: &mut [f64]| {
         let (position, velocity) = y.split_at(nodes);
         let j = (k + 1).min(n - 1);
-        let moving = travel.motion.contains(&k);
-        let offset = if moving { offset_nm } else { 0.0 };
-        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset
-            - feedback.kp_nms_per_rad * (model_estimate - travel.speed_estimate_radps[k])
-            - feedback.ki_nm_per_rad * departure_integral;
-        let (u, v) = (reference.0[k] + frac * (reference.0[j] - reference.0[k]), reference.1[k]);
+        let hold = sequence.at(k);
+        let offset = if hold == Hold::BeforeMotion { 0.0 } else { offset_nm };
+        let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset + feedback_nm;
         let theta = theta0 + position[layout.sheave] / r;
         let shaft = torque + series.ripple_nm(theta, &ripple);
-        let brake = if moving { BrakeAction::Released } else { BrakeAction::Held };
         let lumped = line.lumped(&chain, position[layout.sheave]);
-        line.accelerations_of(&chain, &lumped, position, velocity, shaft, brake, 0.0, acc);
-        if moving {
+        line.accelerations_of(&chain, &lumped, position, velocity, shaft, hold.brake(clamp), 0.0, acc);
+        if let Hold::Drive { .. } = hold {
+            let (u, v) = (tracked.0[k] + frac * (tracked.0[j] - tracked.0[k]), tracked.1[k]);
             let body = tracking_acceleration(&lumped.masses_kg[..nodes], position, velocity, (u, v), tracking);
             acc[..nodes].iter_mut().for_each(|a| *a += body);
         }
     };
     let (mut car, mut cw) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    let mut estimate = ModelEstimate::new(&feedback, fs, travel.speed_estimate_radps[0]);
+    let mut estimate = ModelEstimate::new(&travel.controller.unwrap_or_default(), fs, travel.speed_estimate_radps[0]);
     // The ripple as a polynomial of the angle about a recent one (refreshed
     // between samples): a few multiply-adds per stage in place of the
     // harmonics' sines.
@@ -570,12 +745,19 @@ fn torque_driven_accelerations_with(
     let mut a = [0.0; MAX_NODES];
     for k in 0..n {
         series.ensure(theta0 + y[layout.sheave] / r, &ripple, 0.0);
-        if !travel.motion.contains(&k) {
-            y[nodes + layout.sheave] = 0.0;
+        let hold = sequence.at(k);
+        if sequence.brake == Some(k) {
+            meet_the_brake(&line, &chain, y, tracked.1[k]);
+            clamp_angle_rad = effects.brake_stop.map(|_| y[layout.sheave] / r);
+        }
+        if !matches!(hold, Hold::Drive { .. }) {
+            if clamp_angle_rad.is_none() {
+                y[nodes + layout.sheave] = 0.0;
+            }
             estimate.hold(travel.speed_estimate_radps[k]);
         }
-        let e = (estimate.estimate_radps, estimate.departure_integral_rad);
-        deriv(y, k, 0.0, e, &series, &mut a);
+        let feedback_nm = hold.speed_loop(travel, settings).answer_nm(&estimate, travel.speed_estimate_radps[k]);
+        deriv(y, k, 0.0, feedback_nm, clamp_angle_rad, &series, &mut a);
         car.push(a[layout.body]);
         cw.push(-a[layout.counterweight()]);
         if k + 1 == n {
@@ -587,7 +769,7 @@ fn torque_driven_accelerations_with(
             plant::rk4_step_in_time(y, h * sub, &mut work, |frac, y, dy| {
                 let (dx, dv) = dy.split_at_mut(nodes);
                 dx.copy_from_slice(&y[nodes..]);
-                deriv(y, k, start + frac * sub, e, &series, dv);
+                deriv(y, k, start + frac * sub, feedback_nm, clamp_angle_rad, &series, dv);
             });
         }
         estimate.advance(y[nodes + layout.sheave] / r, travel.speed_estimate_radps[k], h);
@@ -596,6 +778,50 @@ fn torque_driven_accelerations_with(
     let split_hz = RIGID_FRACTION * first_mode_hz(&chain, travel, r);
     let rope = rope_acceleration_mps2(travel, effects, r, &reference.1)?;
     below_from_the_angle((&car, &cw), &rope, fs, split_hz)
+}
+
+/// The chain meets the brake at the rig's speed `speed_mps` (m/s, the
+/// tracking reference's): the torque-driven rigid-body motion drifts within
+/// the tracking loop's bandwidth, and the brake's stop rings in proportion
+/// to that speed. Every node of the packed state `y` gets the same change
+/// of velocity (the elastic state is kept).
+fn meet_the_brake(line: &Line, chain: &Chain, y: &mut [f64], speed_mps: f64) {
+    let (nodes, sheave) = (line.layout.nodes, line.layout.sheave);
+    let lumped = line.lumped(chain, y[sheave]);
+    let shift = speed_mps - mass_weighted_mean(&lumped.masses_kg[..nodes], &y[nodes..2 * nodes]);
+    y[nodes..2 * nodes].iter_mut().for_each(|v| *v += shift);
+}
+
+/// The tracking references (m, m/s; [`tracking_reference_m`]) of the
+/// measured angle `shaft_angle_rad` (rad): as recorded, and the one the
+/// tracking loop follows, the angle continued past the brake's sample
+/// `brake` ([`continued_past`]) so that its low-pass does not anticipate
+/// the brake's stop.
+#[allow(clippy::type_complexity)]
+fn tracking_references(
+    shaft_angle_rad: &[f64],
+    brake: Option<usize>,
+    fs: f64,
+    r: f64,
+) -> Result<((Vec<f64>, Vec<f64>), (Vec<f64>, Vec<f64>))> {
+    let reference = tracking_reference_m(shaft_angle_rad, fs, r)?;
+    let tracked = match brake {
+        Some(b) => tracking_reference_m(&continued_past(shaft_angle_rad, b, fs), fs, r)?,
+        None => reference.clone(),
+    };
+    Ok((reference, tracked))
+}
+
+/// The shaft angle (rad) as recorded up to sample `b` and from there on
+/// turning on at its mean speed over the [`BRAKE_READING_LOWPASS_HZ`]
+/// period before `b`: the motion the rig would have had without its brake.
+fn continued_past(shaft_angle_rad: &[f64], b: usize, fs: f64) -> Vec<f64> {
+    let b = b.min(shaft_angle_rad.len().saturating_sub(1));
+    let span = ((fs / BRAKE_READING_LOWPASS_HZ).round() as usize).clamp(1, b.max(1));
+    let speed = (shaft_angle_rad[b] - shaft_angle_rad[b.saturating_sub(span)]) / span as f64;
+    (0..shaft_angle_rad.len())
+        .map(|k| if k <= b { shaft_angle_rad[k] } else { shaft_angle_rad[b] + speed * (k - b) as f64 })
+        .collect()
 }
 
 /// The acceleration (m/s^2) the tracking force gives every node of the
@@ -609,9 +835,13 @@ fn tracking_acceleration(
     (u, v): (f64, f64),
     (kp, kd): (f64, f64),
 ) -> f64 {
-    let total: f64 = masses.iter().sum();
-    let mean = |x: &[f64]| masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total;
-    kp * (u - mean(position)) + kd * (v - mean(velocity))
+    kp * (u - mass_weighted_mean(masses, position)) + kd * (v - mass_weighted_mean(masses, velocity))
+}
+
+/// The mean of the nodes' `x` weighted by their `masses` (kg): the
+/// rigid-body coordinate of positions or velocities.
+fn mass_weighted_mean(masses: &[f64], x: &[f64]) -> f64 {
+    masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / masses.iter().sum::<f64>()
 }
 
 /// The line's state packed for the integrator: the `nodes` positions (m),
@@ -716,11 +946,16 @@ fn moving_start(line: &Line, chain: &Chain, speed_mps: f64, torque_nm: f64) -> (
     (state, needed_nm)
 }
 
-/// A displacement (m) low-passed at [`TRACKING_REFERENCE_LOWPASS_HZ`]
-/// (zero phase: the signal less its high-passed part).
+/// A displacement (m) low-passed at [`TRACKING_REFERENCE_LOWPASS_HZ`].
 fn lowpassed_m(displacement_m: &[f64], fs: f64) -> Result<Vec<f64>> {
-    let high = highpass_zero_phase(displacement_m, fs, TRACKING_REFERENCE_LOWPASS_HZ)?;
-    Ok(displacement_m.iter().zip(&high).map(|(a, h)| a - h).collect())
+    lowpassed(displacement_m, fs, TRACKING_REFERENCE_LOWPASS_HZ)
+}
+
+/// `x` low-passed at `corner_hz` (zero phase: the signal less its
+/// high-passed part).
+fn lowpassed(x: &[f64], fs: f64, corner_hz: f64) -> Result<Vec<f64>> {
+    let high = highpass_zero_phase(x, fs, corner_hz)?;
+    Ok(x.iter().zip(&high).map(|(a, h)| a - h).collect())
 }
 
 /// The tracking loop's reference: the measured sheave-edge travel (m) from
@@ -936,6 +1171,56 @@ mod tests {
         let rope_40 = (TAU * 40.0).powi(2) * 1e-3;
         println!("40 Hz: car {:.5} of the rope's {rope_40:.3} m/s^2", high_re.hypot(high_im));
         assert!(high_re.hypot(high_im) < 0.05 * rope_40);
+    }
+
+    /// A rigid travel of the reference rig's 70.5 kg car at 1 rad/s from
+    /// 0.2 s, its torque what the rigid chain needs, ending as `end` says
+    /// (`speed` at `t` s, rad/s; `torque` at `t` from the out-of-balance
+    /// and damping torque and the rigid chain's inertia torque, N m); the
+    /// angle through a 1e-4 rad encoder. Returns where the brake takes the
+    /// sheave, s.
+    fn brake_found(speed: impl Fn(f64) -> f64, torque: impl Fn(f64, f64, f64) -> f64) -> Option<f64> {
+        let rig = RigConfig::embedded_default().unwrap();
+        let params = ChainParams::from_rig(&rig, 70.5);
+        let (fs, n, lw) = (1000.0, 5000, 2.0);
+        let r = params.sheave_radius_m;
+        let speed: Vec<f64> = (0..n).map(|k| speed(k as f64 / fs)).collect();
+        let mut exact = vec![0.0; n];
+        (1..n).for_each(|k| exact[k] = exact[k - 1] + 0.5 * (speed[k] + speed[k - 1]) / fs);
+        let angle: Vec<f64> = exact.iter().map(|a| (a / 1e-4).round() * 1e-4).collect();
+        let inertia = rigid_inertia_kg_m2(&params);
+        let damping = params.c_sheave_nms_per_rad + (params.c_car_kg_per_s + params.c_cw_kg_per_s) * r * r;
+        let torque: Vec<f64> = (0..n)
+            .map(|k| {
+                let alpha = (speed[(k + 1).min(n - 1)] - speed[k.saturating_sub(1)]) * fs / 2.0;
+                let steady = params.out_of_balance_torque_nm(lw + r * exact[k]) + damping * speed[k];
+                torque(k as f64 / fs, steady, inertia * alpha)
+            })
+            .collect();
+        let estimate = speed.clone();
+        let chain = Chain::new(params.clone(), lw);
+        let mut travel = travel_of(&chain, (&torque, &angle, &estimate), motion_from_angle(&angle, fs), fs);
+        travel.constant_speed = 500..1900;
+        brake_engagement(&params, &travel).unwrap().map(|k| k as f64 / fs)
+    }
+
+    /// The brake is found where it catches the turning sheave and where the
+    /// drive hands it the load at standstill; not where the drive brings
+    /// the sheave to rest and holds it.
+    #[test]
+    fn the_brake_is_where_the_recording_shows_it() {
+        let turning = |t: f64| if (0.2..2.0).contains(&t) { 1.0 } else { 0.0 };
+        let smooth = |t: f64| if t < 0.2 { 0.0 } else { (3.0 - t).clamp(0.0, 1.0) };
+        // The brake, not the drive, stops the sheave.
+        let braked = |_: f64, steady: f64, _: f64| steady;
+        let caught = brake_found(turning, braked).expect("a brake that catches the sheave");
+        let held = |_: f64, steady: f64, inertial: f64| steady + inertial;
+        assert!((caught - 2.0).abs() < 0.02, "caught at {caught} s, stopped at 2 s");
+        assert_eq!(brake_found(smooth, held), None, "the drive holds");
+        let released =
+            |t: f64, steady: f64, inertial: f64| (steady + inertial) * (1.0 - (t - 3.5) / 0.05).clamp(0.0, 1.0);
+        let handed = brake_found(smooth, released).expect("the drive releases its torque");
+        assert!((handed - 3.5).abs() < 0.02, "released from 3.5 s, found at {handed} s");
     }
 
     #[test]
