@@ -507,27 +507,6 @@ impl Plant {
         vdq: impl FnOnce(f64, f64) -> (f64, f64),
     ) -> (f64, BrakeAction) {
         let n = self.nodes();
-        let (torque, brake) = self.motor_and_brake_currents(y, dy, theta_e, omega_e, ripple_nm, vdq);
-        dy[..n].copy_from_slice(&y[n..2 * n]);
-        if brake == BrakeAction::Held {
-            dy[self.line.layout.sheave] = 0.0;
-        }
-        (torque, brake)
-    }
-
-    /// [`Self::motor_and_brake`] without the nodes' velocities: writes
-    /// `d/dt (i_d, i_q)` into `dy[2n..2n + 2]` only (the general line's fast
-    /// path writes the velocities in its own loop).
-    pub(crate) fn motor_and_brake_currents(
-        &self,
-        y: &[f64],
-        dy: &mut [f64],
-        theta_e: f64,
-        omega_e: f64,
-        ripple_nm: f64,
-        vdq: impl FnOnce(f64, f64) -> (f64, f64),
-    ) -> (f64, BrakeAction) {
-        let n = self.nodes();
         let (id, iq) = (y[2 * n], y[2 * n + 1]);
         let (did, diq) = match (self.inputs.pwm_enabled, self.faults.open_phase) {
             (false, _) => (0.0, 0.0),
@@ -543,6 +522,10 @@ impl Plant {
             (true, false) => BrakeAction::Held,
             (true, true) => BrakeAction::Clamped { angle_rad: self.clamp_angle_rad },
         };
+        dy[..n].copy_from_slice(&y[n..2 * n]);
+        if brake == BrakeAction::Held {
+            dy[self.line.layout.sheave] = 0.0;
+        }
         dy[2 * n] = did;
         dy[2 * n + 1] = diq;
         (torque, brake)
@@ -765,8 +748,7 @@ fn open_phase_direction(phase: usize) -> (f64, f64) {
 /// derivative of `y` into `dy` (both of `y.len()` values). `work` is the
 /// step's work space, at least `5 * y.len()` values (four stages and the
 /// shifted state), reused from step to step by the callers: [`Rk4`] on the
-/// heap, [`Rk4Scratch`] in a fixed array, [`rk4_step`] for a fixed-size
-/// state. [`rk4_step_in_time`] for a derivative that depends on the time.
+/// heap, [`Rk4Scratch`] in a fixed array. [`rk4_step_in_time`] for a derivative that depends on the time.
 pub fn rk4_step_in(y: &mut [f64], h: f64, work: &mut [f64], mut f: impl FnMut(&[f64], &mut [f64])) {
     rk4_step_in_time(y, h, work, |_, y, dy| f(y, dy));
 }
@@ -835,12 +817,6 @@ impl Rk4 {
     }
 }
 
-/// One step of [`rk4_step_in`] for a state of at most [`MAX_STATE_LEN`]
-/// values, its work space on the stack.
-pub fn rk4_step_slice(y: &mut [f64], h: f64, f: impl FnMut(&[f64], &mut [f64])) {
-    Rk4Scratch::new().step(y, h, f);
-}
-
 /// [`rk4_step_in`]'s work space for a plant state (at most
 /// [`MAX_STATE_LEN`] values) in a fixed array, reused over many steps.
 pub struct Rk4Scratch {
@@ -868,18 +844,6 @@ impl Rk4Scratch {
     }
 }
 
-/// [`rk4_step_in`] for a fixed-size state whose derivative `f` returns an
-/// array: the new state.
-pub fn rk4_step<const N: usize>(y: &[f64; N], h: f64, f: impl Fn(&[f64; N]) -> [f64; N]) -> [f64; N] {
-    let mut out = *y;
-    let mut work = [[0.0; N]; 5];
-    rk4_step_in(&mut out, h, work.as_flattened_mut(), |x, dx| {
-        let x: &[f64; N] = x.try_into().expect("a state of N values");
-        dx.copy_from_slice(&f(x));
-    });
-    out
-}
-
 #[cfg(test)]
 mod rk4_tests {
     use super::*;
@@ -894,17 +858,13 @@ mod rk4_tests {
             dy[1] = -y[0];
         };
         let h = std::f64::consts::TAU / 200.0;
-        let (mut a, mut b, mut c, mut d) = ([1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 0.0]);
+        let (mut a, mut b) = ([1.0, 0.0], [1.0, 0.0]);
         let (mut heap, mut stack) = (Rk4::new(), Rk4Scratch::new());
         for _ in 0..200 {
             heap.step(&mut a, h, f);
             stack.step(&mut b, h, f);
-            rk4_step_slice(&mut c, h, f);
-            d = rk4_step(&d, h, |y| [y[1], -y[0]]);
         }
         assert_eq!(a, b);
-        assert_eq!(a, c);
-        assert_eq!(a, d);
         assert!((a[0] - 1.0).abs() < 1e-6 && a[1].abs() < 1e-6, "{a:?}");
     }
 
