@@ -12,7 +12,7 @@
 //! the measured acceleration, both low-passed below the chain's elastic
 //! modes.
 
-use dsp::{highpass_causal, highpass_zero_phase};
+use dsp::{highpass_causal, lowpass_complement_zero_phase};
 
 use crate::error::Result;
 
@@ -97,8 +97,7 @@ pub fn first_order_highpass(signal: &[f64], sample_rate_hz: f64, corner_hz: f64)
 pub fn identify_highpass(measured: &[f64], model: &[f64], sample_rate_hz: f64) -> Result<Highpass> {
     let n = measured.len().min(model.len());
     let low = |v: &[f64]| -> Result<Vec<f64>> {
-        let high = highpass_zero_phase(v, sample_rate_hz, COMPARISON_LOWPASS_HZ)?;
-        Ok(v.iter().zip(&high).map(|(a, h)| a - h).collect())
+        Ok(lowpass_complement_zero_phase(v, sample_rate_hz, COMPARISON_LOWPASS_HZ)?)
     };
     let target = low(&measured[..n])?;
     // The zero-phase low-pass and the candidate commute (both linear and

@@ -31,7 +31,7 @@ use std::ops::Range;
 use crate::error::{bail, Context, Result};
 
 use super::drive_law::SpeedController;
-use dsp::{central_difference, highpass_zero_phase};
+use dsp::{central_difference, highpass_zero_phase, lowpass_complement_zero_phase};
 use plant::angle::AngleSeries;
 use plant::effects::{EffectKind, Effects};
 use plant::line::{BrakeAction, Line, MAX_NODES};
@@ -954,8 +954,7 @@ fn lowpassed_m(displacement_m: &[f64], fs: f64) -> Result<Vec<f64>> {
 /// `x` low-passed at `corner_hz` (zero phase: the signal less its
 /// high-passed part).
 fn lowpassed(x: &[f64], fs: f64, corner_hz: f64) -> Result<Vec<f64>> {
-    let high = highpass_zero_phase(x, fs, corner_hz)?;
-    Ok(x.iter().zip(&high).map(|(a, h)| a - h).collect())
+    Ok(lowpass_complement_zero_phase(x, fs, corner_hz)?)
 }
 
 /// The tracking loop's reference: the measured sheave-edge travel (m) from

@@ -5,7 +5,7 @@
 //! loop does not, the gap lies upstream of the sheave (drive or electrical);
 //! when the replay misses them too, it lies in the mechanics.
 
-use dsp::highpass_zero_phase;
+use dsp::lowpass_complement_zero_phase;
 use plant::effects::Effects;
 use plant::line::{BrakeAction, Line};
 use plant::rope::{CAR, CW, DOF, SHEAVE};
@@ -37,9 +37,9 @@ pub fn replay_accelerations(
     }
     let theta0 = shaft_angle_rad[0];
     let relative: Vec<f64> = shaft_angle_rad.iter().map(|a| a - theta0).collect();
-    let high = highpass_zero_phase(&relative, sample_rate_hz, REPLAY_LOWPASS_HZ)?;
     let r = rig.mechanics.sheave_radius_m;
-    let sheave: Vec<f64> = relative.iter().zip(&high).map(|(a, h)| (a - h) * r).collect();
+    let low = lowpass_complement_zero_phase(&relative, sample_rate_hz, REPLAY_LOWPASS_HZ)?;
+    let sheave: Vec<f64> = low.iter().map(|a| a * r).collect();
     let mut params = ChainParams::from_rig(rig, m_car_kg);
     params.m_cw_kg = m_cw_kg;
     let chain = Chain::new(params, lw_start_m);

@@ -118,6 +118,21 @@ pub fn highpass_zero_phase(signal: &[f64], sample_rate_hz: f64, cutoff_hz: f64) 
     Ok(buf)
 }
 
+/// The complementary zero-phase low-pass: `signal` less its
+/// [`highpass_zero_phase`] at `cutoff_hz` (Hz), the same length, what lies
+/// below the cutoff (constants and ramps kept).
+///
+/// # Errors
+/// Those of [`highpass_zero_phase`].
+pub fn lowpass_complement_zero_phase(
+    signal: &[f64],
+    sample_rate_hz: f64,
+    cutoff_hz: f64,
+) -> Result<Vec<f64>, AnalysisError> {
+    let high = highpass_zero_phase(signal, sample_rate_hz, cutoff_hz)?;
+    Ok(signal.iter().zip(&high).map(|(a, h)| a - h).collect())
+}
+
 /// The checks of a high-pass's inputs: the sample rate, a cutoff with
 /// `0 < cutoff_hz < sample_rate_hz / 2`, a finite non-empty signal.
 fn check_highpass(signal: &[f64], sample_rate_hz: f64, cutoff_hz: f64) -> Result<(), AnalysisError> {
@@ -166,6 +181,26 @@ mod tests {
         assert!((gain - 0.5f64.sqrt()).abs() < 2e-3, "{gain}");
         assert!(highpass_causal(&x, fs, 600.0).is_err());
         assert!(highpass_causal(&[], fs, 1.0).is_err());
+    }
+
+    /// The complementary low-pass keeps a slow tone and a ramp, removes a
+    /// fast tone, and adds back to the signal with the high-pass; its bad
+    /// inputs are the high-pass's.
+    #[test]
+    fn complementary_lowpass_keeps_what_lies_below_the_cutoff() {
+        let fs = 1000.0;
+        let n = 10_000;
+        let slow = sine(fs, 0.5, 1.0, 0.3, n);
+        let fast = sine(fs, 80.0, 0.4, 1.1, n);
+        let x: Vec<f64> = (0..n).map(|k| slow[k] + fast[k] + 1e-3 * k as f64).collect();
+        let low = lowpass_complement_zero_phase(&x, fs, 10.0).unwrap();
+        let high = highpass_zero_phase(&x, fs, 10.0).unwrap();
+        for k in 1000..n - 1000 {
+            assert!((low[k] - slow[k] - 1e-3 * k as f64).abs() < 1e-3, "{k}: {}", low[k]);
+            assert!((low[k] + high[k] - x[k]).abs() < 1e-12);
+        }
+        assert!(lowpass_complement_zero_phase(&x, fs, 600.0).is_err());
+        assert!(lowpass_complement_zero_phase(&[], fs, 1.0).is_err());
     }
     use std::f64::consts::PI;
 

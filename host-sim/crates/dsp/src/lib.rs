@@ -56,7 +56,7 @@ pub(crate) mod test_signals {
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
 pub use difference::central_difference;
 pub use dq0::{dq_currents, machine_torque_nm};
-pub use filter::{highpass_causal, highpass_zero_phase};
+pub use filter::{highpass_causal, highpass_zero_phase, lowpass_complement_zero_phase};
 pub use iso18738::{
     ride_report, Axis, AxisFigures, MotionFigures, MotionSource, RegionFigures, RideInput, RideReport, SoundFigures,
 };
