@@ -74,53 +74,120 @@ pub fn simulate_recording(
             Ok(run.to_recording(&spec, m_cw_kg, format!("model of {stem}")))
         }
         RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
-            let acc = measured.column(ACC_CAR).with_context(|| format!("`{stem}`: no {ACC_CAR}"))?;
-            let fs = measured.meta.sample_rate_hz;
-            let release = release_index(&acc.values).with_context(|| format!("`{stem}`: finding the release"))?;
-            let released_s = (acc.values.len() - release) as f64 / fs;
-            let m = &rig.mechanics;
-            let spec = FreeDecaySpec {
-                mass_kg,
-                rope_length_m,
-                rope_ea_n: m.rope_ea_n,
-                rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
-                damping_kg_per_s: m.c_car_kg_per_s,
-                initial_acceleration_mps2: 1.0,
-                elements: DECAY_ROPE_ELEMENTS,
-            };
-            let simulate = |spec: &FreeDecaySpec| {
-                simulate_free_decay_with(spec, effects, sample_rate_hz, released_s)
-                    .with_context(|| format!("`{stem}`: simulating the free decay"))
-            };
-            // The held displacement is the test's, not the model's: the
-            // model's decay takes the measured level over its first second.
-            let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
-            let first_s = |v: &[f64], rate: f64| rms(&v[..((rate as usize).min(v.len()))]);
-            let measured_level = first_s(&acc.values[release..], fs);
-            let mut unit = simulate(&spec)?;
-            let mut level = measured_level / first_s(&unit, sample_rate_hz).max(1e-300);
-            if amplitude_dependent(effects) && level.is_finite() && level > 0.0 {
-                // A stiffening rope or dry friction does not scale: the
-                // decay is simulated again released at the test's level,
-                // and the remaining (small) difference scaled.
-                let released = FreeDecaySpec { initial_acceleration_mps2: level, ..spec };
-                unit = simulate(&released)?;
-                level = measured_level / first_s(&unit, sample_rate_hz).max(1e-300);
-            }
-            let pre_trigger = (release as f64 / fs * sample_rate_hz).round() as usize;
-            let values: Vec<f64> =
-                std::iter::repeat_n(0.0, pre_trigger).chain(unit.iter().map(|a| a * level)).collect();
-            let time = (0..values.len()).map(|i| i as f64 / sample_rate_hz).collect();
-            Ok(Recording {
-                meta: RecordingMeta {
-                    kind: measured.meta.kind.clone(),
-                    sample_rate_hz,
-                    description: Some(format!("model of {stem}")),
-                },
-                columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, values)],
-            })
+            simulate_decay(rig, effects, measured, stem, sample_rate_hz, mass_kg, rope_length_m)
         }
     }
+}
+
+/// The model's counterpart of a free decay `measured` (named `stem`) of
+/// `mass_kg` on `rope_length_m`, sampled at `sample_rate_hz`: released
+/// where the test was, at the test's level (the RMS of its first second
+/// after the release), after the same pre-trigger.
+fn simulate_decay(
+    rig: &RigConfig,
+    effects: &Effects,
+    measured: &Recording,
+    stem: &str,
+    sample_rate_hz: f64,
+    mass_kg: f64,
+    rope_length_m: f64,
+) -> Result<Recording> {
+    let acc = measured.column(ACC_CAR).with_context(|| format!("`{stem}`: no {ACC_CAR}"))?;
+    let fs = measured.meta.sample_rate_hz;
+    let release = release_index(&acc.values).with_context(|| format!("`{stem}`: finding the release"))?;
+    let released_s = (acc.values.len() - release) as f64 / fs;
+    let m = &rig.mechanics;
+    let spec = FreeDecaySpec {
+        mass_kg,
+        rope_length_m,
+        rope_ea_n: m.rope_ea_n,
+        rope_mass_per_length_kg_per_m: m.rope_mass_per_length_kg_per_m,
+        damping_kg_per_s: m.c_car_kg_per_s,
+        initial_acceleration_mps2: 1.0,
+        elements: DECAY_ROPE_ELEMENTS,
+    };
+    let simulate = |initial_acceleration_mps2: f64| {
+        let spec = FreeDecaySpec { initial_acceleration_mps2, ..spec };
+        simulate_free_decay_with(&spec, effects, sample_rate_hz, released_s)
+            .with_context(|| format!("`{stem}`: simulating the free decay"))
+    };
+    // The held displacement is the test's, not the model's: the model's
+    // decay takes the measured level over its first second.
+    let measured_level = first_second_rms(&acc.values[release..], fs);
+    let (unit, level) = if amplitude_dependent(effects) {
+        // A stiffening rope or dry friction does not scale: the decay is
+        // released at the level whose first second matches the test's.
+        let peak = acc.values[release..].iter().take((0.05 * fs).ceil() as usize).fold(0.0f64, |m, v| m.max(v.abs()));
+        let run = |a: f64| -> Result<(f64, Vec<f64>)> {
+            let v = simulate(a)?;
+            Ok((first_second_rms(&v, sample_rate_hz), v))
+        };
+        let (rms, decay) = released_at_level(run, measured_level, peak)?;
+        // The remaining (small) difference scaled.
+        (decay, measured_level / rms.max(1e-300))
+    } else {
+        let unit = simulate(1.0)?;
+        let level = measured_level / first_second_rms(&unit, sample_rate_hz).max(1e-300);
+        (unit, level)
+    };
+    let pre_trigger = (release as f64 / fs * sample_rate_hz).round() as usize;
+    let values: Vec<f64> = std::iter::repeat_n(0.0, pre_trigger).chain(unit.iter().map(|a| a * level)).collect();
+    let time = (0..values.len()).map(|i| i as f64 / sample_rate_hz).collect();
+    Ok(Recording {
+        meta: RecordingMeta {
+            kind: measured.meta.kind.clone(),
+            sample_rate_hz,
+            description: Some(format!("model of {stem}")),
+        },
+        columns: vec![Column::new(TIME_S, time), Column::new(ACC_CAR, values)],
+    })
+}
+
+/// RMS of the first second of `v` sampled at `rate_hz` (all of it if shorter).
+fn first_second_rms(v: &[f64], rate_hz: f64) -> f64 {
+    let v = &v[..(rate_hz as usize).min(v.len())];
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+/// Largest number of decays simulated to find the release level.
+const RELEASE_LEVEL_RUNS: usize = 5;
+
+/// Relative tolerance on the first second's RMS when matching the release level.
+const RELEASE_LEVEL_TOLERANCE: f64 = 2e-3;
+
+/// The decay released at the acceleration (m/s^2) at which its
+/// first-second RMS reaches `target` (the test's), with that RMS: `run(a)`
+/// gives a decay released at `a` and its RMS. Secant steps from `start`
+/// (the test's first peak), at most [`RELEASE_LEVEL_RUNS`] decays: the RMS
+/// grows with the release level (dry friction lowers it by a bounded
+/// amount, a stiffening rope changes it smoothly), so the steps converge;
+/// the closest decay found is returned.
+fn released_at_level(run: impl Fn(f64) -> Result<(f64, Vec<f64>)>, target: f64, start: f64) -> Result<(f64, Vec<f64>)> {
+    let start = if start > 0.0 && start.is_finite() { start } else { 1.0 };
+    let (mut a0, mut r0) = (start, run(start)?);
+    if !(target > 0.0 && target.is_finite()) {
+        return Ok(r0);
+    }
+    // A proportional step first (exact for a linear decay), then secants.
+    let mut a1 = if r0.0 > 0.0 { a0 * target / r0.0 } else { 2.0 * a0 };
+    let mut best = r0.clone();
+    for _ in 1..RELEASE_LEVEL_RUNS {
+        if (best.0 - target).abs() <= RELEASE_LEVEL_TOLERANCE * target || !(a1 > 0.0 && a1.is_finite()) {
+            break;
+        }
+        let r1 = run(a1)?;
+        let slope = (r1.0 - r0.0) / (a1 - a0);
+        let next = if slope > 0.0 && slope.is_finite() {
+            a1 + (target - r1.0) / slope
+        } else {
+            a1 * target / r1.0.max(1e-300)
+        };
+        if (r1.0 - target).abs() < (best.0 - target).abs() {
+            best = r1.clone();
+        }
+        (a0, r0, a1) = (a1, r1, next.max(0.1 * a1));
+    }
+    Ok(best)
 }
 
 /// Whether `effects` make a free decay's shape depend on its amplitude
@@ -319,4 +386,31 @@ pub fn highpass_accelerations(signals: &mut ChainSignals, highpass: acquisition:
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::Cell;
+
+    /// A decay under dry friction: its first-second RMS grows as the
+    /// square of a small release level (the friction stops it within a
+    /// cycle) and linearly, less a bounded amount, at a large one. The
+    /// level is found within the tolerance in at most the runs allowed,
+    /// from a start far off on either side.
+    #[test]
+    fn the_release_level_is_found_where_the_decay_does_not_scale() {
+        let rms = |a: f64| 0.35 * a * a / (a + 3.0);
+        for start in [0.5, 12.0, 60.0] {
+            let runs = Cell::new(0);
+            let run = |a: f64| -> Result<(f64, Vec<f64>)> {
+                runs.set(runs.get() + 1);
+                Ok((rms(a), vec![a]))
+            };
+            let (level, decay) = released_at_level(run, 3.0, start).unwrap();
+            assert!((level - 3.0).abs() <= RELEASE_LEVEL_TOLERANCE * 3.0, "start {start}: level {level}");
+            assert!((rms(decay[0]) - level).abs() < 1e-12);
+            assert!(runs.get() <= RELEASE_LEVEL_RUNS, "start {start}: {} runs", runs.get());
+        }
+    }
 }
