@@ -34,6 +34,7 @@ use super::screen;
 use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers};
 use super::target::Target;
 use plant::effects::{EffectKind, Effects, Fit as Declared, FromData, Neutral, ParamScale};
+use recording::RecordingKind;
 use rig_config::RigConfig;
 
 /// Relative penalty per fitted parameter on the held-out gap when ranking.
@@ -336,6 +337,9 @@ impl Lab<'_> {
             .par_iter()
             .map(|&(m, t)| {
                 let target = &self.targets[t];
+                if self.runs_as_nominal(rig, &models[m], target) {
+                    return Some(target.nominal.clone());
+                }
                 target
                     .counterpart
                     .simulate(rig, &models[m], &target.recording, &target.stem)
@@ -348,6 +352,15 @@ impl Lab<'_> {
             out[m].push(r);
         }
         out
+    }
+
+    /// Whether the run of `effects` on `rig` for `target` is its nominal
+    /// run: a free decay, on the calibrated rig, with none of the effects a
+    /// free decay has ([`Effects::for_free_decay`]).
+    fn runs_as_nominal(&self, rig: &RigConfig, effects: &Effects, target: &Target) -> bool {
+        matches!(target.recording.meta.kind, RecordingKind::FreeDecay { .. })
+            && effects.for_free_decay().is_nominal()
+            && (std::ptr::eq(rig, self.rig) || rig == self.rig)
     }
 
     /// Step: the screened grid of every effect of `kinds` that is screened
