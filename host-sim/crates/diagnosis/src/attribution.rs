@@ -1,0 +1,85 @@
+//! Step 4 of the pipeline as [`crate::diagnose`] runs it: the effects the
+//! counterpart holds fitted to the mechanics ([`crate::attribute`], on the
+//! calibrations re-done by [`crate::hypotheses`]) and named
+//! ([`crate::naming`]); under another drive, the direct-axis current's
+//! lines attributed on their own ([`crate::electrical_lines`]).
+
+use crate::attribute::{attribute, Candidate, Lab};
+use crate::calibrate::Calibration;
+use crate::compare::Compared;
+use crate::drive_finding::DriveModel;
+use crate::verdict::GapOptions;
+use crate::{driven, electrical_lines, hypotheses, naming};
+use plant::effects::EffectKind;
+use recording::Recording;
+use rig_config::RigConfig;
+
+/// Why some effects are not fitted to the mechanics under another drive,
+/// in words (`None` when every effect is).
+fn not_fitted_note(not_fitted: &[EffectKind]) -> Option<String> {
+    (!not_fitted.is_empty()).then(|| {
+        let names: Vec<&str> = not_fitted.iter().map(|k| k.name()).collect();
+        format!(
+            "the rig's drive is another, so the effects are fitted with the mechanics driven by its measured torque; \
+             not fitted to the mechanics: {} (the dead time acts through the currents, which the measured torque \
+             already carries: it is fitted to the direct-axis current's lines instead; the brake clamp acts at \
+             standstill, where another drive's start and stop are not compared)",
+            names.join(", ")
+        )
+    })
+}
+
+/// Steps 4 and 5 on the mechanics: every effect the counterpart holds
+/// fitted (the calibration re-done under the hypotheses that it can
+/// absorb), cross-validated and named; with the note on what is not
+/// fitted and the runs planned per recording.
+pub(crate) fn attribute_mechanics(
+    model: &RigConfig,
+    calibration: &Calibration,
+    dataset: &[(String, Recording)],
+    compared: &Compared,
+    drive: DriveModel,
+    options: &GapOptions,
+    progress: &(dyn Fn(&str, usize, usize) + Sync),
+) -> (Vec<Candidate>, Option<String>, usize) {
+    let planned = std::sync::atomic::AtomicUsize::new(0);
+    let report_progress = |done: usize, total: usize| {
+        planned.store(total, std::sync::atomic::Ordering::Relaxed);
+        progress("fitting effects", done, total);
+    };
+    // Under another drive the counterpart is the torque-driven mechanics,
+    // which holds only some of the library's effects.
+    let (kinds, not_fitted): (Vec<EffectKind>, Vec<EffectKind>) =
+        options.effects.iter().partition(|k| drive == DriveModel::Project || driven::holds_effect(**k));
+    // The calibration re-done under the hypotheses of the effects it can
+    // absorb (step 4a).
+    let refits: Vec<hypotheses::Refit> =
+        kinds.iter().filter_map(|&k| hypotheses::refit(k, model, calibration, dataset)).collect();
+    let lab = Lab {
+        refits: &refits,
+        rig: model,
+        targets: &compared.targets,
+        bands: &compared.bands,
+        reference_tension_n: calibration.reference_tension_n,
+        progress: &report_progress,
+    };
+    let mut ranking = if kinds.is_empty() { Vec::new() } else { attribute(&lab, &kinds) };
+    naming::name_candidates(&mut ranking);
+    (ranking, not_fitted_note(&not_fitted), planned.load(std::sync::atomic::Ordering::Relaxed))
+}
+
+/// Under another drive, its transducer and inverter errors show in the
+/// direct-axis current, not in the torque-driven mechanics: the lines'
+/// own attribution (`None` under the project's drive).
+pub(crate) fn electrical_lines_of(
+    compared: &mut Compared,
+    drive: DriveModel,
+    options: &GapOptions,
+) -> Option<electrical_lines::ElectricalLines> {
+    (drive == DriveModel::Foreign).then(|| {
+        let (measured, not_measured) = std::mem::take(&mut compared.direct_axis);
+        let mut lines = electrical_lines::explain(measured, not_measured, &options.effects);
+        naming::name_candidates(&mut lines.ranking);
+        lines
+    })
+}
