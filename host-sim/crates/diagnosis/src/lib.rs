@@ -78,6 +78,7 @@ pub use error::DiagnosisError;
 pub use prepare::RigSpeedLoop;
 pub use verdict::{
     GapOptions, GapReport, RecordingGap, Verdict, EXPLAINED_SHRINK, NOMINAL_EXCESS_DB, PERSISTENT_CELL_DB,
+    SUB_NOMINAL_REMOVAL_FRACTION,
 };
 
 use crate::error::{bail, Result};
