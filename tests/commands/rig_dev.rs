@@ -43,6 +43,18 @@ fn diagnosed(name: &str) -> (GapReport, f64) {
     (report, started.elapsed().as_secs_f64())
 }
 
+/// The diagnosis of the dataset `name` with an effect: `explained` by that
+/// effect (the dataset's name), first, held-out shrink at least 70 %; its
+/// best candidate.
+fn explained_by_its_effect(name: &str) -> diagnosis::attribute::Candidate {
+    let (r, _) = diagnosed(name);
+    assert_eq!(r.verdict, Verdict::Explained, "{name}: {:?} by {:?}", r.verdict, r.explained_by);
+    assert_eq!(r.explained_by.as_deref(), Some(name));
+    let first = r.ranking.into_iter().next().expect("a ranking");
+    assert!(first.held_out_shrink >= 0.7, "{name}: held-out shrink {:.2}", first.held_out_shrink);
+    first
+}
+
 /// The parameter-only rig is `nominal` with the README's values (EA
 /// within 2 %, guide damping within 15 %, sheave damping within 10 %) and
 /// the tension-stiffening rig `explained` by tension stiffening with its
@@ -58,11 +70,7 @@ fn param_only_is_nominal_and_tension_stiffening_is_explained() {
     assert!(within(c.guide_damping_kg_per_s, 200.0, 0.15), "guide {:.1} kg/s", c.guide_damping_kg_per_s);
     assert!(within(c.sheave_damping_nms_per_rad, 4.5, 0.10), "sheave {:.3}", c.sheave_damping_nms_per_rad);
 
-    let (r, _) = diagnosed("tension_stiffening");
-    assert_eq!(r.verdict, Verdict::Explained, "tension_stiffening: {:?} by {:?}", r.verdict, r.explained_by);
-    assert_eq!(r.explained_by.as_deref(), Some("tension_stiffening"));
-    let first = &r.ranking[0];
-    assert!(first.held_out_shrink >= 0.7, "held-out shrink {:.2}", first.held_out_shrink);
+    let first = explained_by_its_effect("tension_stiffening");
     let alpha = first.parameters.iter().find(|p| p.name == "alpha").expect("the exponent is fitted").value;
     assert!(within(alpha, 0.45, 0.30), "exponent {alpha:.3} against the README's 0.45");
 }
@@ -73,11 +81,7 @@ fn param_only_is_nominal_and_tension_stiffening_is_explained() {
 /// 0.1 m is 8 kg) within 30 %: read in place, the whole library.
 #[test]
 fn diverting_pulley_is_explained_with_its_equivalent_mass() {
-    let (r, _) = diagnosed("diverting_pulley");
-    assert_eq!(r.verdict, Verdict::Explained, "diverting_pulley: {:?} by {:?}", r.verdict, r.explained_by);
-    assert_eq!(r.explained_by.as_deref(), Some("diverting_pulley"));
-    let first = &r.ranking[0];
-    assert!(first.held_out_shrink >= 0.7, "held-out shrink {:.2}", first.held_out_shrink);
+    let first = explained_by_its_effect("diverting_pulley");
     let pulley = first.effects.diverting_pulley.expect("the pulley is fitted");
     let mass_kg = pulley.rim_mass_kg();
     assert!((mass_kg / 8.0 - 1.0).abs() <= 0.30, "equivalent mass {mass_kg:.2} kg against the README's 8 kg");
@@ -90,11 +94,7 @@ fn diverting_pulley_is_explained_with_its_equivalent_mass() {
 /// level. Read in place, the whole library.
 #[test]
 fn coulomb_guide_friction_is_explained_with_its_force() {
-    let (r, _) = diagnosed("coulomb_guide_friction");
-    assert_eq!(r.verdict, Verdict::Explained, "coulomb_guide_friction: {:?} by {:?}", r.verdict, r.explained_by);
-    assert_eq!(r.explained_by.as_deref(), Some("coulomb_guide_friction"));
-    let first = &r.ranking[0];
-    assert!(first.held_out_shrink >= 0.7, "held-out shrink {:.2}", first.held_out_shrink);
+    let first = explained_by_its_effect("coulomb_guide_friction");
     let force = first.parameters.iter().find(|p| p.name == "friction_n").expect("the force is fitted").value;
     assert!((force / 6.0 - 1.0).abs() <= 0.30, "friction {force:.2} N against the README's 6 N on the car");
 }
