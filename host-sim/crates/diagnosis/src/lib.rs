@@ -143,6 +143,7 @@ pub fn diagnose(
     let electrical_lines = electrical_lines_of(&mut compared, drive.drive, options);
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
+    let verdict_note = verdict::form_error_note(verdict, mechanical_ranking.first(), options);
     // The mechanics' candidate the verdict rests on: a named one, also when
     // it explains a gap within the nominal threshold (the verdict says so).
     let best = mechanical_ranking
@@ -171,6 +172,7 @@ pub fn diagnose(
         left_out,
         attribution_note,
         explained_by,
+        verdict_note,
         gap_measure: GAP_MEASURE.to_string(),
         nominal_excess_db,
         noise_gap_db,

@@ -318,6 +318,9 @@ fn overview(s: &mut String, r: &GapReport) {
     let _ = writeln!(s, "# Sim-to-real gap: {}\n", r.dataset);
     let verdict = verdict_text(r.verdict, r.explained_by.as_deref(), r.ranking.is_empty());
     let _ = writeln!(s, "Verdict: {verdict}.\n");
+    if let Some(note) = &r.verdict_note {
+        let _ = writeln!(s, "{note}.\n");
+    }
     if let Some(note) = r.no_effect_helps_note() {
         let _ = writeln!(s, "{note}.\n");
     }
