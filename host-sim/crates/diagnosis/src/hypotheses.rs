@@ -18,7 +18,7 @@
 //!   (viscous) and `q = -2 F / m` (dry friction `F` on the mass `m`: the
 //!   acceleration jumps by `2 F / m` where the friction reverses, at every
 //!   turning point), read on the signal itself, not on its first-mode
-//!   band-pass ([`half_cycle_extremes`]); the viscous part replaces the
+//!   band-pass (`half_cycle_extremes`); the viscous part replaces the
 //!   calibrated guide damping, the friction centres the effect's grid, and
 //!   the travels' torque balance (Eqn 13) is read again with both to give
 //!   the sheave damping (`2 F r`: the friction acts on car and

@@ -5,7 +5,7 @@
 //!
 //! The pipeline, [`diagnose`], step by step:
 //!
-//! 1. [`calibrate`]: EA, guide and sheave damping identified from the data.
+//! 1. [`mod@calibrate`]: EA, guide and sheave damping identified from the data.
 //! 2. [`prepare`]: every recording measured ([`signals`]) and its
 //!    counterpart made with the calibrated nominal model: [`simulate`]
 //!    (closed loop) or, for travels under another drive, the mechanics
@@ -14,7 +14,7 @@
 //! 3. [`compare`]: the comparison targets ([`target`]) and the nominal
 //!    model's gap in cells of channel x travel phase x band ([`measure`]),
 //!    with the [`replay`] (measured shaft motion into the mechanics) beside
-//!    it; [`locate`]: the gap located along the signal chain, in time and
+//!    it; [`mod@locate`]: the gap located along the signal chain, in time and
 //!    in frequency.
 //! 4. [`attribution`]: every effect fitted and cross-validated
 //!    ([`attribute`]); an effect that the calibration can absorb on the

@@ -1,7 +1,7 @@
 //! What step 3 of the diagnosis hands on: one recording prepared for the
 //! comparison (its measured cells, noise and tolerances, the nominal
 //! model's spectra, how its counterpart is simulated), which the location
-//! ([`super::locate`]) and the attribution ([`super::attribute`]) read
+//! ([`mod@super::locate`]) and the attribution ([`super::attribute`]) read
 //! alike, neither from the other.
 
 use super::measure::Tolerances;
