@@ -145,11 +145,12 @@ pub fn diagnose(
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
     let verdict_note = verdict::form_error_note(verdict, mechanical_ranking.first(), options);
     // The mechanics' candidate the verdict rests on: a named one, also when
-    // it explains a gap within the nominal threshold (the verdict says so).
+    // it explains a gap within the nominal threshold (the verdict says so),
+    // not when what it removes of such a gap is the model's form error.
     let best = mechanical_ranking
         .first()
         .filter(|c| c.naming.named)
-        .filter(|c| !is_nominal || (verdict == Verdict::Explained && c.held_out_shrink >= options.explained_shrink));
+        .filter(|c| !is_nominal || (verdict == Verdict::Explained && verdict::explains(c, true, options)));
     let mut simulations = compared.simulations + planned * compared.targets.len();
     let explained_by = (verdict == Verdict::Explained).then(|| explained_by(electrical, best));
     let mut map_after = Vec::new();
