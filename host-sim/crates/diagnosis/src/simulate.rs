@@ -164,26 +164,25 @@ const RELEASE_LEVEL_TOLERANCE: f64 = 2e-3;
 /// the closest decay found is returned.
 fn released_at_level(run: impl Fn(f64) -> Result<(f64, Vec<f64>)>, target: f64, start: f64) -> Result<(f64, Vec<f64>)> {
     let start = if start > 0.0 && start.is_finite() { start } else { 1.0 };
-    let (mut a0, mut r0) = (start, run(start)?);
+    let mut best = run(start)?;
     if !(target > 0.0 && target.is_finite()) {
-        return Ok(r0);
+        return Ok(best);
     }
-    // A proportional step first (exact for a linear decay), then secants.
-    let mut a1 = if r0.0 > 0.0 { a0 * target / r0.0 } else { 2.0 * a0 };
-    let mut best = r0.clone();
+    // The last two levels and their RMS (the secant's points): a
+    // proportional step first (exact for a linear decay), then secants.
+    let (mut a0, mut r0) = (start, best.0);
+    let mut a1 = if r0 > 0.0 { a0 * target / r0 } else { 2.0 * a0 };
     for _ in 1..RELEASE_LEVEL_RUNS {
         if (best.0 - target).abs() <= RELEASE_LEVEL_TOLERANCE * target || !(a1 > 0.0 && a1.is_finite()) {
             break;
         }
-        let r1 = run(a1)?;
-        let slope = (r1.0 - r0.0) / (a1 - a0);
-        let next = if slope > 0.0 && slope.is_finite() {
-            a1 + (target - r1.0) / slope
-        } else {
-            a1 * target / r1.0.max(1e-300)
-        };
-        if (r1.0 - target).abs() < (best.0 - target).abs() {
-            best = r1.clone();
+        let decay = run(a1)?;
+        let r1 = decay.0;
+        let slope = (r1 - r0) / (a1 - a0);
+        let next =
+            if slope > 0.0 && slope.is_finite() { a1 + (target - r1) / slope } else { a1 * target / r1.max(1e-300) };
+        if (r1 - target).abs() < (best.0 - target).abs() {
+            best = decay;
         }
         (a0, r0, a1) = (a1, r1, next.max(0.1 * a1));
     }
