@@ -185,11 +185,6 @@ pub struct ChainSpectra {
     pub channels: Vec<(Channel, ChannelSpectra)>,
 }
 
-/// The periodic Hann window of `len` samples: `(1 - cos(2 pi i / len)) / 2`.
-pub(crate) fn hann_window(len: usize) -> Vec<f64> {
-    (0..len).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / len as f64).cos()).collect()
-}
-
 /// Hann windows by length, each with its energy `sum(w^2)`, made once per
 /// length (a recording's segments share one or two lengths).
 #[derive(Default)]
@@ -203,7 +198,8 @@ impl HannWindows {
         let at = match self.by_len.iter().position(|(l, _, _)| *l == len) {
             Some(at) => at,
             None => {
-                let window = hann_window(len);
+                let window: Vec<f64> =
+                    (0..len).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / len as f64).cos()).collect();
                 let energy = window.iter().map(|w| w * w).sum();
                 self.by_len.push((len, window, energy));
                 self.by_len.len() - 1
@@ -217,26 +213,20 @@ impl HannWindows {
 /// Complex amplitudes (unit of `x`) of the mechanical `orders`' lines in
 /// `x` (its mean removed) along the shaft angle `theta` (rad) under a Hann
 /// window `w` over the stage: `2 / sum(w) sum w (x - mean) e^(-i k (theta -
-/// theta_ref))` (`w` of the length of `x`), one `sin_cos` per sample and the
-/// orders by powers of it ([`unit_power`]). A stage holds a fractional number of revolutions:
-/// without the window, a strong line (the rig's order 12 is some hundred
+/// theta_0))` (`w` of the length of `x`), one `sin_cos` per sample and the
+/// orders by powers of it ([`unit_power`]). A stage holds a fractional
+/// number of revolutions: without the window, a strong line (the rig's order 12 is some hundred
 /// times its order 2 in the car's acceleration) leaks into the weak ones
 /// by `1 / (pi d N)` of its amplitude, `d` orders away over `N`
 /// revolutions (about 1/500 at `d = 10`, `N = 15`); the window's side lobes
 /// fall as `1 / (d N)^3`. With them, the factor that takes the noise's
 /// one-sided density (unit^2/Hz) to a line's expected power (unit^2) at
 /// sample rate `fs` (Hz): `2 fs sum(w^2) / sum(w)^2` (`3 fs / n`).
-pub(crate) fn angle_locked_lines(
-    x: &[f64],
-    (theta, theta_ref): (&[f64], f64),
-    orders: &[u32],
-    window: &[f64],
-    fs: f64,
-) -> (Vec<Complex64>, f64) {
+fn angle_locked_lines(x: &[f64], theta: &[f64], orders: &[u32], window: &[f64], fs: f64) -> (Vec<Complex64>, f64) {
     let mean = x.iter().sum::<f64>() / x.len().max(1) as f64;
     let mut sums = vec![Complex64::new(0.0, 0.0); orders.len()];
     for ((v, t), w) in x.iter().zip(theta).zip(window) {
-        let (s, c) = (t - theta_ref).sin_cos();
+        let (s, c) = (t - theta[0]).sin_cos();
         for (sum, &order) in sums.iter_mut().zip(orders) {
             let (ck, sk) = unit_power(c, s, order);
             *sum += Complex64::new(ck, -sk) * (w * (v - mean));
@@ -281,7 +271,7 @@ impl ChainSpectra {
             let (lines, line_noise_scale) = match &segmentation.constant {
                 Some(r) if signals.angle_rad.len() >= r.end => angle_locked_lines(
                     &values[r.clone()],
-                    (&signals.angle_rad[r.clone()], signals.angle_rad[r.start]),
+                    &signals.angle_rad[r.clone()],
                     &bands.line_orders,
                     windows.of(r.len()).0,
                     segmentation.sample_rate_hz,
@@ -455,7 +445,7 @@ mod tests {
         let orders = [1, 6, 12, 72];
         let mut windows = HannWindows::default();
         let window = windows.of(x.len()).0.to_vec();
-        let (got, _) = angle_locked_lines(&x, (&theta, theta[0]), &orders, &window, 1000.0);
+        let (got, _) = angle_locked_lines(&x, &theta, &orders, &window, 1000.0);
         let mean = x.iter().sum::<f64>() / x.len() as f64;
         let s1: f64 = window.iter().sum();
         for (g, &k) in got.iter().zip(&orders) {
@@ -479,10 +469,10 @@ mod tests {
         let theta: Vec<f64> = (0..n).map(|i| 15.37 * TAU * i as f64 / n as f64).collect();
         let x: Vec<f64> = theta.iter().map(|t| (12.0 * t + 0.3).cos() + 0.01 * (2.0 * t + 1.1).cos()).collect();
         let mut windows = HannWindows::default();
-        let (lines, _) = angle_locked_lines(&x, (&theta, 0.0), &[2, 12], windows.of(n).0, 4096.0);
+        let (lines, _) = angle_locked_lines(&x, &theta, &[2, 12], windows.of(n).0, 4096.0);
         assert!((lines[0].norm() - 0.01).abs() < 2e-4 && (lines[0].arg() - 1.1).abs() < 0.02, "{}", lines[0]);
         let rectangular = vec![1.0; n];
-        let (plain, _) = angle_locked_lines(&x, (&theta, 0.0), &[2], &rectangular, 4096.0);
+        let (plain, _) = angle_locked_lines(&x, &theta, &[2], &rectangular, 4096.0);
         assert!((plain[0] - Complex64::from_polar(0.01, 1.1)).norm() > 0.05 * 0.01, "{}", plain[0]);
     }
 
@@ -501,7 +491,7 @@ mod tests {
         let mut scale = 0.0;
         for _ in 0..trials {
             let x: Vec<f64> = (0..n).map(|_| rng.sample(normal)).collect();
-            let (lines, s) = angle_locked_lines(&x, (&theta, 0.0), &[6], &window, fs);
+            let (lines, s) = angle_locked_lines(&x, &theta, &[6], &window, fs);
             sum += lines[0].norm_sqr();
             scale = s;
         }
