@@ -106,14 +106,7 @@ impl Case {
 
     /// Relative errors of the calibrated EA, guide and sheave damping.
     fn calibration_errors(&self) -> Option<(f64, f64, f64)> {
-        let c = &self.report.calibration;
-        self.calibration_truth.map(|(ea, guide, sheave)| {
-            (
-                c.rope_ea_n / ea - 1.0,
-                c.guide_damping_kg_per_s / guide - 1.0,
-                c.sheave_damping_nms_per_rad / sheave - 1.0,
-            )
-        })
+        self.calibration_truth.map(|truth| calibration_errors(&self.report, truth))
     }
 
     /// `explained` by the true effect.
@@ -121,6 +114,20 @@ impl Case {
         self.report.verdict == Verdict::Explained
             && self.report.explained_by.as_deref().is_some_and(|e| self.truth.starts_with(&format!("{e} ")))
     }
+}
+
+/// The EA (N), guide damping (kg/s) and sheave damping (N m s/rad) of
+/// `rig`, the values its calibration should find.
+fn calibration_truth(rig: &RigConfig) -> (f64, f64, f64) {
+    let m = &rig.mechanics;
+    (m.rope_ea_n, m.c_car_kg_per_s, m.c_sheave_nms_per_rad)
+}
+
+/// Relative errors of `report`'s calibrated EA, guide and sheave damping
+/// against `truth` ([`calibration_truth`]).
+fn calibration_errors(report: &GapReport, (ea, guide, sheave): (f64, f64, f64)) -> (f64, f64, f64) {
+    let c = &report.calibration;
+    (c.rope_ea_n / ea - 1.0, c.guide_damping_kg_per_s / guide - 1.0, c.sheave_damping_nms_per_rad / sheave - 1.0)
 }
 
 /// The two car masses up and down over the full travel and their two free
@@ -251,10 +258,6 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
     let nominal = foreign_dataset(&model, &foreign, Effects::none());
     let noise_mps2 = foreign.acquisition.map_or(0.0, |a| a.acc_noise_mps2);
     let variant = acquisition_variant(&foreign);
-    let truth_of = |r: &RigConfig| {
-        let m = &r.mechanics;
-        Some((m.rope_ea_n, m.c_car_kg_per_s, m.c_sheave_nms_per_rad))
-    };
     let truth = parameter_only(&model, &mut rng);
     if selected("nominal") {
         let report = diagnosed(&model, "nominal", &nominal);
@@ -264,7 +267,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
             truth: "nominal".into(),
             change: Change::default(),
             noise_mps2,
-            calibration_truth: truth_of(&model),
+            calibration_truth: Some(calibration_truth(&model)),
             report,
         });
         let data = foreign_dataset(&truth, &foreign, Effects::none());
@@ -275,7 +278,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
         );
         let report = diagnosed(&model, &name, &data);
         let change = Change::between(&data, &nominal);
-        let calibration_truth = truth_of(&truth);
+        let calibration_truth = Some(calibration_truth(&truth));
         cases.push(Case {
             draw: d,
             variant: variant.clone(),
@@ -405,19 +408,13 @@ fn foreign_rig_that_is_not_the_reference_rig_stays_nominal() {
     let spec = DatasetSpec { m_car_kg: vec![85.0], ..DatasetSpec::rig(&other) };
     let data = make_foreign_dataset_hooked(&other, &spec, &foreign_rig(7), None).expect("foreign dataset");
     let report = diagnosed(&other, "another rig", &data);
-    let c = &report.calibration;
-    let m = &other.mechanics;
-    let errors = [
-        c.rope_ea_n / m.rope_ea_n - 1.0,
-        c.guide_damping_kg_per_s / m.c_car_kg_per_s - 1.0,
-        c.sheave_damping_nms_per_rad / m.c_sheave_nms_per_rad - 1.0,
-    ];
+    let errors = calibration_errors(&report, calibration_truth(&other));
     println!(
         "verdict {:?}, excess {:.2} dB, calibration errors {errors:.4?}",
         report.verdict, report.nominal_excess_db
     );
     assert_eq!(report.verdict, Verdict::Nominal);
-    assert!(errors[0].abs() < 0.02 && errors[1].abs() < 0.15 && errors[2].abs() < 0.10, "{errors:?}");
+    assert!(errors.0.abs() < 0.02 && errors.1.abs() < 0.15 && errors.2.abs() < 0.10, "{errors:?}");
 }
 
 /// An effect on [`another_rig`]: its values that differ from the
@@ -533,7 +530,7 @@ fn foreign_rig_diverting_pulley_is_explained() {
     effects.set(EffectKind::DivertingPulley, &values).unwrap();
     let report = diagnosed(&model, "diverting pulley", &foreign_dataset(&model, &foreign, effects));
     let best = report.ranking.first().expect("a ranking");
-    let inertia = best.parameters.iter().find(|p| p.name == "inertia_kg_m2").map(|p| p.value);
+    let inertia = value(&best.parameters, "inertia_kg_m2");
     println!(
         "verdict {:?}, excess {:.2} dB, first {} (inertia {inertia:?}), shrink {:.0} %",
         report.verdict,
