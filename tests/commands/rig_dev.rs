@@ -99,6 +99,49 @@ fn coulomb_guide_friction_is_explained_with_its_force() {
     assert!((force / 6.0 - 1.0).abs() <= 0.30, "friction {force:.2} N against the README's 6 N on the car");
 }
 
+/// The recorded phase currents' balance, read in place without a model:
+/// in `current_sensor_error` (the drive's transducer signals, gains 0.97,
+/// 1.02, 1.01 and offsets -0.20, +0.10, +0.05 A in the README) every
+/// travel's currents fail to sum to zero, and the balance gives the gains
+/// of phases a and b relative to phase c and the offsets' weighted sum
+/// `g_c sum o_x / g_x` within 5 % of the README's deviations; in the five
+/// other datasets every travel's currents sum to zero within their noise.
+#[test]
+fn the_current_sensor_error_shows_in_the_recorded_currents_balance() {
+    use diagnosis::current_balance::current_balance;
+    let rig = RigConfig::embedded_default().expect("the embedded rig loads");
+    for (name, truth) in DATASETS {
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/rig-dev").join(name);
+        let data =
+            read_dataset(&dir, rig.mechanics.rope_total_length_m).expect("rig-dev follows the measurement format");
+        let balances = current_balance(&data);
+        assert_eq!(balances.len(), 4, "{name}: four travels record three phase currents");
+        for b in &balances {
+            println!(
+                "{name} {}: {:?} {:.4} A, unbalanced {}",
+                b.recording,
+                b.gain_ratio,
+                b.offset_sum_a,
+                b.unbalanced()
+            );
+            if truth != Some("current_sensor_error") {
+                assert!(!b.unbalanced(), "{name}: {b:?}");
+                continue;
+            }
+            let (g, o) = ([0.97, 1.02, 1.01], [-0.20, 0.10, 0.05]);
+            let offset_sum = g[2] * (o[0] / g[0] + o[1] / g[1] + o[2] / g[2]);
+            assert!(b.unbalanced(), "{name}: {b:?}");
+            for (fitted, truth) in [(b.gain_ratio[0], g[0] / g[2]), (b.gain_ratio[1], g[1] / g[2])] {
+                assert!(
+                    (fitted - truth).abs() <= 0.05 * (truth - 1.0).abs(),
+                    "{name}: gain ratio {fitted:.5} against {truth:.5}"
+                );
+            }
+            assert!((b.offset_sum_a - offset_sum).abs() <= 0.05 * offset_sum.abs(), "{name}: {:.4} A", b.offset_sum_a);
+        }
+    }
+}
+
 #[test]
 #[ignore = "six foreign diagnoses, several minutes: run with --ignored"]
 fn rig_dev_datasets_table() {

@@ -19,7 +19,9 @@
 //! 4. [`attribution`]: every effect fitted and cross-validated
 //!    ([`attribute`]); an effect that the calibration can absorb on the
 //!    calibration re-done under its hypothesis ([`hypotheses`]); under
-//!    another drive, the direct-axis current's lines ([`electrical_lines`]).
+//!    another drive, the direct-axis current's lines ([`electrical_lines`]);
+//!    in every travel, whether the recorded phase currents sum to zero
+//!    ([`current_balance`]: a current-measurement error without a model).
 //! 5. [`naming`]: a candidate is named only when it shrinks the held-out
 //!    gap beyond its scatter and its fitted strength leaves no effect by
 //!    more than its uncertainty.
@@ -45,6 +47,7 @@ pub mod attribute;
 pub mod attribution;
 pub mod calibrate;
 pub mod compare;
+pub mod current_balance;
 pub mod drive_finding;
 pub mod drive_law;
 pub mod driven;
@@ -142,6 +145,7 @@ pub fn diagnose(
         attribute_mechanics(&model, &calibration, dataset, &compared, drive.drive, options, progress);
     let electrical_lines = electrical_lines_of(&mut compared, drive.drive, options);
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
+    let current_balance = current_balance::current_balance(dataset);
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
     let verdict_note = verdict::form_error_note(verdict, mechanical_ranking.first(), options);
     // The mechanics' candidate the verdict rests on: a named one, also when
@@ -179,6 +183,7 @@ pub fn diagnose(
         noise_gap_db,
         persistent_cell,
         electrical_lines,
+        current_balance,
         car_acceleration_views,
         calibration,
         location,

@@ -347,6 +347,9 @@ fn overview(s: &mut String, r: &GapReport) {
     if let Some(p) = &r.persistent_cell {
         let _ = writeln!(s, "Persistent cell of the nominal model: {}.\n", persistent_text(p));
     }
+    if !r.current_balance.is_empty() {
+        let _ = writeln!(s, "Phase currents' balance: {}.\n", crate::current_balance::balance_text(&r.current_balance));
+    }
     if let Some(e) = &r.electrical_lines {
         let _ = writeln!(s, "Direct-axis current's lines: {}.\n", electrical_lines_text(e));
         for (stem, reason) in &e.not_measured {

@@ -7,11 +7,11 @@ use crate::attribute::Candidate;
 use crate::calibrate::Calibration;
 use crate::compare::CarAccelerationViews;
 use crate::drive_finding::{DriveAssumption, DriveFinding, DriveModel};
-use crate::electrical_lines;
 use crate::identify_dataset::LeftOut;
 use crate::locate::Location;
 use crate::measure::{CellGap, GapValue, PersistentCell};
 use crate::prepare::RigSpeedLoop;
+use crate::{current_balance, electrical_lines};
 #[cfg(doc)]
 use crate::{drive_law, driven, measure, naming};
 use plant::effects::EffectKind;
@@ -138,6 +138,9 @@ pub struct GapReport {
     /// ([`electrical_lines`]); a line present makes the verdict other than
     /// `nominal`.
     pub electrical_lines: Option<electrical_lines::ElectricalLines>,
+    /// Each travel's phase-current balance ([`current_balance`]): reported,
+    /// not yet part of the verdict.
+    pub current_balance: Vec<current_balance::RecordingBalance>,
     /// The car acceleration of the recording with the largest nominal gap,
     /// measured and from the models the diagnosis compared it with (for
     /// spectrograms; not in `gap.json`).
