@@ -176,7 +176,7 @@ pub fn balance_text(balances: &[RecordingBalance]) -> String {
         .iter()
         .map(|b| {
             format!(
-                "`{}`: g_a/g_c {:.4} +- {:.4}, g_b/g_c {:.4} +- {:.4}, offset sum {:.4} +- {:.4} A (sum {:.3} A RMS, {:.3} A left)",
+                "`{}`: g_a/g_c {:.4} +- {:.1e}, g_b/g_c {:.4} +- {:.1e}, offset sum {:.4} +- {:.1e} A (sum {:.3} A RMS, {:.3} A left)",
                 b.recording,
                 b.gain_ratio[0],
                 b.standard_errors[0],
@@ -191,7 +191,8 @@ pub fn balance_text(balances: &[RecordingBalance]) -> String {
         .collect();
     format!(
         "the recorded phase currents do not sum to zero in {} of {} travels: a current-measurement error \
-         (the drive's transducers or the rig's clamps; {}-sigma rule): {}",
+         (the drive's transducers or the rig's clamps; {} standard errors and above the recording's noise; \
+         not yet weighed by the verdict): {}",
         unbalanced.len(),
         balances.len(),
         UNBALANCED_SIGMAS,
