@@ -17,6 +17,7 @@
 //! clamps) the balance does not tell; the offsets' vector in the
 //! machine's plane (the part that makes torque) is not in it either.
 
+use nalgebra::{Matrix3, Vector3};
 use recording::{Recording, I_A, I_B, I_C};
 
 /// Standard errors by which a fitted value must leave its balanced value
@@ -105,38 +106,26 @@ pub fn recording_balance(stem: &str, recording: &Recording) -> Option<RecordingB
     .filter(|b| b.gain_ratio.iter().chain(&b.standard_errors).all(|v| v.is_finite()))
 }
 
-/// Least squares of `rows` (`[row; 3]`, `y`): the solution and the inverse
-/// of the normal matrix, `None` when the normal matrix is singular.
+/// Least squares of `rows` (`[row; 3]`, `y`) by the normal equations: the
+/// solution and the inverse of the normal matrix, `None` when the normal
+/// matrix's determinant is not above 1e-12 of the product of its diagonal
+/// (the currents do not constrain the fit).
 fn least_squares(rows: impl Iterator<Item = ([f64; 3], f64)>) -> Option<([f64; 3], [[f64; 3]; 3])> {
-    let mut normal = [[0.0; 3]; 3];
-    let mut right = [0.0; 3];
+    let mut normal = Matrix3::zeros();
+    let mut right = Vector3::zeros();
     for (row, y) in rows {
-        for i in 0..3 {
-            right[i] += row[i] * y;
-            for j in 0..3 {
-                normal[i][j] += row[i] * row[j];
-            }
-        }
+        let row = Vector3::from(row);
+        normal += row * row.transpose();
+        right += row * y;
     }
-    let inverse = inverse_3x3(&normal)?;
-    let x = std::array::from_fn(|i| (0..3).map(|j| inverse[i][j] * right[j]).sum());
-    Some((x, inverse))
-}
-
-/// Inverse of a symmetric 3 x 3 matrix by its cofactors, `None` when its
-/// determinant is not above 1e-12 of the product of its diagonal.
-fn inverse_3x3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let cof = |i: usize, j: usize| {
-        let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
-        let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
-        m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0]
-    };
-    let det = (0..3).map(|j| m[0][j] * cof(0, j)).sum::<f64>();
-    let scale = m[0][0] * m[1][1] * m[2][2];
+    let scale = normal.diagonal().product();
+    let det = normal.determinant();
     if !(det.is_finite() && scale > 0.0 && det > 1e-12 * scale) {
         return None;
     }
-    Some(std::array::from_fn(|i| std::array::from_fn(|j| cof(j, i) / det)))
+    let inverse = normal.try_inverse()?;
+    let x = inverse * right;
+    Some((x.into(), std::array::from_fn(|i| std::array::from_fn(|j| inverse[(i, j)]))))
 }
 
 /// Factor by which correlated samples inflate a mean's variance, from the
