@@ -20,6 +20,7 @@ use std::time::Instant;
 
 use diagnosis::{diagnose, GapOptions, GapReport, Verdict};
 use recording::read::read_dataset;
+use recording::Recording;
 use rig_config::RigConfig;
 
 /// The datasets and what the README says a correct diagnosis finds (the
@@ -33,11 +34,17 @@ const DATASETS: [(&str, Option<&str>); 6] = [
     ("diverting_pulley", Some("diverting_pulley")),
 ];
 
-fn diagnosed(name: &str) -> (GapReport, f64) {
+/// The reference rig and the dataset `name` of `../shared/rig-dev`, read in place.
+fn read(name: &str) -> (RigConfig, Vec<(String, Recording)>) {
     let rig = RigConfig::embedded_default().expect("the embedded rig loads");
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/rig-dev").join(name);
     assert!(dir.is_dir(), "{}: the rig-dev datasets are expected beside the repository", dir.display());
     let data = read_dataset(&dir, rig.mechanics.rope_total_length_m).expect("rig-dev follows the measurement format");
+    (rig, data)
+}
+
+fn diagnosed(name: &str) -> (GapReport, f64) {
+    let (rig, data) = read(name);
     let started = Instant::now();
     let report = diagnose(&rig, name, &data, &GapOptions::default(), &|_, _, _| {}).expect("a verdict");
     (report, started.elapsed().as_secs_f64())
@@ -109,12 +116,8 @@ fn coulomb_guide_friction_is_explained_with_its_force() {
 #[test]
 fn the_current_sensor_error_shows_in_the_recorded_currents_balance() {
     use diagnosis::current_balance::current_balance;
-    let rig = RigConfig::embedded_default().expect("the embedded rig loads");
     for (name, truth) in DATASETS {
-        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/rig-dev").join(name);
-        let data =
-            read_dataset(&dir, rig.mechanics.rope_total_length_m).expect("rig-dev follows the measurement format");
-        let balances = current_balance(&data);
+        let balances = current_balance(&read(name).1);
         assert_eq!(balances.len(), 4, "{name}: four travels record three phase currents");
         for b in &balances {
             println!(
