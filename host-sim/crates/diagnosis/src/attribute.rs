@@ -64,8 +64,28 @@ pub struct Lab<'a> {
     /// absorb ([`super::hypotheses`]): such an effect is fitted on its
     /// re-calibrated rig, over the grid its calibration gave.
     pub refits: &'a [Refit],
+    /// Parameters measured without the model (the recorded currents'
+    /// balance, [`crate::current_balance`]): held at their value in every
+    /// fit of their effect instead of fitted to the mechanics.
+    pub known: &'a [KnownParameter],
     /// Called after every batch of runs with (runs done, runs planned).
     pub progress: &'a (dyn Fn(usize, usize) + Sync),
+}
+
+/// A parameter of a linear effect measured without the model: every fit
+/// holds it at its value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KnownParameter {
+    /// The effect.
+    pub effect: EffectKind,
+    /// The parameter's index in the effect's declaration.
+    pub index: usize,
+    /// Its measured value (the parameter's unit).
+    pub value: f64,
+    /// Its standard error (same unit).
+    pub uncertainty: f64,
+    /// What measured it, in words.
+    pub source: &'static str,
 }
 
 /// One fitted parameter with its spread across the folds.
@@ -79,8 +99,14 @@ pub struct FittedParameter {
     pub unit: &'static str,
     /// Value fitted on all recordings.
     pub value: f64,
-    /// Jackknife standard error over the folds (same unit).
+    /// Jackknife standard error over the folds (same unit), or the
+    /// measurement's standard error for a parameter measured without the
+    /// model.
     pub uncertainty: f64,
+    /// What measured the parameter when it was not fitted to the
+    /// mechanics ([`KnownParameter`]); `None`: fitted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub measured_by: Option<&'static str>,
 }
 
 /// An effect (or a pair) after fitting and cross-validation.
@@ -502,6 +528,23 @@ impl Family {
             .collect();
     }
 
+    /// Per coefficient, its value when the parameter it scales is known
+    /// ([`Lab::known`]): the known value over the probe's; `None`: fitted.
+    fn held_coefficients(&self, known: &[KnownParameter]) -> Vec<Option<f64>> {
+        let mut out = Vec::with_capacity(self.coefficient_count());
+        for l in &self.linear {
+            match l.kind.fit() {
+                Declared::Linear(strengths) if l.probes.len() == strengths.len() => {
+                    out.extend(strengths.iter().map(|&(i, probe)| {
+                        known.iter().find(|k| k.effect == l.kind && k.index == i).map(|k| k.value / probe)
+                    }));
+                }
+                _ => out.extend(std::iter::repeat_n(None, l.probes.len())),
+            }
+        }
+        out
+    }
+
     fn clamp(&self, c: &[f64]) -> Vec<f64> {
         let mut out = Vec::with_capacity(c.len());
         let mut i = 0;
@@ -530,18 +573,25 @@ impl Family {
         sum / set.len().max(1) as f64
     }
 
-    /// Best fit on `set`.
+    /// Best fit on `set`, the known coefficients held.
     fn fit(&self, lab: &Lab, set: &[usize]) -> Fit {
-        let d = self.coefficient_count();
-        let mut best = Fit { base: 0, coefficients: vec![0.0; d], excess_db: f64::INFINITY };
+        let held = self.held_coefficients(lab.known);
+        // The full coefficient vector from the free ones.
+        let full = |free: &[f64]| -> Vec<f64> {
+            let mut free = free.iter();
+            held.iter().map(|h| h.unwrap_or_else(|| free.next().copied().unwrap_or(0.0))).collect()
+        };
+        let score = |b: usize, free: &[f64]| self.score(lab, b, &full(free), set);
+        let d = held.iter().filter(|h| h.is_none()).count();
+        let mut best = Fit { base: 0, coefficients: self.clamp(&full(&[])), excess_db: f64::INFINITY };
         for b in 0..self.bases.len() {
             let (c, s) = if d == 0 {
-                (Vec::new(), self.score(lab, b, &[], set))
+                (Vec::new(), score(b, &[]))
             } else {
                 let starts = starting_points(d);
                 let (mut x0, mut s0) = (vec![0.0; d], f64::INFINITY);
                 for x in starts {
-                    let s = self.score(lab, b, &x, set);
+                    let s = score(b, &x);
                     if s < s0 {
                         (x0, s0) = (x, s);
                     }
@@ -554,7 +604,7 @@ impl Family {
                             for v in [-4.0, -2.5, -1.5, -0.75, -0.25, 0.0, 0.25, 0.75, 1.5, 2.5, 4.0] {
                                 let mut x = x0.clone();
                                 x[i] = v;
-                                let s = self.score(lab, b, &x, set);
+                                let s = score(b, &x);
                                 if s < s0 {
                                     (x0, s0) = (x, s);
                                 }
@@ -562,11 +612,11 @@ impl Family {
                         }
                     }
                 }
-                let (x1, _) = nelder_mead(|x| self.score(lab, b, x, set), &x0, 0.5, 60 * d + 40);
-                nelder_mead(|x| self.score(lab, b, x, set), &x1, 0.2, 60 * d + 40)
+                let (x1, _) = nelder_mead(|x| score(b, x), &x0, 0.5, 60 * d + 40);
+                nelder_mead(|x| score(b, x), &x1, 0.2, 60 * d + 40)
             };
             if s < best.excess_db {
-                best = Fit { base: b, coefficients: self.clamp(&c), excess_db: s };
+                best = Fit { base: b, coefficients: self.clamp(&full(&c)), excess_db: s };
             }
         }
         best
@@ -586,8 +636,11 @@ impl Family {
         out
     }
 
-    fn fitted_parameters(&self) -> usize {
-        self.kinds.iter().map(|k| fitted_count(*k)).sum()
+    /// The parameters fitted to the mechanics: the declared fitted ones
+    /// but those held known.
+    fn fitted_parameters(&self, known: &[KnownParameter]) -> usize {
+        let held = self.held_coefficients(known).iter().filter(|h| h.is_some()).count();
+        self.kinds.iter().map(|k| fitted_count(*k)).sum::<usize>() - held
     }
 
     /// The fitted grid parameters (`effect.parameter`) of base `b` that
@@ -753,8 +806,12 @@ pub(crate) fn jackknife_error(per_fold: &[f64]) -> f64 {
 
 /// Step: the fitted parameters of `params` (fitted on all recordings), each
 /// with its jackknife error over `fold_params` (the same effects fitted per
-/// fold).
-fn fitted_parameter_list(params: &[(EffectKind, Vec<f64>)], fold_params: &[GridPoint]) -> Vec<FittedParameter> {
+/// fold), or, when `known`, the measurement's error and source.
+fn fitted_parameter_list(
+    params: &[(EffectKind, Vec<f64>)],
+    fold_params: &[GridPoint],
+    known: &[KnownParameter],
+) -> Vec<FittedParameter> {
     let mut parameters = Vec::new();
     for (e, (kind, values)) in params.iter().enumerate() {
         for (j, spec) in kind.parameters().iter().enumerate() {
@@ -762,12 +819,14 @@ fn fitted_parameter_list(params: &[(EffectKind, Vec<f64>)], fold_params: &[GridP
                 continue;
             }
             let per_fold: Vec<f64> = fold_params.iter().map(|p| p[e].1[j]).collect();
+            let measured = known.iter().find(|k| k.effect == *kind && k.index == j);
             parameters.push(FittedParameter {
                 effect: kind.name(),
                 name: spec.name,
                 unit: spec.unit,
                 value: values[j],
-                uncertainty: jackknife_error(&per_fold),
+                uncertainty: measured.map_or_else(|| jackknife_error(&per_fold), |k| k.uncertainty),
+                measured_by: measured.map(|k| k.source),
             });
         }
     }
@@ -796,7 +855,7 @@ fn evaluate(lab: &Lab, family: &Family, nominal: &[f64]) -> Candidate {
     let s_all = fit_all.excess_db;
     let params = family.parameters(fit_all.base, &fit_all.coefficients);
     let effects = effects_of(&params).unwrap_or_default();
-    let parameters = fitted_parameter_list(&params, &fold_params);
+    let parameters = fitted_parameter_list(&params, &fold_params, lab.known);
     let held: Vec<usize> = (0..lab.targets.len()).filter(|&t| held_after[t].is_finite()).collect();
     let mean_of = |v: &dyn Fn(usize) -> f64| held.iter().map(|&t| v(t)).sum::<f64>() / held.len().max(1) as f64;
     let (before, after) = if held.is_empty() {
@@ -804,7 +863,7 @@ fn evaluate(lab: &Lab, family: &Family, nominal: &[f64]) -> Candidate {
     } else {
         (mean_of(&|t| nominal[t]), mean_of(&|t| held_after[t]))
     };
-    let fitted = family.fitted_parameters();
+    let fitted = family.fitted_parameters(lab.known);
     Candidate {
         held_out_improvements_db: held.iter().map(|&t| nominal[t] - held_after[t]).collect(),
         search_edge: family.search_edge(fit_all.base),
@@ -1412,7 +1471,7 @@ mod tests {
             [EffectKind::DeadTime, EffectKind::EncoderError]
         );
         assert_eq!(f.coefficient_count(), 3);
-        assert_eq!(f.fitted_parameters(), 3);
+        assert_eq!(f.fitted_parameters(&[]), 3);
         // Grid x grid: the combinations with their own runs, from `first_model` on.
         let combos =
             vec![vec![(EffectKind::RopeDiscretization, vec![2.0])], vec![(EffectKind::RopeDiscretization, vec![4.0])]];
@@ -1424,6 +1483,35 @@ mod tests {
             [(combos[0].clone(), 33), (combos[1].clone(), 34)]
         );
         assert!(f.linear.is_empty());
+    }
+
+    #[test]
+    fn known_parameters_hold_their_coefficients_and_are_not_counted_as_fitted() {
+        let f = linear_family(EffectKind::CurrentSensorError, 4);
+        assert_eq!(f.held_coefficients(&[]), [None; 4]);
+        let known = [KnownParameter {
+            effect: EffectKind::CurrentSensorError,
+            index: 2,
+            value: -0.04,
+            uncertainty: 1e-4,
+            source: "a measurement",
+        }];
+        // gain_error_a's probe is 0.01: the coefficient that gives -0.04.
+        let held = f.held_coefficients(&known);
+        assert_eq!(held.iter().filter(|h| h.is_some()).count(), 1);
+        assert!((held[2].expect("held") + 4.0).abs() < 1e-12, "{held:?}");
+        assert_eq!(f.fitted_parameters(&known), 3);
+        // Another effect's known parameter does not touch it.
+        let other = [KnownParameter { effect: EffectKind::EncoderError, ..known[0] }];
+        assert_eq!(f.held_coefficients(&other), [None; 4]);
+        let listed = fitted_parameter_list(
+            &[(EffectKind::CurrentSensorError, vec![0.1, 0.0, -0.04, 0.0])],
+            &vec![vec![(EffectKind::CurrentSensorError, vec![0.2, 0.0, -0.04, 0.0])]; 2],
+            &known,
+        );
+        assert_eq!(listed[2].measured_by, Some("a measurement"));
+        assert_eq!(listed[2].uncertainty, 1e-4);
+        assert_eq!(listed[0].measured_by, None);
     }
 
     #[test]
@@ -1450,7 +1538,7 @@ mod tests {
         let params = vec![(EffectKind::DeadTime, vec![2.0e-6, 0.3])];
         let folds =
             vec![vec![(EffectKind::DeadTime, vec![1.0e-6, 0.3])], vec![(EffectKind::DeadTime, vec![3.0e-6, 0.3])]];
-        let list = fitted_parameter_list(&params, &folds);
+        let list = fitted_parameter_list(&params, &folds, &[]);
         assert_eq!(list.len(), 1);
         assert_eq!((list[0].effect, list[0].name, list[0].unit), ("dead_time", "dead_time_s", "s"));
         assert_eq!(list[0].value, 2.0e-6);

@@ -4,9 +4,10 @@
 //! ([`crate::naming`]); under another drive, the direct-axis current's
 //! lines attributed on their own ([`crate::electrical_lines`]).
 
-use crate::attribute::{attribute, Candidate, Lab};
+use crate::attribute::{attribute, Candidate, KnownParameter, Lab};
 use crate::calibrate::Calibration;
 use crate::compare::Compared;
+use crate::current_balance::{measured_gain_errors, RecordingBalance};
 use crate::drive_finding::DriveModel;
 use crate::verdict::GapOptions;
 use crate::{driven, electrical_lines, hypotheses, naming};
@@ -29,14 +30,41 @@ fn not_fitted_note(not_fitted: &[EffectKind]) -> Option<String> {
     })
 }
 
+/// The parameters the recorded currents' balance measures without the
+/// model: `current_sensor_error`'s gain errors of phases a and b relative
+/// to phase c (its declaration's indices 2 and 3), where their values lie
+/// within the effect's declared range.
+fn balance_parameters(balances: &[RecordingBalance]) -> Vec<KnownParameter> {
+    let kind = EffectKind::CurrentSensorError;
+    let Some(gains) = measured_gain_errors(balances) else { return Vec::new() };
+    let specs = kind.parameters();
+    ["gain_error_a", "gain_error_b"]
+        .iter()
+        .zip(gains)
+        .filter_map(|(name, (value, uncertainty))| {
+            let index = specs.iter().position(|s| s.name == *name)?;
+            (specs[index].min..=specs[index].max).contains(&value).then_some(KnownParameter {
+                effect: kind,
+                index,
+                value,
+                uncertainty,
+                source: "the recorded currents' balance",
+            })
+        })
+        .collect()
+}
+
 /// Steps 4 and 5 on the mechanics: every effect the counterpart holds
 /// fitted (the calibration re-done under the hypotheses that it can
-/// absorb), cross-validated and named; with the note on what is not
-/// fitted and the runs planned per recording.
+/// absorb; what the currents' `balances` measure held), cross-validated
+/// and named; with the note on what is not fitted and the runs planned
+/// per recording.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn attribute_mechanics(
     model: &RigConfig,
     calibration: &Calibration,
     dataset: &[(String, Recording)],
+    balances: &[RecordingBalance],
     compared: &Compared,
     drive: DriveModel,
     options: &GapOptions,
@@ -55,7 +83,9 @@ pub(crate) fn attribute_mechanics(
     // absorb (step 4a).
     let refits: Vec<hypotheses::Refit> =
         kinds.iter().filter_map(|&k| hypotheses::refit(k, model, calibration, dataset)).collect();
+    let known = balance_parameters(balances);
     let lab = Lab {
+        known: &known,
         refits: &refits,
         rig: model,
         targets: &compared.targets,

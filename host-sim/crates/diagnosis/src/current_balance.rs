@@ -81,6 +81,9 @@ pub fn recording_balance(stem: &str, recording: &Recording) -> Option<RecordingB
     let column = |name| recording.column(name).map(|c| c.values.as_slice());
     let (s_a, s_b, s_c) = (column(I_A)?, column(I_B)?, column(I_C)?);
     let n = s_a.len().min(s_b.len()).min(s_c.len());
+    if derived_phase(&s_a[..n], &s_b[..n], &s_c[..n]) {
+        return None;
+    }
     let rows = |k: usize| ([s_a[k], s_b[k], -1.0], -s_c[k]);
     let (x, inverse) = least_squares((0..n).map(rows))?;
     let residual: Vec<f64> = (0..n)
@@ -104,6 +107,54 @@ pub fn recording_balance(stem: &str, recording: &Recording) -> Option<RecordingB
         residual_rms_a: rms(residual.iter().copied()),
     })
     .filter(|b| b.gain_ratio.iter().chain(&b.standard_errors).all(|v| v.is_finite()))
+}
+
+/// Whether the third phase current is the other two's negative sum (an
+/// acquisition that records two phases and derives the third): the sum is
+/// zero to the float's rounding (below 1e-9 of the currents' RMS), so the
+/// balance says nothing about the transducers.
+fn derived_phase(s_a: &[f64], s_b: &[f64], s_c: &[f64]) -> bool {
+    let sum = rms(s_a.iter().zip(s_b).zip(s_c).map(|((a, b), c)| a + b + c));
+    let currents = rms(s_a.iter().chain(s_b).chain(s_c).copied());
+    sum <= DERIVED_PHASE_FRACTION * currents
+}
+
+/// The currents' sum (RMS) below which, as a fraction of the currents'
+/// RMS, the third phase is taken as derived from the other two: float
+/// rounding of a sum of three, far below any transducer's resolution.
+const DERIVED_PHASE_FRACTION: f64 = 1e-9;
+
+/// The gain errors of phases a and b relative to phase c that the
+/// balances of a dataset's travels measure together (`g_x / g_c - 1`, as
+/// `plant::effects::CurrentSensorError`'s `gain_error_a`, `gain_error_b`),
+/// each with its standard error: the inverse-variance mean over the
+/// travels, its error the larger of the weighted one and the travels'
+/// scatter (the standard error of their plain mean). `None` without a
+/// balance.
+pub fn measured_gain_errors(balances: &[RecordingBalance]) -> Option<[(f64, f64); 2]> {
+    if balances.is_empty() {
+        return None;
+    }
+    let combined = |i: usize| {
+        let weights: Vec<f64> = balances.iter().map(|b| b.standard_errors[i].max(f64::MIN_POSITIVE).powi(-2)).collect();
+        let total: f64 = weights.iter().sum();
+        let mean = balances.iter().zip(&weights).map(|(b, w)| w * b.gain_ratio[i]).sum::<f64>() / total;
+        let n = balances.len() as f64;
+        let plain = balances.iter().map(|b| b.gain_ratio[i]).sum::<f64>() / n;
+        let scatter = if balances.len() >= 2 {
+            (balances.iter().map(|b| (b.gain_ratio[i] - plain).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
+        } else {
+            0.0
+        };
+        (mean - 1.0, total.sqrt().recip().max(scatter))
+    };
+    Some([combined(0), combined(1)]).filter(|g| g.iter().all(|(v, e)| v.is_finite() && e.is_finite()))
+}
+
+/// Whether the dataset's currents are measured with an error: more than
+/// half of its balanced travels are unbalanced ([`RecordingBalance::unbalanced`]).
+pub fn currents_unbalanced(balances: &[RecordingBalance]) -> bool {
+    2 * balances.iter().filter(|b| b.unbalanced()).count() > balances.len()
 }
 
 /// Least squares of `rows` (`[row; 3]`, `y`) by the normal equations: the
@@ -180,8 +231,7 @@ pub fn balance_text(balances: &[RecordingBalance]) -> String {
         .collect();
     format!(
         "the recorded phase currents do not sum to zero in {} of {} travels: a current-measurement error \
-         (the drive's transducers or the rig's clamps; {} standard errors and above the recording's noise; \
-         not yet weighed by the verdict): {}",
+         (the drive's transducers or the rig's clamps; {} standard errors and above the recording's noise): {}",
         unbalanced.len(),
         balances.len(),
         UNBALANCED_SIGMAS,
@@ -260,5 +310,26 @@ mod tests {
         let mut r = recorded([1.0; 3], [0.0; 3], 0.01);
         r.columns.retain(|c| c.name != I_C);
         assert!(recording_balance("two phases", &r).is_none());
+    }
+
+    #[test]
+    fn a_third_phase_derived_from_the_other_two_is_no_balance() {
+        let mut r = recorded([0.97, 1.02, 1.0], [0.1, 0.0, 0.0], 0.01);
+        let derived: Vec<f64> = r.columns[0].values.iter().zip(&r.columns[1].values).map(|(a, b)| -(a + b)).collect();
+        r.columns[2].values = derived;
+        assert!(recording_balance("derived", &r).is_none());
+    }
+
+    #[test]
+    fn the_dataset_gain_errors_combine_the_travels() {
+        let (g, o) = ([0.97, 1.02, 1.01], [-0.20, 0.10, 0.05]);
+        let balances: Vec<RecordingBalance> =
+            [0.02, 0.03].iter().map(|&noise| recording_balance("t", &recorded(g, o, noise)).expect("a fit")).collect();
+        let [(ga, ea), (gb, eb)] = measured_gain_errors(&balances).expect("measured");
+        assert!((ga - (g[0] / g[2] - 1.0)).abs() < 5.0 * ea.max(1e-4), "{ga} +- {ea}");
+        assert!((gb - (g[1] / g[2] - 1.0)).abs() < 5.0 * eb.max(1e-4), "{gb} +- {eb}");
+        assert!(currents_unbalanced(&balances));
+        assert!(measured_gain_errors(&[]).is_none());
+        assert!(!currents_unbalanced(&[]));
     }
 }

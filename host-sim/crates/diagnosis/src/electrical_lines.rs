@@ -428,6 +428,7 @@ fn model_parameters(model: Model, x: &[f64]) -> (Vec<FittedParameter>, Effects) 
         unit,
         value,
         uncertainty: f64::NAN,
+        measured_by: None,
     };
     if matches!(model, Model::Transducers | Model::Both) {
         let v = transducer_parameters(x);

@@ -139,15 +139,20 @@ pub fn diagnose(
     let location = locate(&nominal_cells, &recordings, &compared.bands, &compared.targets, &compared.measured);
 
     let persistent_cell = persistent_cell(&nominal_cells, &compared.bands);
+    // Recorded currents that do not sum to zero are measured with an
+    // error, however small the gap it leaves: not the nominal rig.
+    let current_balance = current_balance::current_balance(dataset);
+    let unbalanced = current_balance::currents_unbalanced(&current_balance);
     let is_nominal = nominal_excess_db <= options.nominal_excess_db
-        && persistent_cell.as_ref().is_none_or(|p| p.rms_beyond_db <= options.persistent_cell_db);
+        && persistent_cell.as_ref().is_none_or(|p| p.rms_beyond_db <= options.persistent_cell_db)
+        && !unbalanced;
     let (mechanical_ranking, attribution_note, planned) =
-        attribute_mechanics(&model, &calibration, dataset, &compared, drive.drive, options, progress);
+        attribute_mechanics(&model, &calibration, dataset, &current_balance, &compared, drive.drive, options, progress);
     let electrical_lines = electrical_lines_of(&mut compared, drive.drive, options);
     let electrical = electrical_lines.as_ref().filter(|e| e.present());
-    let current_balance = current_balance::current_balance(dataset);
     let verdict = verdict_of(is_nominal, mechanical_ranking.first(), electrical, options);
-    let verdict_note = verdict::form_error_note(verdict, mechanical_ranking.first(), options);
+    let verdict_note = verdict::form_error_note(verdict, mechanical_ranking.first(), options)
+        .or_else(|| verdict::unbalanced_note(verdict, unbalanced));
     // The mechanics' candidate the verdict rests on: a named one, also when
     // it explains a gap within the nominal threshold (the verdict says so),
     // not when what it removes of such a gap is the model's form error.

@@ -131,7 +131,14 @@ mod tests {
     fn candidate(name: &'static str, value: f64, uncertainty: f64, improvements: &[f64]) -> Candidate {
         Candidate {
             name: name.to_string(),
-            parameters: vec![FittedParameter { effect: name, name: "friction_n", unit: "N", value, uncertainty }],
+            parameters: vec![FittedParameter {
+                effect: name,
+                name: "friction_n",
+                unit: "N",
+                value,
+                uncertainty,
+                measured_by: None,
+            }],
             held_out_improvements_db: improvements.to_vec(),
             ..Candidate::default()
         }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Context, Result};
 
-use super::attribute::Candidate;
+use super::attribute::{Candidate, FittedParameter};
 use super::calibrate::Calibration;
 use super::locate::Location;
 use super::measure::CellGap;
@@ -179,8 +179,7 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
         "score_db",
     ])?;
     for (i, c) in report.ranking.iter().enumerate() {
-        let params: Vec<String> =
-            c.parameters.iter().map(|p| format!("{}={:.4e}+-{:.1e}", p.name, p.value, p.uncertainty)).collect();
+        let params: Vec<String> = c.parameters.iter().map(|p| parameter_text(p, 4)).collect();
         w.write_record([
             (i + 1).to_string(),
             c.name.clone(),
@@ -365,14 +364,20 @@ fn explaining_effect(s: &mut String, r: &GapReport) {
         let _ = writeln!(
             s,
             "`{}` shrinks the held-out gap from {:.2} dB to {:.2} dB ({:.0} %). Fitted parameters (all recordings; \
-             uncertainty: jackknife over the folds):\n",
+             uncertainty: jackknife over the folds, or the measurement's where a parameter was measured without \
+             the model):\n",
             best.name,
             best.held_out_gap_before_db,
             best.held_out_gap_after_db,
             100.0 * best.held_out_shrink
         );
         for p in &best.parameters {
-            let _ = writeln!(s, "- `{}.{}` = {:.4e} +- {:.1e} {}", p.effect, p.name, p.value, p.uncertainty, p.unit);
+            let source = p.measured_by.map(|m| format!(" (measured by {m}, not fitted)")).unwrap_or_default();
+            let _ = writeln!(
+                s,
+                "- `{}.{}` = {:.4e} +- {:.1e} {}{source}",
+                p.effect, p.name, p.value, p.uncertainty, p.unit
+            );
         }
         s.push('\n');
         if let Some(r) = &best.refit {
@@ -452,6 +457,14 @@ fn calibration_section(s: &mut String, c: &Calibration) {
 }
 
 /// Section `Ranking (step 4)`: one table row per candidate, best first.
+/// A parameter as `name=value+-uncertainty` with `digits` decimals of
+/// the mantissa, followed by `(measured)` when it was measured without
+/// the model.
+fn parameter_text(p: &FittedParameter, digits: usize) -> String {
+    let measured = if p.measured_by.is_some() { " (measured)" } else { "" };
+    format!("{}={:.digits$e}+-{:.1e}{measured}", p.name, p.value, p.uncertainty)
+}
+
 fn ranking_section(s: &mut String, ranking: &[Candidate]) {
     let _ = writeln!(s, "## Ranking (step 4)\n");
     let _ = writeln!(
@@ -459,8 +472,7 @@ fn ranking_section(s: &mut String, ranking: &[Candidate]) {
         "| rank | effect | parameters | training before/after (dB) | held-out before/after (dB) | shrink | score (dB) | named |\n|---|---|---|---|---|---|---|---|"
     );
     for (i, c) in ranking.iter().enumerate() {
-        let params: Vec<String> =
-            c.parameters.iter().map(|p| format!("{}={:.3e}+-{:.1e}", p.name, p.value, p.uncertainty)).collect();
+        let params: Vec<String> = c.parameters.iter().map(|p| parameter_text(p, 3)).collect();
         let _ = writeln!(
             s,
             "| {} | {} | {} | {:.2}/{:.2} | {:.2}/{:.2} | {:.0} % | {:.2} | {} |",
@@ -625,8 +637,22 @@ mod tests {
         let c = Candidate {
             name: "a + b".to_string(),
             parameters: vec![
-                FittedParameter { effect: "a", name: "p", unit: "s", value: 0.00125, uncertainty: 2.5e-4 },
-                FittedParameter { effect: "b", name: "q", unit: "N", value: 40.0, uncertainty: f64::NAN },
+                FittedParameter {
+                    effect: "a",
+                    name: "p",
+                    unit: "s",
+                    value: 0.00125,
+                    uncertainty: 2.5e-4,
+                    measured_by: None,
+                },
+                FittedParameter {
+                    effect: "b",
+                    name: "q",
+                    unit: "N",
+                    value: 40.0,
+                    uncertainty: f64::NAN,
+                    measured_by: Some("the currents' balance"),
+                },
             ],
             fitted_parameters: 2,
             training_gap_before_db: 1.0,
@@ -645,7 +671,7 @@ mod tests {
         assert_eq!(rows.len(), 2);
         assert_eq!(
             rows[0],
-            "| 1 | a + b | p=1.250e-3+-2.5e-4, q=4.000e1+-NaN | 1.00/0.50 | 1.20/0.30 | 75 % | 0.34 | yes |"
+            "| 1 | a + b | p=1.250e-3+-2.5e-4, q=4.000e1+-NaN (measured) | 1.00/0.50 | 1.20/0.30 | 75 % | 0.34 | yes |"
         );
         assert!(rows[1].starts_with("| 2 | a + b |"));
     }

@@ -121,7 +121,10 @@ pub struct GapReport {
     /// The explaining effect (or pair) when `explained`.
     pub explained_by: Option<String>,
     /// When the verdict is `nominal` although a named candidate shrinks
-    /// the held-out gap enough: why, in words ([`SUB_NOMINAL_REMOVAL_FRACTION`]).
+    /// the held-out gap enough: why, in words ([`SUB_NOMINAL_REMOVAL_FRACTION`]);
+    /// when it is not `nominal` because the recorded currents do not sum
+    /// to zero ([`crate::current_balance`]) and no effect explains the
+    /// gap: that.
     pub verdict_note: Option<String>,
     /// The gap measure, in words, with its unit.
     pub gap_measure: String,
@@ -285,6 +288,19 @@ pub(crate) fn form_error_note(verdict: Verdict, best: Option<&Candidate>, option
             removed_db(c),
             100.0 * c.held_out_shrink
         )
+    })
+}
+
+/// Why the verdict is not `nominal` when the recorded phase currents do
+/// not sum to zero (`unbalanced`) and the verdict is `unexplained`, in
+/// words; `None` otherwise.
+pub(crate) fn unbalanced_note(verdict: Verdict, unbalanced: bool) -> Option<String> {
+    (unbalanced && verdict == Verdict::Unexplained).then(|| {
+        "the recorded phase currents do not sum to zero (see the currents' balance): the currents are measured \
+         with an error, so the rig is not the nominal one, whatever the gap's size; no effect of the library, \
+         `current_sensor_error` with the gains the balance measures included, explains the gap it leaves in \
+         the mechanics"
+            .to_string()
     })
 }
 
