@@ -7,7 +7,7 @@
 use crate::attribute::{attribute, Candidate, KnownParameter, Lab};
 use crate::calibrate::Calibration;
 use crate::compare::Compared;
-use crate::current_balance::{measured_gain_errors, RecordingBalance};
+use crate::current_balance::{currents_unbalanced, measured_gain_errors, RecordingBalance};
 use crate::drive_finding::DriveModel;
 use crate::verdict::GapOptions;
 use crate::{driven, electrical_lines, hypotheses, naming};
@@ -31,11 +31,17 @@ fn not_fitted_note(not_fitted: &[EffectKind]) -> Option<String> {
 }
 
 /// The parameters the recorded currents' balance measures without the
-/// model: `current_sensor_error`'s gain errors of phases a and b relative
-/// to phase c (its declaration's indices 2 and 3), where their values lie
-/// within the effect's declared range.
+/// model: when the recorded currents are unbalanced (they carry the error:
+/// the drive's transducer signals, or clamps that err), the gain errors
+/// of phases a and b relative to phase c, `current_sensor_error`'s
+/// `gain_error_a` and `gain_error_b`, where they lie within the effect's
+/// declared range. Balanced currents say nothing of transducers that the
+/// recording does not hold (the drive's, behind clamps): nothing held.
 fn balance_parameters(balances: &[RecordingBalance]) -> Vec<KnownParameter> {
     let kind = EffectKind::CurrentSensorError;
+    if !currents_unbalanced(balances) {
+        return Vec::new();
+    }
     let Some(gains) = measured_gain_errors(balances) else { return Vec::new() };
     let specs = kind.parameters();
     ["gain_error_a", "gain_error_b"]
