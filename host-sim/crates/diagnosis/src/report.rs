@@ -456,7 +456,6 @@ fn calibration_section(s: &mut String, c: &Calibration) {
     );
 }
 
-/// Section `Ranking (step 4)`: one table row per candidate, best first.
 /// A parameter as `name=value+-uncertainty` with `digits` decimals of
 /// the mantissa, followed by `(measured)` when it was measured without
 /// the model.
@@ -465,6 +464,7 @@ fn parameter_text(p: &FittedParameter, digits: usize) -> String {
     format!("{}={:.digits$e}+-{:.1e}{measured}", p.name, p.value, p.uncertainty)
 }
 
+/// Section `Ranking (step 4)`: one table row per candidate, best first.
 fn ranking_section(s: &mut String, ranking: &[Candidate]) {
     let _ = writeln!(s, "## Ranking (step 4)\n");
     let _ = writeln!(

@@ -141,8 +141,9 @@ pub struct GapReport {
     /// ([`electrical_lines`]); a line present makes the verdict other than
     /// `nominal`.
     pub electrical_lines: Option<electrical_lines::ElectricalLines>,
-    /// Each travel's phase-current balance ([`current_balance`]): reported,
-    /// not yet part of the verdict.
+    /// Each travel's phase-current balance ([`current_balance`]): currents
+    /// unbalanced in most travels make the verdict other than `nominal` and
+    /// hold `current_sensor_error`'s gains in its fit.
     pub current_balance: Vec<current_balance::RecordingBalance>,
     /// The car acceleration of the recording with the largest nominal gap,
     /// measured and from the models the diagnosis compared it with (for
