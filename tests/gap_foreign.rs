@@ -234,7 +234,7 @@ fn print_table(cases: &[Case]) {
 /// earlier case (parameters and noise) as it was.
 fn sweep_order() -> Vec<EffectKind> {
     let (held, others): (Vec<EffectKind>, Vec<EffectKind>) =
-        EffectKind::ALL.into_iter().partition(|k| holds_effect(*k));
+        EffectKind::ALL.into_iter().partition(|k| holds_effect(*k, false));
     held.into_iter().chain(others).collect()
 }
 
@@ -601,7 +601,7 @@ fn foreign_rig_electrical_effects_show_in_the_direct_axis_lines() {
 /// test above's.)
 #[test]
 fn foreign_rig_mechanical_effects_leave_the_direct_axis_clean() {
-    let mechanical = |k: &EffectKind| holds_effect(*k) && *k != EffectKind::CurrentSensorError;
+    let mechanical = |k: &EffectKind| holds_effect(*k, false) && *k != EffectKind::CurrentSensorError;
     for kind in EffectKind::ALL.into_iter().filter(mechanical) {
         let mut effects = Effects::none();
         effects.set(kind, &kind.defaults()).unwrap();

@@ -16,15 +16,28 @@ use recording::Recording;
 use rig_config::RigConfig;
 
 /// Why some effects are not fitted to the mechanics under another drive,
-/// in words (`None` when every effect is).
+/// in words (`None` when every effect is): each left-out effect's reason.
 fn not_fitted_note(not_fitted: &[EffectKind]) -> Option<String> {
     (!not_fitted.is_empty()).then(|| {
         let names: Vec<&str> = not_fitted.iter().map(|k| k.name()).collect();
+        let reasons: Vec<&str> = not_fitted
+            .iter()
+            .filter_map(|k| match k {
+                EffectKind::DeadTime => Some(
+                    "the dead time acts through the currents, which the measured torque already carries: it is \
+                     fitted to the direct-axis current's lines instead",
+                ),
+                EffectKind::BrakeStop => Some(
+                    "the brake clamp acts at standstill, where another drive's stop is compared only in a travel \
+                     whose recording shows the brake stopping the turning sheave, and none does here",
+                ),
+                _ => None,
+            })
+            .collect();
+        let why = if reasons.is_empty() { String::new() } else { format!(" ({})", reasons.join("; ")) };
         format!(
             "the rig's drive is another, so the effects are fitted with the mechanics driven by its measured torque; \
-             not fitted to the mechanics: {} (the dead time acts through the currents, which the measured torque \
-             already carries: it is fitted to the direct-axis current's lines instead; the brake clamp acts at \
-             standstill, where another drive's start and stop are not compared)",
+             not fitted to the mechanics: {}{why}",
             names.join(", ")
         )
     })
@@ -83,8 +96,9 @@ pub(crate) fn attribute_mechanics(
     };
     // Under another drive the counterpart is the torque-driven mechanics,
     // which holds only some of the library's effects.
+    let brake_seen = compared.targets.iter().any(|t| t.counterpart.shows_brake());
     let (kinds, not_fitted): (Vec<EffectKind>, Vec<EffectKind>) =
-        options.effects.iter().partition(|k| drive == DriveModel::Project || driven::holds_effect(**k));
+        options.effects.iter().partition(|k| drive == DriveModel::Project || driven::holds_effect(**k, brake_seen));
     // The calibration re-done under the hypotheses of the effects it can
     // absorb (step 4a).
     let refits: Vec<hypotheses::Refit> =
@@ -118,4 +132,26 @@ pub(crate) fn electrical_lines_of(
         naming::name_candidates(&mut lines.ranking);
         lines
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The note gives each left-out effect's own reason, and only theirs:
+    /// with the brake seen in a recording, only the dead time is left out
+    /// under another drive, and the note says nothing of the brake.
+    #[test]
+    fn the_not_fitted_note_gives_the_left_out_effects_reasons() {
+        let left_out = |brake_seen: bool| -> Vec<EffectKind> {
+            EffectKind::ALL.into_iter().filter(|k| !driven::holds_effect(*k, brake_seen)).collect()
+        };
+        assert_eq!(left_out(true), [EffectKind::DeadTime]);
+        assert!(left_out(false).contains(&EffectKind::BrakeStop));
+        let seen = not_fitted_note(&left_out(true)).expect("the dead time is left out");
+        assert!(seen.contains("dead_time") && seen.contains("direct-axis") && !seen.contains("brake"), "{seen}");
+        let unseen = not_fitted_note(&left_out(false)).expect("two left out");
+        assert!(unseen.contains("brake_stop") && unseen.contains("none does here"), "{unseen}");
+        assert_eq!(not_fitted_note(&[]), None);
+    }
 }

@@ -151,25 +151,35 @@ pub(crate) fn align_phases(measured: &mut ChainSignals, model: &mut ChainSignals
 /// comparable with the model: what that rig does not tell is taken out, and
 /// the torque-driven model's response to the torque's measurement noise
 /// (`noise_response`) is added, as the model gets the sensors' noise.
+/// `stop_compared`: the recording shows the brake stopping the turning
+/// sheave at the end of the travel, so the stop is kept.
 fn foreign_rig_cells(
     measured_cells: &mut spectra::CellPowers,
     recording: &Recording,
     bands: &Bands,
     model: &RigConfig,
     noise_response: Option<&ChainSignals>,
+    stop_compared: bool,
 ) {
     // At standstill, before and after the motion, another drive lifts and
     // sets its brake against its own pre-torque and holding torque when it
-    // likes; the recording does not say when. Those transients are the
-    // drive's, not a gap of the mechanics: not compared. Its data
+    // likes. Where the recording does not say when, those transients are
+    // the drive's, not a gap of the mechanics: not compared. Where it shows
+    // the brake stopping the turning sheave at the end
+    // (`driven::brake_stops_the_sheave`), the model takes it there and the
+    // stop is compared. Its data
     // acquisition's anti-alias filter may start at a fifth of the sample
     // rate, and its torque stands for the shaft's only below the current
     // loop's bandwidth: bands above are not compared.
     if let Some(response) = noise_response {
         let top_hz = (FOREIGN_TOP_FRACTION * recording.meta.sample_rate_hz).min(FOREIGN_TOP_HZ);
         measured_cells.cells.retain(|((_, phase, band), _)| {
-            !matches!(phase, signals::Phase::Start | signals::Phase::Stop)
-                && (bands.is_line(*band) || bands.edges_hz[*band].1 <= top_hz)
+            let standstill = match phase {
+                signals::Phase::Start => true,
+                signals::Phase::Stop => !stop_compared,
+                _ => false,
+            };
+            !standstill && (bands.is_line(*band) || bands.edges_hz[*band].1 <= top_hz)
         });
         let spectra = ChainSpectra::compute(response, &Segmentation::of(response), bands);
         let extra = cell_powers(&[(&spectra, 1.0)], bands);
@@ -237,7 +247,8 @@ fn target_of(
     let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
     let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
     if drive == DriveModel::Foreign {
-        foreign_rig_cells(&mut measured_cells, recording, &bands, model, noise_response.as_ref());
+        let stop_compared = how.shows_brake();
+        foreign_rig_cells(&mut measured_cells, recording, &bands, model, noise_response.as_ref(), stop_compared);
     }
     let nominal_cells = cell_powers(&[(&nominal_spectra, 1.0)], &bands);
     let perturbed_cells: Vec<_> = perturbed

@@ -292,6 +292,24 @@ pub fn brake_engagement(params: &ChainParams, travel: &DrivenTravel) -> Result<O
     Ok(Some(onset))
 }
 
+/// The chain of `rig` with the travel's car and counterweight masses.
+fn travel_chain_params(rig: &RigConfig, travel: &DrivenTravel) -> ChainParams {
+    let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
+    params.m_cw_kg = travel.m_cw_kg;
+    params
+}
+
+/// Whether the rig's brake, read on the chain of `rig` with the travel's
+/// masses ([`brake_engagement`]), takes the sheave before the encoder
+/// stands still: a brake that stops the turning sheave, whose clamp then
+/// rings with the chain. A drive that sets its brake on the standing
+/// sheave and then releases its torque hands the load over statically:
+/// that stop is the drive's own sequence.
+pub fn brake_stops_the_sheave(rig: &RigConfig, travel: &DrivenTravel) -> Result<bool> {
+    let brake = brake_engagement(&travel_chain_params(rig, travel), travel)?;
+    Ok(brake.is_some_and(|b| b < travel.motion.end))
+}
+
 /// What the counterpart needs of a travel recording, at one sample rate.
 pub struct DrivenTravel<'a> {
     /// Car mass, kg.
@@ -404,8 +422,7 @@ pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> Ri
     }
     let angle = &travel.shaft_angle_rad[stage.clone()];
     let shaft_speed_radps = (angle[angle.len() - 1] - angle[0]) * travel.sample_rate_hz / (n - 1.0);
-    let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
-    params.m_cw_kg = travel.m_cw_kg;
+    let params = travel_chain_params(rig, travel);
     let inertia = rigid_inertia_kg_m2(&params);
     for h in &mut ripple.harmonics {
         let (mut re, mut im) = (0.0, 0.0);
@@ -507,12 +524,13 @@ fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_
 /// model reads the true angle from the recorded one) and the current
 /// transducers' errors (the model takes the true torque from the recorded
 /// currents, read as the drive's transducer signals: [`crate::transducer`]);
-/// not an error the recorded currents carry themselves, nor the brake's
-/// clamp: the model takes the brake where the recording shows it
-/// ([`brake_engagement`]), but the diagnosis does not compare another
-/// drive's stop.
-pub fn holds_effect(kind: EffectKind) -> bool {
-    kind.seen().under_another_drive
+/// not an error the recorded currents carry themselves. The brake's clamp
+/// acts once the brake holds, at standstill, where another drive's own
+/// sequence is not compared; only where a recording shows the brake
+/// stopping the turning sheave ([`brake_stops_the_sheave`]: `brake_seen`)
+/// is its stop compared, and the clamp held there.
+pub fn holds_effect(kind: EffectKind, brake_seen: bool) -> bool {
+    kind.seen().under_another_drive || (kind == EffectKind::BrakeStop && brake_seen)
 }
 
 /// Car and counterweight accelerations (m/s^2, positive up) of the chain
@@ -694,8 +712,7 @@ fn torque_driven_accelerations_with(
         bail!("the travel has {n} samples; expected at least 2");
     }
     let (fs, r) = (travel.sample_rate_hz, rig.mechanics.sheave_radius_m);
-    let mut params = ChainParams::from_rig(rig, travel.m_car_kg);
-    params.m_cw_kg = travel.m_cw_kg;
+    let params = travel_chain_params(rig, travel);
     let sequence = StopSequence { motion: travel.motion.clone(), brake: brake_engagement(&params, travel)? };
     let (reference, tracked) = tracking_references(&travel.shaft_angle_rad[..n], sequence.brake, fs, r)?;
     let chain = Chain::new(params, travel.lw_start_m);

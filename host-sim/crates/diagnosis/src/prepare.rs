@@ -13,8 +13,8 @@ use crate::signals::{self, chain_signals, decimation_factor, ChainSignals};
 #[cfg(doc)]
 use crate::simulate;
 use crate::simulate::{
-    driven_accelerations, driven_counterpart, driven_highpass, driven_signals, highpass_accelerations, model_step_s,
-    simulate_counterpart, Counterpart, DriveRecord, DrivenInputs,
+    driven_accelerations, driven_brake_stops_the_sheave, driven_counterpart, driven_highpass, driven_signals,
+    highpass_accelerations, model_step_s, simulate_counterpart, Counterpart, DriveRecord, DrivenInputs,
 };
 use crate::{acquisition, drive_law, driven, electrical_lines, transducer, travel_signals};
 use plant::effects::Effects;
@@ -204,6 +204,7 @@ pub(crate) fn counterpart(
             transducer_lines: transducer_lines.clone(),
             transducer: transducer.clone(),
             highpass,
+            brake_stops_the_sheave: driven_brake_stops_the_sheave(models[0], recording, &measured, drive_record)?,
         };
         // The nominal run shaped as the attribution shapes every effect's
         // (`Counterpart::simulate` -> `driven_counterpart`).

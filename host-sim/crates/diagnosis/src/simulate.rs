@@ -232,6 +232,10 @@ pub struct DrivenInputs {
     /// The rig's accelerometer high-pass, found once from the nominal model
     /// ([`driven_highpass`]).
     pub highpass: acquisition::Highpass,
+    /// Whether the rig's brake stops the turning sheave at the end of the
+    /// travel, read on the nominal model's chain
+    /// ([`driven_brake_stops_the_sheave`]).
+    pub brake_stops_the_sheave: bool,
 }
 
 impl DrivenInputs {
@@ -263,6 +267,13 @@ pub struct DriveRecord<'a> {
 }
 
 impl Counterpart {
+    /// Whether the recording shows the rig's brake stopping the turning
+    /// sheave at the end of the travel, under another drive (the stop is
+    /// then compared).
+    pub fn shows_brake(&self) -> bool {
+        matches!(self, Counterpart::Driven(inputs) if inputs.brake_stops_the_sheave)
+    }
+
     /// The counterpart of `measured` (named `stem`) on `rig` with `effects`.
     pub fn simulate(
         &self,
@@ -303,6 +314,29 @@ pub fn driven_accelerations(
     settings: &driven::DrivenSettings,
     effects: &Effects,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
+    driven::torque_driven_accelerations(model, &driven_travel(recording, measured, drive)?, settings, effects)
+}
+
+/// Whether the rig's brake stops the turning sheave at the end of the
+/// travel `recording` (measured chain signals `measured`), where the
+/// recording shows it, read on the chain of `model`
+/// ([`driven::brake_stops_the_sheave`]).
+pub fn driven_brake_stops_the_sheave(
+    model: &RigConfig,
+    recording: &Recording,
+    measured: &ChainSignals,
+    drive: DriveRecord,
+) -> Result<bool> {
+    driven::brake_stops_the_sheave(model, &driven_travel(recording, measured, drive)?)
+}
+
+/// What the torque-driven model takes of the travel `recording` whose
+/// measured chain signals are `measured`, and of its drive.
+fn driven_travel<'a>(
+    recording: &Recording,
+    measured: &'a ChainSignals,
+    drive: DriveRecord<'a>,
+) -> Result<driven::DrivenTravel<'a>> {
     let RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         bail!("not a travel");
     };
@@ -310,7 +344,7 @@ pub fn driven_accelerations(
     let Some(constant) = phase(signals::Phase::Constant) else {
         bail!("the travel has no constant-speed stage");
     };
-    let travel = driven::DrivenTravel {
+    Ok(driven::DrivenTravel {
         m_car_kg,
         m_cw_kg,
         lw_start_m,
@@ -323,8 +357,7 @@ pub fn driven_accelerations(
         sample_rate_hz: measured.sample_rate_hz,
         transducer_lines: drive.transducer_lines,
         transducer: drive.transducer,
-    };
-    driven::torque_driven_accelerations(model, &travel, settings, effects)
+    })
 }
 
 /// The rig's accelerometer high-pass ([`acquisition::identify_highpass`])

@@ -59,13 +59,20 @@ impl Effect for BrakeStop {
             "N m s/rad",
             5.0,
             0.0,
-            200.0,
+            1000.0,
             Linear,
-            false,
+            true,
             "damping of the clamped brake",
-        ),
+        )
+        // How long the clamp rings, not how strong it is: no value of it
+        // is the nominal plant's rigid brake.
+        .neutral_at(Neutral::NotAStrength),
     ];
-    const FIT: Fit = Fit::Grid { axes: &[(0, &[4.0e3, 3.0e4, 2.0e5])], screened: true };
+    // The clamp's damping sets how long the sheave rings on it: fitted with
+    // the stiffness (on the reference rig's sheave, 0.34 kg m^2, the
+    // damping grid spans damping ratios 0.01 to 0.77 at 2e5 N m/rad; the
+    // range reaches critical damping at 7.4e5 N m/rad).
+    const FIT: Fit = Fit::Grid { axes: &[(0, &[4.0e3, 3.0e4, 2.0e5]), (1, &[5.0, 50.0, 400.0])], screened: true };
     // It acts while the brake holds, where another drive's start and stop
     // sequence is not compared.
     const SEEN: Seen = Seen { in_free_decay: false, under_another_drive: false };
