@@ -43,22 +43,26 @@ impl Plant {
     /// `steps` RK4 steps of `h` (s) with [`super::Integrator::Fast`].
     pub(crate) fn advance_fast(&mut self, steps: usize, h: f64) {
         let len = self.state_len();
-        let mut state = self.state;
         // The RK4's work space is kept from call to call (no zeroing of a
-        // fresh one each time).
+        // fresh one each time), with the state stepped in its first `len`
+        // values: only the used part of the state is copied out and back.
         let mut work = std::mem::take(&mut self.rk4_work);
-        if work.len() < 5 * len {
-            work.resize(5 * len, 0.0);
+        if work.len() < 6 * len {
+            work.resize(6 * len, 0.0);
         }
+        let (state, rk4_work) = work.split_at_mut(len);
+        state.copy_from_slice(&self.state[..len]);
+        // One buffer of masses and springs, refilled at each step.
+        let mut lumped = Lumped::zeroed();
         for _ in 0..steps {
-            let theta = self.shaft_angle_rad(&state);
+            let theta = self.shaft_angle_rad(state);
             self.angle.ensure(theta, &self.ripple, self.pmsm.pole_pairs);
-            let lumped = self.midpoint_lumped(&state, h);
+            self.midpoint_lumped_into(state, h, &mut lumped);
             let step = self.line.coefficients(&self.chain, &lumped);
-            rk4_step_in(&mut state[..len], h, &mut work, |y, dy| self.line_step_derivative(&step, y, dy));
+            rk4_step_in(state, h, rk4_work, |y, dy| self.line_step_derivative(&step, y, dy));
         }
+        self.state[..len].copy_from_slice(state);
         self.rk4_work = work;
-        self.state = state;
         let theta = self.shaft_angle_rad(&self.state);
         self.angle.ensure(theta, &self.ripple, self.pmsm.pole_pairs);
     }
@@ -66,8 +70,15 @@ impl Plant {
     /// Masses, springs and damping at the predicted midpoint of a step of
     /// `h` (s) from the node positions and velocities in `y`.
     fn midpoint_lumped(&self, y: &[f64], h: f64) -> Lumped {
+        let mut out = Lumped::zeroed();
+        self.midpoint_lumped_into(y, h, &mut out);
+        out
+    }
+
+    /// [`Plant::midpoint_lumped`] written into `out` ([`super::line::Line::lumped_into`]).
+    fn midpoint_lumped_into(&self, y: &[f64], h: f64, out: &mut Lumped) {
         let (n, sheave) = (self.nodes(), self.line.layout.sheave);
-        self.line.lumped(&self.chain, y[sheave] + 0.5 * h * y[n + sheave])
+        self.line.lumped_into(&self.chain, y[sheave] + 0.5 * h * y[n + sheave], out);
     }
 
     /// Time derivative `dy` of the state `y` with the line's coefficients

@@ -128,6 +128,19 @@ pub struct Lumped {
     pub frame_damping_kg_per_s: f64,
 }
 
+impl Lumped {
+    /// Every value zero (the start of [`Line::lumped_into`]'s buffer).
+    pub fn zeroed() -> Self {
+        Self {
+            lw_m: 0.0,
+            masses_kg: [0.0; MAX_NODES],
+            springs_n_per_m: [0.0; MAX_NODES],
+            damping_kg_per_s: [0.0; MAX_NODES],
+            frame_damping_kg_per_s: 0.0,
+        }
+    }
+}
+
 /// The line for a chain and its effects (only the mechanical effects
 /// matter here: tension stiffening, pulley, discretisation, frame mode,
 /// guide friction, brake clamp, sheave eccentricity).
@@ -174,6 +187,16 @@ impl Line {
 
     /// Masses, springs and damping with the sheave at `u_sh_m` (m).
     pub fn lumped(&self, chain: &Chain, u_sh_m: f64) -> Lumped {
+        let mut out = Lumped::zeroed();
+        self.lumped_into(chain, u_sh_m, &mut out);
+        out
+    }
+
+    /// [`Line::lumped`] written into `out`, which must hold zeros or an
+    /// earlier result of this line (every call writes the same entries, the
+    /// others stay zero): the integrator's per-step buffer, neither zeroed
+    /// nor copied at each step.
+    pub fn lumped_into(&self, chain: &Chain, u_sh_m: f64, out: &mut Lumped) {
         let p = &chain.params;
         let e = &self.effects;
         let layout = &self.layout;
@@ -183,13 +206,7 @@ impl Line {
         let mu = p.rope_mass_per_length_kg_per_m;
         let g = p.gravity_mps2;
         let stiffening = e.tension_stiffening.as_ref();
-        let mut out = Lumped {
-            lw_m: lw,
-            masses_kg: [0.0; MAX_NODES],
-            springs_n_per_m: [0.0; MAX_NODES],
-            damping_kg_per_s: [0.0; MAX_NODES],
-            frame_damping_kg_per_s: 0.0,
-        };
+        out.lw_m = lw;
         // Counterweight side, listed from the counterweight up.
         out.masses_kg[0] = p.m_cw_kg;
         let cw_element = element_mass_kg(lw, n, mu);
@@ -234,7 +251,6 @@ impl Line {
             out.damping_kg_per_s[node] =
                 pulley.damping_kg_per_s(out.springs_n_per_m[layout.sheave], out.masses_kg[node]);
         }
-        out
     }
 
     /// Node accelerations (m/s^2) into `accel` (the first `nodes`), for

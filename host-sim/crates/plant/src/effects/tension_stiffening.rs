@@ -24,6 +24,11 @@ impl TensionStiffening {
     /// speculate the `powf` into the nominal plant's path.)
     #[inline(never)]
     pub fn ea_n(&self, ea0_n: f64, tension_n: f64) -> f64 {
+        // `x^0` is exactly 1 for every `x` (NaN and infinities included):
+        // the `powf` would return `ea0_n` bit for bit.
+        if self.alpha == 0.0 {
+            return ea0_n;
+        }
         let ratio = tension_n.max(f64::MIN_POSITIVE) / self.reference_tension_n;
         ea0_n * ratio.powf(self.alpha)
     }
