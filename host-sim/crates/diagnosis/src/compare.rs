@@ -166,7 +166,7 @@ fn foreign_rig_cells(
     // likes. Where the recording does not say when, those transients are
     // the drive's, not a gap of the mechanics: not compared. Where it shows
     // the brake stopping the turning sheave at the end
-    // (`driven::brake_stops_the_sheave`), the model takes it there and the
+    // (`driven::stop_brake`), the model takes it there and the
     // stop is compared. Its data
     // acquisition's anti-alias filter may start at a fifth of the sample
     // rate, and its torque stands for the shaft's only below the current
@@ -309,6 +309,7 @@ pub(crate) fn compared(
                 refused,
                 shaft_angle,
                 accelerometer_highpass: prepared.accelerometer_highpass,
+                stop_brake: prepared.how.stop_brake().unwrap_or(crate::driven::StopBrake::NotFound),
             });
         }
         let lines = prepared.direct_axis.take();

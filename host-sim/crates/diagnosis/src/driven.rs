@@ -191,9 +191,8 @@ pub const STANDSTILL_WINDOW_S: f64 = 0.05;
 /// estimate lags; the encoder tells when the brake holds.
 pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<usize> {
     let n = shaft_angle_rad.len();
-    let quantum = encoder_step_rad(shaft_angle_rad);
-    let threshold = (4.0 * quantum).max(1e-4);
-    let w = ((STANDSTILL_WINDOW_S * sample_rate_hz).round() as usize).max(1);
+    let threshold = standstill_threshold_rad(shaft_angle_rad);
+    let w = standstill_window_samples(sample_rate_hz);
     let moving =
         |k: usize| (shaft_angle_rad[(k + w).min(n - 1)] - shaft_angle_rad[k.saturating_sub(w)]).abs() > threshold;
     let first = (0..n).find(|&k| moving(k));
@@ -202,6 +201,18 @@ pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<
         (Some(a), Some(b)) => a..b + 1,
         _ => 0..0,
     }
+}
+
+/// The change of the shaft angle (rad) over `2 x` [`STANDSTILL_WINDOW_S`]
+/// above which the shaft counts as turning: four encoder steps
+/// ([`encoder_step_rad`]), at least 0.1 mrad.
+pub fn standstill_threshold_rad(shaft_angle_rad: &[f64]) -> f64 {
+    (4.0 * encoder_step_rad(shaft_angle_rad)).max(1e-4)
+}
+
+/// [`STANDSTILL_WINDOW_S`] in samples at `sample_rate_hz` (Hz), at least one.
+fn standstill_window_samples(sample_rate_hz: f64) -> usize {
+    ((STANDSTILL_WINDOW_S * sample_rate_hz).round() as usize).max(1)
 }
 
 /// Low-pass of the shaft angle and the torque in which the brake's torque
@@ -279,7 +290,7 @@ pub fn brake_engagement(params: &ChainParams, travel: &DrivenTravel) -> Result<O
     let torque_rms = mean(&travel.torque_nm[stage.clone()].iter().map(|t| t * t).collect::<Vec<_>>()).sqrt();
     let threshold = (BRAKE_NOISE_FACTOR * spread).max(BRAKE_TORQUE_FLOOR_FRACTION * torque_rms);
     let fs = travel.sample_rate_hz;
-    let w = ((STANDSTILL_WINDOW_S * fs).round() as usize).max(1);
+    let w = standstill_window_samples(fs);
     let from = travel.motion.end.saturating_sub(2 * w).max(stage.end).min(n);
     let span = ((BRAKE_LEVEL_SPAN_S * fs).round() as usize).max(1);
     let before = from.saturating_sub(span).max(stage.end).min(from)..from;
@@ -299,15 +310,103 @@ fn travel_chain_params(rig: &RigConfig, travel: &DrivenTravel) -> ChainParams {
     params
 }
 
-/// Whether the rig's brake, read on the chain of `rig` with the travel's
-/// masses ([`brake_engagement`]), takes the sheave before the encoder
-/// stands still: a brake that stops the turning sheave, whose clamp then
-/// rings with the chain. A drive that sets its brake on the standing
-/// sheave and then releases its torque hands the load over statically:
-/// that stop is the drive's own sequence.
-pub fn brake_stops_the_sheave(rig: &RigConfig, travel: &DrivenTravel) -> Result<bool> {
-    let brake = brake_engagement(&travel_chain_params(rig, travel), travel)?;
-    Ok(brake.is_some_and(|b| b < travel.motion.end))
+/// How the end of the motion is timed against the brake
+/// ([`stop_brake`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum StopClock {
+    /// The recorded speed reference's end ([`reference_end`]).
+    Reference,
+    /// The encoder's standstill ([`motion_from_angle`]); the recording has
+    /// no speed reference.
+    Encoder,
+}
+
+/// The rig's brake at the end of a travel as the recording shows it
+/// ([`stop_brake`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub enum StopBrake {
+    /// No brake found ([`brake_engagement`]): the drive holds the sheave to
+    /// the end of the recording.
+    NotFound,
+    /// The brake takes the turning sheave `at_s` s into the recording; its
+    /// clamp then rings with the chain.
+    StopsTheSheave {
+        /// Where the brake takes the sheave, s.
+        at_s: f64,
+        /// What the brake is timed against.
+        clock: StopClock,
+    },
+    /// The drive sets the brake on the standing sheave and hands it the
+    /// load, `at_s` s into the recording: the drive's own stop sequence.
+    HandedOver {
+        /// Where the brake takes the load, s.
+        at_s: f64,
+        /// What the brake is timed against.
+        clock: StopClock,
+    },
+}
+
+impl StopBrake {
+    /// Whether the brake stops the turning sheave (the stop is then
+    /// compared under another drive).
+    pub fn stops_the_sheave(&self) -> bool {
+        matches!(self, StopBrake::StopsTheSheave { .. })
+    }
+
+    /// In words, for the report.
+    pub fn text(&self) -> String {
+        let clock = |c: &StopClock| match c {
+            StopClock::Reference => "the speed reference's end",
+            StopClock::Encoder => "the encoder's standstill (no speed reference recorded)",
+        };
+        match self {
+            StopBrake::NotFound => "no brake found: the drive holds the sheave; the stop is not compared".to_string(),
+            StopBrake::StopsTheSheave { at_s, clock: c } => {
+                format!("the brake takes the turning sheave at {at_s:.3} s (by {}): the stop is compared", clock(c))
+            }
+            StopBrake::HandedOver { at_s, clock: c } => format!(
+                "the drive hands the load to its brake at {at_s:.3} s (after {}): its own stop sequence, not compared",
+                clock(c)
+            ),
+        }
+    }
+}
+
+/// The rig's brake at the end of the travel, read on the chain of `rig`
+/// with the travel's masses ([`brake_engagement`]): whether it takes a
+/// turning sheave, whose clamp then rings with the chain. Where the travel
+/// records its speed reference, the brake does when it takes the sheave
+/// before the reference's end ([`DrivenTravel::reference_end`]), up to
+/// [`STANDSTILL_WINDOW_S`] after it: the drive still commands the motion
+/// the brake stops. A drive that sets its brake on the standing sheave
+/// after its reference has ended and then releases its torque hands the
+/// load over statically, whatever the release turns the sheave through an
+/// elastic clamp: that stop is the drive's own sequence. Without a
+/// recorded reference, the brake takes a turning sheave when it is found
+/// before the encoder's standstill ([`DrivenTravel::motion`]), which a
+/// drive that releases its torque slowly into an elastic clamp can also
+/// show.
+pub fn stop_brake(rig: &RigConfig, travel: &DrivenTravel) -> Result<StopBrake> {
+    let Some(brake) = brake_engagement(&travel_chain_params(rig, travel), travel)? else {
+        return Ok(StopBrake::NotFound);
+    };
+    let (clock, stops) = match travel.reference_end {
+        Some(end) => (StopClock::Reference, brake <= end + standstill_window_samples(travel.sample_rate_hz)),
+        None => (StopClock::Encoder, brake < travel.motion.end),
+    };
+    let at_s = brake as f64 / travel.sample_rate_hz;
+    Ok(if stops { StopBrake::StopsTheSheave { at_s, clock } } else { StopBrake::HandedOver { at_s, clock } })
+}
+
+/// The sample after the last at which the speed reference `reference`
+/// (any unit) exceeds `1e-6` of its peak: where the drive stops commanding
+/// motion. `None` for a reference that never departs from zero.
+pub fn reference_end(reference: &[f64]) -> Option<usize> {
+    let peak = reference.iter().fold(0.0_f64, |m, r| m.max(r.abs()));
+    if peak <= 0.0 || !peak.is_finite() {
+        return None;
+    }
+    reference.iter().rposition(|r| r.abs() > 1e-6 * peak).map(|k| k + 1)
 }
 
 /// What the counterpart needs of a travel recording, at one sample rate.
@@ -332,6 +431,9 @@ pub struct DrivenTravel<'a> {
     pub motion: Range<usize>,
     /// Samples of the constant-speed stage.
     pub constant_speed: Range<usize>,
+    /// The sample at which the recorded speed reference ends
+    /// ([`reference_end`]); `None` where the recording has no reference.
+    pub reference_end: Option<usize>,
     /// Sample rate, Hz.
     pub sample_rate_hz: f64,
     /// The torque lines of the rig drive's current transducers over the
@@ -527,7 +629,7 @@ fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_
 /// not an error the recorded currents carry themselves. The brake's clamp
 /// acts once the brake holds, at standstill, where another drive's own
 /// sequence is not compared; only where a recording shows the brake
-/// stopping the turning sheave ([`brake_stops_the_sheave`]: `brake_seen`)
+/// stopping the turning sheave ([`stop_brake`]: `brake_seen`)
 /// is its stop compared, and the clamp held there.
 pub fn holds_effect(kind: EffectKind, brake_seen: bool) -> bool {
     kind.seen().under_another_drive || (kind == EffectKind::BrakeStop && brake_seen)
@@ -1008,6 +1110,7 @@ mod tests {
             controller: None,
             motion,
             constant_speed: 0..torque_nm.len(),
+            reference_end: None,
             sample_rate_hz,
             transducer_lines: &[],
             transducer: None,
@@ -1196,6 +1299,17 @@ mod tests {
     /// angle through a 1e-4 rad encoder. Returns where the brake takes the
     /// sheave, s.
     fn brake_found(speed: impl Fn(f64) -> f64, torque: impl Fn(f64, f64, f64) -> f64) -> Option<f64> {
+        brake_read(speed, torque, None).0
+    }
+
+    /// [`brake_found`], the speed reference ending at `reference_end` s
+    /// where given, and whether the brake stops the turning sheave
+    /// ([`stop_brake`]).
+    fn brake_read(
+        speed: impl Fn(f64) -> f64,
+        torque: impl Fn(f64, f64, f64) -> f64,
+        reference_end: Option<f64>,
+    ) -> (Option<f64>, bool) {
         let rig = RigConfig::embedded_default().unwrap();
         let params = ChainParams::from_rig(&rig, 70.5);
         let (fs, n, lw) = (1000.0, 5000, 2.0);
@@ -1217,7 +1331,60 @@ mod tests {
         let chain = Chain::new(params.clone(), lw);
         let mut travel = travel_of(&chain, (&torque, &angle, &estimate), motion_from_angle(&angle, fs), fs);
         travel.constant_speed = 500..1900;
-        brake_engagement(&params, &travel).unwrap().map(|k| k as f64 / fs)
+        travel.reference_end = reference_end.map(|t| (t * fs).round() as usize);
+        let found = brake_engagement(&params, &travel).unwrap().map(|k| k as f64 / fs);
+        (found, stop_brake(&rig, &travel).unwrap().stops_the_sheave())
+    }
+
+    /// A brake that catches the sheave while the reference still commands
+    /// motion stops the turning sheave; a drive that sets its brake after
+    /// its reference has ended and then releases its torque hands the
+    /// load over, even where the release turns the sheave (the encoder's
+    /// standstill after the brake).
+    #[test]
+    fn the_brake_stops_the_sheave_where_the_reference_still_runs() {
+        let turning = |t: f64| if (0.2..2.0).contains(&t) { 1.0 } else { 0.0 };
+        let braked = |_: f64, steady: f64, _: f64| steady;
+        assert!(brake_read(turning, braked, Some(2.0)).1, "caught as the reference ends");
+        assert!(brake_read(turning, braked, None).1, "caught before the encoder stands still");
+        // The drive brings the sheave to rest at 3 s, with its reference,
+        // holds it, and releases its torque over 0.4 s from 3.5 s; the
+        // clamp yields 1.6 mrad meanwhile, so the encoder's standstill
+        // comes after the brake.
+        let creeping = |t: f64| {
+            if t < 0.2 {
+                0.0
+            } else {
+                (3.0 - t).clamp(0.0, 1.0) + if (3.5..3.9).contains(&t) { 0.004 } else { 0.0 }
+            }
+        };
+        let released =
+            |t: f64, steady: f64, inertial: f64| (steady + inertial) * (1.0 - (t - 3.5) / 0.4).clamp(0.0, 1.0);
+        let (handed, stops) = brake_read(creeping, released, Some(3.0));
+        assert!(handed.is_some_and(|t| t > 3.5), "released from 3.5 s, found at {handed:?} s");
+        assert!(!stops, "handed over after the reference's end");
+        assert!(brake_read(creeping, released, None).1, "without a reference, read by the encoder");
+    }
+
+    /// The report says for each reading whether the stop is compared, and
+    /// against what the brake was timed.
+    #[test]
+    fn the_brake_reading_says_whether_the_stop_is_compared() {
+        let stops = StopBrake::StopsTheSheave { at_s: 12.3456, clock: StopClock::Reference };
+        let handed = StopBrake::HandedOver { at_s: 13.0, clock: StopClock::Encoder };
+        assert!(stops.stops_the_sheave() && !handed.stops_the_sheave() && !StopBrake::NotFound.stops_the_sheave());
+        assert!(stops.text().contains("12.346 s") && stops.text().ends_with("the stop is compared"));
+        assert!(stops.text().contains("speed reference"), "{}", stops.text());
+        assert!(handed.text().contains("not compared") && handed.text().contains("no speed reference recorded"));
+        assert!(StopBrake::NotFound.text().contains("not compared"));
+    }
+
+    #[test]
+    fn the_reference_ends_where_it_stops_commanding_motion() {
+        let reference = [0.0, 0.5, 1.0, 1.0, 0.5, 1e-9, 1e-300, 0.0, 0.0];
+        assert_eq!(reference_end(&reference), Some(5), "the tail below 1e-6 of the peak is no motion");
+        assert_eq!(reference_end(&[0.0; 4]), None);
+        assert_eq!(reference_end(&[f64::NAN, 1.0]), Some(2));
     }
 
     /// The brake is found where it catches the turning sheave and where the

@@ -13,7 +13,7 @@ use crate::signals::{self, chain_signals, decimation_factor, ChainSignals};
 #[cfg(doc)]
 use crate::simulate;
 use crate::simulate::{
-    driven_accelerations, driven_brake_stops_the_sheave, driven_counterpart, driven_highpass, driven_signals,
+    driven_accelerations, driven_counterpart, driven_highpass, driven_signals, driven_stop_brake,
     highpass_accelerations, model_step_s, simulate_counterpart, Counterpart, DriveRecord, DrivenInputs,
 };
 use crate::{acquisition, drive_law, driven, electrical_lines, transducer, travel_signals};
@@ -39,6 +39,9 @@ pub struct RigSpeedLoop {
     /// as the data show them, applied to every run
     /// ([`simulate::driven_highpass`]).
     pub accelerometer_highpass: acquisition::Highpass,
+    /// The rig's brake at the end of the travel as the data show it, and
+    /// so whether its stop is compared ([`driven::stop_brake`]).
+    pub stop_brake: driven::StopBrake,
 }
 
 /// One recording made ready for the gap: its measured chain signals and the
@@ -196,6 +199,7 @@ pub(crate) fn counterpart(
     };
     let (nominal, perturbed, how) = if let Some(raw) = nominal_driven {
         let perturbed = driven_perturbed(models, &measured, run_driven)?;
+        let stop_brake = driven_stop_brake(models[0], recording, &measured, drive_record)?;
         let inputs = DrivenInputs {
             measured: measured.clone(),
             torque_nm: torque.clone(),
@@ -204,7 +208,7 @@ pub(crate) fn counterpart(
             transducer_lines: transducer_lines.clone(),
             transducer: transducer.clone(),
             highpass,
-            brake_stops_the_sheave: driven_brake_stops_the_sheave(models[0], recording, &measured, drive_record)?,
+            stop_brake,
         };
         // The nominal run shaped as the attribution shapes every effect's
         // (`Counterpart::simulate` -> `driven_counterpart`).

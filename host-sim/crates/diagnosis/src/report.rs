@@ -580,6 +580,10 @@ fn speed_loops(s: &mut String, loops: &[super::RigSpeedLoop]) {
     for l in loops {
         let _ = writeln!(s, "- {}: {}", l.recording, l.accelerometer_highpass.text());
     }
+    let _ = writeln!(s, "\nThe brake at the end of each travel as the data show it:\n");
+    for l in loops {
+        let _ = writeln!(s, "- {}: {}", l.recording, l.stop_brake.text());
+    }
     let _ = writeln!(s);
 }
 

@@ -232,10 +232,9 @@ pub struct DrivenInputs {
     /// The rig's accelerometer high-pass, found once from the nominal model
     /// ([`driven_highpass`]).
     pub highpass: acquisition::Highpass,
-    /// Whether the rig's brake stops the turning sheave at the end of the
-    /// travel, read on the nominal model's chain
-    /// ([`driven_brake_stops_the_sheave`]).
-    pub brake_stops_the_sheave: bool,
+    /// The rig's brake at the end of the travel, read on the nominal
+    /// model's chain ([`driven_stop_brake`]).
+    pub stop_brake: driven::StopBrake,
 }
 
 impl DrivenInputs {
@@ -271,7 +270,16 @@ impl Counterpart {
     /// sheave at the end of the travel, under another drive (the stop is
     /// then compared).
     pub fn shows_brake(&self) -> bool {
-        matches!(self, Counterpart::Driven(inputs) if inputs.brake_stops_the_sheave)
+        self.stop_brake().is_some_and(|b| b.stops_the_sheave())
+    }
+
+    /// The rig's brake at the end of the travel, where the model is driven
+    /// by the measured torque.
+    pub fn stop_brake(&self) -> Option<driven::StopBrake> {
+        match self {
+            Counterpart::Driven(inputs) => Some(inputs.stop_brake),
+            _ => None,
+        }
     }
 
     /// The counterpart of `measured` (named `stem`) on `rig` with `effects`.
@@ -317,17 +325,16 @@ pub fn driven_accelerations(
     driven::torque_driven_accelerations(model, &driven_travel(recording, measured, drive)?, settings, effects)
 }
 
-/// Whether the rig's brake stops the turning sheave at the end of the
-/// travel `recording` (measured chain signals `measured`), where the
-/// recording shows it, read on the chain of `model`
-/// ([`driven::brake_stops_the_sheave`]).
-pub fn driven_brake_stops_the_sheave(
+/// The rig's brake at the end of the travel `recording` (measured chain
+/// signals `measured`) as the recording shows it, read on the chain of
+/// `model` ([`driven::stop_brake`]).
+pub fn driven_stop_brake(
     model: &RigConfig,
     recording: &Recording,
     measured: &ChainSignals,
     drive: DriveRecord,
-) -> Result<bool> {
-    driven::brake_stops_the_sheave(model, &driven_travel(recording, measured, drive)?)
+) -> Result<driven::StopBrake> {
+    driven::stop_brake(model, &driven_travel(recording, measured, drive)?)
 }
 
 /// What the torque-driven model takes of the travel `recording` whose
@@ -354,10 +361,20 @@ fn driven_travel<'a>(
         controller: drive.controller,
         motion: driven::motion_from_angle(&measured.angle_rad, measured.sample_rate_hz),
         constant_speed: constant,
+        reference_end: recorded_reference_end(recording, measured),
         sample_rate_hz: measured.sample_rate_hz,
         transducer_lines: drive.transducer_lines,
         transducer: drive.transducer,
     })
+}
+
+/// Where the speed reference of `recording` ends ([`driven::reference_end`]),
+/// as a sample of the measured chain signals `measured`; `None` where the
+/// recording has no reference column.
+fn recorded_reference_end(recording: &Recording, measured: &ChainSignals) -> Option<usize> {
+    let factor = recording.meta.sample_rate_hz / measured.sample_rate_hz;
+    let reference = recording.column(recording::REF_SPEED)?;
+    driven::reference_end(&reference.values).map(|end| (end as f64 / factor).ceil() as usize)
 }
 
 /// The rig's accelerometer high-pass ([`acquisition::identify_highpass`])
