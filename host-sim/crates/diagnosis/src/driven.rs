@@ -206,7 +206,7 @@ pub fn motion_from_angle(shaft_angle_rad: &[f64], sample_rate_hz: f64) -> Range<
 /// The change of the shaft angle (rad) over `2 x` [`STANDSTILL_WINDOW_S`]
 /// above which the shaft counts as turning: four encoder steps
 /// ([`encoder_step_rad`]), at least 0.1 mrad.
-pub fn standstill_threshold_rad(shaft_angle_rad: &[f64]) -> f64 {
+fn standstill_threshold_rad(shaft_angle_rad: &[f64]) -> f64 {
     (4.0 * encoder_step_rad(shaft_angle_rad)).max(1e-4)
 }
 

@@ -130,7 +130,7 @@ fn transducer_series(
     measured: &ChainSignals,
 ) -> Option<transducer::TransducerSeries> {
     let torque = travel_signals::travel_torque(rig, recording, stem).ok()?;
-    let factor = (recording.meta.sample_rate_hz / measured.sample_rate_hz).round().max(1.0) as usize;
+    let factor = measured.decimation_from(recording.meta.sample_rate_hz);
     transducer::TransducerSeries::of(
         rig,
         recording,
@@ -331,7 +331,7 @@ fn rig_speed_controller(
     torque: &[f64],
     speed: &[f64],
 ) -> Result<drive_law::SpeedController, String> {
-    let factor = (recording.meta.sample_rate_hz / measured.sample_rate_hz).round().max(1.0) as usize;
+    let factor = measured.decimation_from(recording.meta.sample_rate_hz);
     let r = model.mechanics.sheave_radius_m;
     let reference: Option<Vec<f64>> = recording
         .column(recording::REF_SPEED)

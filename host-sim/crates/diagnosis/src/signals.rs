@@ -141,6 +141,13 @@ pub struct ChainSignals {
 }
 
 impl ChainSignals {
+    /// The factor by which these signals were decimated from a recording
+    /// sampled at `recording_rate_hz` (Hz): one of their samples is this
+    /// many of the recording's.
+    pub fn decimation_from(&self, recording_rate_hz: f64) -> usize {
+        (recording_rate_hz / self.sample_rate_hz).round().max(1.0) as usize
+    }
+
     /// The samples of `channel`, if present.
     pub fn channel(&self, channel: Channel) -> Option<&[f64]> {
         self.channels.iter().find(|(c, _)| *c == channel).map(|(_, v)| v.as_slice())

@@ -372,9 +372,9 @@ fn driven_travel<'a>(
 /// as a sample of the measured chain signals `measured`; `None` where the
 /// recording has no reference column.
 fn recorded_reference_end(recording: &Recording, measured: &ChainSignals) -> Option<usize> {
-    let factor = recording.meta.sample_rate_hz / measured.sample_rate_hz;
+    let factor = measured.decimation_from(recording.meta.sample_rate_hz);
     let reference = recording.column(recording::REF_SPEED)?;
-    driven::reference_end(&reference.values).map(|end| (end as f64 / factor).ceil() as usize)
+    driven::reference_end(&reference.values).map(|end| end.div_ceil(factor))
 }
 
 /// The rig's accelerometer high-pass ([`acquisition::identify_highpass`])
