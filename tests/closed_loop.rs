@@ -193,6 +193,16 @@ fn the_fast_integrator_matches_the_reference_with_effects_within_1e4_of_the_rms(
     assert!(relative < 1e-4, "{relative}");
 }
 
+/// The brake clamp alone on the 5-DOF chain: the default integrator takes
+/// the exact step while the brake is released and the RK4 while it clamps.
+#[test]
+fn the_fast_integrator_matches_the_reference_with_the_brake_clamp_within_1e4_of_the_rms() {
+    let mut effects = Effects::none();
+    effects.set(EffectKind::BrakeStop, &EffectKind::BrakeStop.defaults()).unwrap();
+    let relative = fast_against_reference_at_half_step(70.5, Direction::Up, effects);
+    assert!(relative < 1e-4, "{relative}");
+}
+
 #[test]
 fn every_nominal_travel_completes_without_a_trip_and_lands_on_target() {
     let rig = rig();

@@ -28,13 +28,15 @@ impl Plant {
     /// True when the plant is the nominal chain that the exact
     /// discretisation ([`super::exact`]) holds: the 5-DOF layout, no
     /// mechanical effect beyond the lumped values (a force at the guides,
-    /// the brake clamp, the eccentric sheave), no dead time, no open phase.
+    /// the brake clamp while the brake is applied, the eccentric sheave), no
+    /// dead time, no open phase. The brake clamp acts only while the brake
+    /// is applied: released, the plant with it is the nominal chain.
     pub(crate) fn nominal_path(&self) -> bool {
         let e = &self.effects;
         self.line.layout.nodes == DOF
             && self.line.layout.body == CAR
             && !e.acts_at_guides()
-            && e.brake_stop.is_none()
+            && (e.brake_stop.is_none() || !self.inputs.brake_engaged)
             && e.sheave_eccentricity.is_none()
             && e.dead_time.is_none()
             && self.faults.open_phase.is_none()
