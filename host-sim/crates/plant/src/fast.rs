@@ -36,7 +36,7 @@ impl Plant {
         self.line.layout.nodes == DOF
             && self.line.layout.body == CAR
             && !e.acts_at_guides()
-            && (e.brake_stop.is_none() || !self.inputs.brake_engaged)
+            && !self.clamped()
             && e.sheave_eccentricity.is_none()
             && e.dead_time.is_none()
             && self.faults.open_phase.is_none()

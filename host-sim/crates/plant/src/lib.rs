@@ -328,11 +328,17 @@ impl Plant {
         self.clamp_angle_rad
     }
 
+    /// True while the brake is applied through the elastic clamp of
+    /// `brake_stop` (the only time the clamp acts on the sheave).
+    pub(crate) fn clamped(&self) -> bool {
+        self.inputs.brake_engaged && self.effects.brake_stop.is_some()
+    }
+
     /// Mechanical energy, J: [`Line::mechanical_energy_j`] with the clamp's
     /// when the brake is applied through `brake_stop`.
     pub fn mechanical_energy_j(&self) -> f64 {
         let (position, velocity) = self.node_state();
-        let clamp = (self.inputs.brake_engaged && self.effects.brake_stop.is_some()).then_some(self.clamp_angle_rad);
+        let clamp = self.clamped().then_some(self.clamp_angle_rad);
         self.line.mechanical_energy_j(&self.chain, position, velocity, clamp)
     }
 
@@ -553,7 +559,7 @@ impl Plant {
     /// Longest RK4 step (s) that keeps `h omega_max <= 1` for the line now
     /// ([`Line::omega_max_radps`]).
     pub fn stable_step_s(&self) -> f64 {
-        let clamped = self.inputs.brake_engaged && self.effects.brake_stop.is_some();
+        let clamped = self.clamped();
         1.0 / self.line.omega_max_radps(&self.chain, self.state[self.line.layout.sheave], clamped)
     }
 
@@ -566,7 +572,7 @@ impl Plant {
     /// rope lengths, so they change by less than 1.1 % over that distance:
     /// the step is then `max_step_s` whichever way it is taken.
     fn step_bound_allows(&mut self, max_step_s: f64) -> bool {
-        let clamped = self.inputs.brake_engaged && self.effects.brake_stop.is_some();
+        let clamped = self.clamped();
         let u = self.state[self.line.layout.sheave];
         let holds = |b: &StepBound| {
             b.clamped == clamped && (u - b.u_m).abs() <= b.reach_m && b.chain == self.chain && u.is_finite()
