@@ -13,7 +13,7 @@ use super::calibrate::Calibration;
 use super::locate::Location;
 use super::measure::CellGap;
 use super::signals::{Channel, Phase};
-use super::{DriveModel, GapReport, RecordingGap, Verdict};
+use super::{CarAccelerationViews, DriveModel, GapReport, RecordingGap, Verdict};
 use plots::{heat_map_plot, HeatMap, HeatPanel};
 
 const PHASES: [Phase; 6] =
@@ -131,8 +131,9 @@ fn format_hz(f: f64) -> String {
     }
 }
 
-/// Writes `gap.json`, `gap_map.csv`, `ranking.csv` and the gap-map plots into
-/// `out`, then `gap.md` listing `extra_plots` (file names in `out`) too.
+/// Writes `gap.json`, `gap_map.csv`, `ranking.csv`, `car_acceleration.csv`
+/// (when the report has the car acceleration's views) and the gap-map plots
+/// into `out`, then `gap.md` listing `extra_plots` (file names in `out`) too.
 pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, String)]) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     let json = out.join("gap.json");
@@ -195,6 +196,9 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
     }
     w.flush()?;
     written.push(csv);
+    if let Some(views) = &report.car_acceleration_views {
+        written.push(write_car_acceleration_csv(out, views)?);
+    }
 
     let mut plots = Vec::new();
     let p = out.join("gap_map_before.png");
@@ -223,6 +227,28 @@ pub fn write_report(out: &Path, report: &GapReport, extra_plots: &[(String, Stri
     std::fs::write(&md, markdown(report, &plots)).with_context(|| format!("writing {}", md.display()))?;
     written.push(md);
     Ok(written)
+}
+
+/// Writes the car acceleration's views ([`CarAccelerationViews`]) into
+/// `out/car_acceleration.csv`: `time_s` (s from the recording's first
+/// sample at the analysis rate, as exact as `f64` holds it) and one column per view (`data`,
+/// `nominal_model`, `explaining_model`; m/s^2), a view shorter than the
+/// data left empty past its end.
+pub fn write_car_acceleration_csv(out: &Path, views: &CarAccelerationViews) -> Result<PathBuf> {
+    let csv = out.join("car_acceleration.csv");
+    let mut w = csv::Writer::from_path(&csv).with_context(|| format!("writing {}", csv.display()))?;
+    let header: Vec<String> = std::iter::once("time_s".to_string())
+        .chain(views.series.iter().map(|(label, _)| label.replace(' ', "_")))
+        .collect();
+    w.write_record(&header)?;
+    let rows = views.series.iter().map(|(_, v)| v.len()).max().unwrap_or(0);
+    for k in 0..rows {
+        let time = (k as f64 / views.sample_rate_hz).to_string();
+        let values = views.series.iter().map(|(_, v)| v.get(k).map_or(String::new(), |x| format!("{x:.9e}")));
+        w.write_record(std::iter::once(time).chain(values))?;
+    }
+    w.flush()?;
+    Ok(csv)
 }
 
 /// The report in words.
@@ -593,6 +619,38 @@ mod tests {
     use crate::attribute::FittedParameter;
     use crate::measure::GapValue;
     use plant::effects::Effects;
+
+    /// The views come back from `car_acceleration.csv` as written: one
+    /// column per view named after it, the time at the analysis rate, every
+    /// value to ten significant digits, a shorter view empty past its end.
+    #[test]
+    fn the_car_acceleration_views_are_written_as_columns() {
+        let dir = tempfile::tempdir().unwrap();
+        let data: Vec<f64> = (0..50).map(|k| (0.3 * k as f64).sin() * 1.234_567_89e-2).collect();
+        let model: Vec<f64> = data.iter().map(|x| -0.5 * x).collect();
+        let views = CarAccelerationViews {
+            recording: "travel_up".to_string(),
+            sample_rate_hz: 1024.0,
+            series: vec![("data".to_string(), data.clone()), ("nominal model".to_string(), model[..40].to_vec())],
+        };
+        let path = write_car_acceleration_csv(dir.path(), &views).unwrap();
+        let mut reader = csv::Reader::from_path(&path).unwrap();
+        assert_eq!(reader.headers().unwrap(), vec!["time_s", "data", "nominal_model"]);
+        let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+        assert_eq!(rows.len(), 50);
+        for (k, row) in rows.iter().enumerate() {
+            let time: f64 = row[0].parse().unwrap();
+            assert!((time - k as f64 / 1024.0).abs() < 1e-12, "row {k}: {time}");
+            let value: f64 = row[1].parse().unwrap();
+            assert!((value - data[k]).abs() <= 1e-9 * data[k].abs() + 1e-300, "row {k}: {value} against {}", data[k]);
+            if k < 40 {
+                let m: f64 = row[2].parse().unwrap();
+                assert!((m - model[k]).abs() <= 1e-9 * model[k].abs() + 1e-300, "row {k}");
+            } else {
+                assert_eq!(&row[2], "", "row {k}: past the model's end");
+            }
+        }
+    }
 
     #[test]
     fn verdict_text_per_verdict() {
