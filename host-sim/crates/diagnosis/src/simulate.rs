@@ -118,13 +118,19 @@ fn simulate_decay(
         // A stiffening rope or dry friction does not scale: the decay is
         // released at the level whose first second matches the test's.
         let peak = acc.values[release..].iter().take((0.05 * fs).ceil() as usize).fold(0.0f64, |m, v| m.max(v.abs()));
-        let run = |a: f64| -> Result<(f64, Vec<f64>)> {
-            let v = simulate(a)?;
-            Ok((first_second_rms(&v, sample_rate_hz), v))
+        // The search reads each decay's first second only, so it simulates
+        // no more (the decay's samples do not depend on its duration);
+        // the level found is then simulated over the whole decay.
+        let probe_s = released_s.min(1.0);
+        let run = |a: f64| -> Result<(f64, f64)> {
+            let spec = FreeDecaySpec { initial_acceleration_mps2: a, ..spec };
+            let v = simulate_free_decay_with(&spec, effects, sample_rate_hz, probe_s)
+                .with_context(|| format!("`{stem}`: simulating the free decay"))?;
+            Ok((first_second_rms(&v, sample_rate_hz), a))
         };
-        let (rms, decay) = released_at_level(run, measured_level, peak)?;
+        let (rms, released_at) = released_at_level(run, measured_level, peak)?;
         // The remaining (small) difference scaled.
-        (decay, measured_level / rms.max(1e-300))
+        (simulate(released_at)?, measured_level / rms.max(1e-300))
     } else {
         let unit = simulate(1.0)?;
         let level = measured_level / first_second_rms(&unit, sample_rate_hz).max(1e-300);
@@ -161,8 +167,8 @@ const RELEASE_LEVEL_TOLERANCE: f64 = 2e-3;
 /// (the test's first peak), at most [`RELEASE_LEVEL_RUNS`] decays: the RMS
 /// grows with the release level (dry friction lowers it by a bounded
 /// amount, a stiffening rope changes it smoothly), so the steps converge;
-/// the closest decay found is returned.
-fn released_at_level(run: impl Fn(f64) -> Result<(f64, Vec<f64>)>, target: f64, start: f64) -> Result<(f64, Vec<f64>)> {
+/// the closest decay's RMS and `run`'s other output for it are returned.
+fn released_at_level<T>(run: impl Fn(f64) -> Result<(f64, T)>, target: f64, start: f64) -> Result<(f64, T)> {
     let start = if start > 0.0 && start.is_finite() { start } else { 1.0 };
     let mut best = run(start)?;
     if !(target > 0.0 && target.is_finite()) {
