@@ -106,9 +106,11 @@ fn simulate_decay(
         initial_acceleration_mps2: 1.0,
         elements: DECAY_ROPE_ELEMENTS,
     };
-    let simulate = |initial_acceleration_mps2: f64| {
+    // The decay released at `initial_acceleration_mps2` over its first
+    // `duration_s` (its samples do not depend on the duration).
+    let simulate = |initial_acceleration_mps2: f64, duration_s: f64| {
         let spec = FreeDecaySpec { initial_acceleration_mps2, ..spec };
-        simulate_free_decay_with(&spec, effects, sample_rate_hz, released_s)
+        simulate_free_decay_with(&spec, effects, sample_rate_hz, duration_s)
             .with_context(|| format!("`{stem}`: simulating the free decay"))
     };
     // The held displacement is the test's, not the model's: the model's
@@ -119,20 +121,19 @@ fn simulate_decay(
         // released at the level whose first second matches the test's.
         let peak = acc.values[release..].iter().take((0.05 * fs).ceil() as usize).fold(0.0f64, |m, v| m.max(v.abs()));
         // The search reads each decay's first second only, so it simulates
-        // no more (the decay's samples do not depend on its duration);
-        // the level found is then simulated over the whole decay.
+        // no more; the level found is then simulated over the whole decay
+        // (unless the first second was all of it).
         let probe_s = released_s.min(1.0);
-        let run = |a: f64| -> Result<(f64, f64)> {
-            let spec = FreeDecaySpec { initial_acceleration_mps2: a, ..spec };
-            let v = simulate_free_decay_with(&spec, effects, sample_rate_hz, probe_s)
-                .with_context(|| format!("`{stem}`: simulating the free decay"))?;
-            Ok((first_second_rms(&v, sample_rate_hz), a))
+        let run = |a: f64| -> Result<(f64, (f64, Vec<f64>))> {
+            let v = simulate(a, probe_s)?;
+            Ok((first_second_rms(&v, sample_rate_hz), (a, v)))
         };
-        let (rms, released_at) = released_at_level(run, measured_level, peak)?;
+        let (rms, (released_at, probe)) = released_at_level(run, measured_level, peak)?;
+        let decay = if probe_s < released_s { simulate(released_at, released_s)? } else { probe };
         // The remaining (small) difference scaled.
-        (simulate(released_at)?, measured_level / rms.max(1e-300))
+        (decay, measured_level / rms.max(1e-300))
     } else {
-        let unit = simulate(1.0)?;
+        let unit = simulate(1.0, released_s)?;
         let level = measured_level / first_second_rms(&unit, sample_rate_hz).max(1e-300);
         (unit, level)
     };

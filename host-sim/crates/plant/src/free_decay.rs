@@ -399,6 +399,7 @@ mod tests {
         assert!(second(&large) > 0.05, "second harmonic {} of the first", second(&large));
         assert!(second(&large) > 10.0 * second(&large_linear), "{} against {}", second(&large), second(&large_linear));
     }
+
     /// A decay's samples do not depend on how long it is simulated: the
     /// first second of a three-second decay is the one-second decay, bit
     /// for bit (the diagnosis searches a release level on first seconds).
