@@ -9,6 +9,7 @@ use crate::calibrate::Calibration;
 use crate::compare::Compared;
 use crate::current_balance::{currents_unbalanced, measured_gain_errors, RecordingBalance};
 use crate::drive_finding::DriveModel;
+use crate::travel_signals::TravelTorque;
 use crate::verdict::GapOptions;
 use crate::{driven, electrical_lines, hypotheses, naming};
 use plant::effects::EffectKind;
@@ -83,6 +84,7 @@ pub(crate) fn attribute_mechanics(
     model: &RigConfig,
     calibration: &Calibration,
     dataset: &[(String, Recording)],
+    travels: &[Option<TravelTorque>],
     balances: &[RecordingBalance],
     compared: &Compared,
     drive: DriveModel,
@@ -102,7 +104,7 @@ pub(crate) fn attribute_mechanics(
     // The calibration re-done under the hypotheses of the effects it can
     // absorb (step 4a).
     let refits: Vec<hypotheses::Refit> =
-        kinds.iter().filter_map(|&k| hypotheses::refit(k, model, calibration, dataset)).collect();
+        kinds.iter().filter_map(|&k| hypotheses::refit(k, model, calibration, dataset, travels)).collect();
     let known = balance_parameters(balances);
     let lab = Lab {
         known: &known,

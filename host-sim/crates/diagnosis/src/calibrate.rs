@@ -5,7 +5,8 @@
 //! logarithmic decrement (Eqn 11-12), the sheave's damping from the torque
 //! balance of the constant-speed stage (Eqn 13 with Eqn 4).
 
-use crate::identify_dataset::identify_dataset;
+use crate::identify_dataset::identify_dataset_on;
+use crate::travel_signals::TravelTorque;
 use recording::Recording;
 use rig_config::RigConfig;
 
@@ -96,13 +97,18 @@ impl Calibration {
     }
 }
 
-/// Calibrates `rig` on `dataset` ([`identify_dataset`]: every recording on
-/// its own, implausible values and outliers left out with the reason);
-/// returns the calibrated rig and the record. A value the data does not
-/// give stays the rig's.
-pub fn calibrate(rig: &RigConfig, dataset: &[(String, Recording)]) -> (RigConfig, Calibration) {
+/// Calibrates `rig` on `dataset` ([`identify_dataset_on`]: every recording
+/// on its own, implausible values and outliers left out with the reason),
+/// `travels[i]` the torque of travel `dataset[i]` as its measurement
+/// derived it (none: derived here); returns the calibrated rig and the
+/// record. A value the data does not give stays the rig's.
+pub fn calibrate(
+    rig: &RigConfig,
+    dataset: &[(String, Recording)],
+    travels: &[Option<TravelTorque>],
+) -> (RigConfig, Calibration) {
     let m = &rig.mechanics;
-    let id = identify_dataset(rig, dataset, DECAY_MAX_FREQUENCY_HZ);
+    let id = identify_dataset_on(rig, dataset, travels, DECAY_MAX_FREQUENCY_HZ);
     let decays: Vec<DecayCalibration> = id
         .decays
         .iter()

@@ -13,6 +13,7 @@ use crate::prepare::{Prepared, RigSpeedLoop};
 use crate::signals::{self, ChainSignals};
 use crate::spectra::{self, cell_powers, Bands, ChainSpectra, Segmentation};
 use crate::target::Target;
+use crate::travel_signals::TravelTorque;
 use crate::verdict::RecordingGap;
 use crate::{driven, electrical_lines, replay};
 use plant::effects::Effects;
@@ -333,10 +334,12 @@ pub(crate) fn compared(
 }
 
 /// The nominal model's cells of every target and each recording's gap
-/// (with the project's drive, the replay's too).
+/// (with the project's drive, the replay's too, its shaft following the
+/// angle of `travels`, indexed as `dataset`).
 pub(crate) fn nominal_gaps(
     model: &RigConfig,
     dataset: &[(String, Recording)],
+    travels: &[Option<TravelTorque>],
     c: &Compared,
     drive: DriveModel,
 ) -> (Vec<Vec<CellGap>>, Vec<RecordingGap>) {
@@ -354,7 +357,8 @@ pub(crate) fn nominal_gaps(
         .map(|((&i, measured), target)| {
             let (stem, recording) = &dataset[i];
             let project = drive == DriveModel::Project;
-            project.then(|| replay::replay_cells(model, recording, stem, measured, target, bands).ok()).flatten()
+            let angle = travels.get(i)?.as_ref().filter(|_| project).map(|t| t.shaft_angle_rad.as_slice())?;
+            replay::replay_cells(model, recording, stem, angle, measured, target, bands).ok()
         })
         .collect();
     let low_acc = |c: &&CellGap| {

@@ -6,8 +6,8 @@
 use crate::compare::align_phases;
 #[cfg(doc)]
 use crate::driven;
-use crate::error::Result;
 use crate::measure::cell_gaps;
+use crate::prepare::MeasuredRun;
 use crate::signals::{self, ChainSignals};
 use crate::spectra::{cell_powers, Bands, ChainSpectra, Segmentation};
 use recording::{Recording, RecordingKind};
@@ -110,9 +110,9 @@ fn speed_profile_mismatch(stem: &str, measured: &ChainSignals, closed: &ChainSig
 pub(crate) fn decide_drive(
     option: DriveAssumption,
     dataset: &[(String, Recording)],
-    runs: &[(usize, ChainSignals, Result<ChainSignals>)],
+    runs: &[MeasuredRun],
 ) -> DriveFinding {
-    let travels = runs.iter().filter(|(i, ..)| matches!(dataset[*i].1.meta.kind, RecordingKind::Travel { .. }));
+    let travels = runs.iter().filter(|r| matches!(dataset[r.index].1.meta.kind, RecordingKind::Travel { .. }));
     match option {
         DriveAssumption::Project => {
             return DriveFinding { drive: DriveModel::Project, reason: "set by --drive project".into() }
@@ -123,8 +123,8 @@ pub(crate) fn decide_drive(
         DriveAssumption::Auto => {}
     }
     let (mut count, mut at_standstill, mut at_speed) = (0, 0, 0);
-    for (i, measured, closed) in travels {
-        let stem = &dataset[*i].0;
+    for MeasuredRun { index, measured, closed, .. } in travels {
+        let stem = &dataset[*index].0;
         count += 1;
         let reason = match closed {
             Err(e) => format!("the project's drive cannot run travel `{stem}` ({e:#})"),

@@ -47,7 +47,7 @@ use rig_config::RigConfig;
 use crate::attribute::{jackknife_error, Candidate, FittedParameter, PARAMETER_PENALTY};
 use crate::driven::TransducerTorqueLine;
 use crate::error::{DiagnosisError, Result};
-use crate::travel_signals::travel_torque;
+use crate::travel_signals::{travel_torque, TravelTorque};
 
 /// Electrical orders (multiples of the electrical frequency `p omega_m`)
 /// whose direct-axis lines are measured.
@@ -161,14 +161,19 @@ fn amplitude(p: [f64; 2]) -> f64 {
 /// The direct-axis lines of the travel recording `stem` on the machine of
 /// `rig`, over its constant-speed stage.
 pub fn travel_lines(rig: &RigConfig, recording: &Recording, stem: &str) -> Result<TravelLines> {
+    travel_lines_of(recording, stem, &travel_torque(rig, recording, stem)?, rig.motor.pole_pairs)
+}
+
+/// [`travel_lines`] on the travel's torque `t` as derived before, for a
+/// machine of `pole_pairs`.
+pub fn travel_lines_of(recording: &Recording, stem: &str, t: &TravelTorque, pole_pairs: u32) -> Result<TravelLines> {
     use recording::{I_A, I_B, I_C};
-    let t = travel_torque(rig, recording, stem)?;
     let column = |name: &str| recording.column(name).map(|c| &c.values[t.constant_speed.clone()]);
     let (Some(a), Some(b), Some(c)) = (column(I_A), column(I_B), column(I_C)) else {
         return Err(DiagnosisError::Message(format!("recording `{stem}`: phase currents missing")));
     };
     let angle = &t.shaft_angle_rad[t.constant_speed.clone()];
-    lines_of_currents(stem, [a, b, c], angle, rig.motor.pole_pairs, t.electrical_offset_rad)
+    lines_of_currents(stem, [a, b, c], angle, pole_pairs, t.electrical_offset_rad)
 }
 
 /// The direct-axis lines of the phase currents `abc` (A) over the shaft

@@ -29,7 +29,7 @@
 
 use crate::calibrate::Calibration;
 use crate::identify::first_mode_signal;
-use crate::travel_signals::torque_balance;
+use crate::travel_signals::{torque_balance, torque_balance_of, TravelTorque};
 use dsp::filter::highpass_zero_phase;
 use plant::effects::EffectKind;
 use plant::free_decay::eqn9_first_frequency_hz;
@@ -256,6 +256,7 @@ fn coulomb_guide_friction(
     model: &RigConfig,
     calibration: &Calibration,
     dataset: &[(String, Recording)],
+    travels: &[Option<TravelTorque>],
 ) -> Option<Refit> {
     let kind = EffectKind::CoulombGuideFriction;
     let m = &model.mechanics;
@@ -302,8 +303,12 @@ fn coulomb_guide_friction(
     // Eqn 13 with the dry friction: tau - tau_e = (c_sh + 2 c r^2) w + 2 F r sign(w).
     let sheave: Vec<f64> = dataset
         .iter()
-        .filter(|(_, r)| matches!(r.meta.kind, RecordingKind::Travel { .. }))
-        .filter_map(|(stem, r)| torque_balance(model, r, stem, 2.0 * c).ok())
+        .enumerate()
+        .filter(|(_, (_, r))| matches!(r.meta.kind, RecordingKind::Travel { .. }))
+        .filter_map(|(i, (stem, r))| match travels.get(i).and_then(Option::as_ref) {
+            Some(t) => torque_balance_of(model, r, stem, 2.0 * c, t).ok(),
+            None => torque_balance(model, r, stem, 2.0 * c).ok(),
+        })
         .map(|b| {
             b.sheave_damping_nms_per_rad
                 - 2.0 * f * m.sheave_radius_m * b.mean_speed_radps.signum() / b.mean_speed_radps
@@ -343,10 +348,11 @@ pub fn refit(
     model: &RigConfig,
     calibration: &Calibration,
     dataset: &[(String, Recording)],
+    travels: &[Option<TravelTorque>],
 ) -> Option<Refit> {
     match kind {
         EffectKind::TensionStiffening => tension_stiffening(model, calibration),
-        EffectKind::CoulombGuideFriction => coulomb_guide_friction(model, calibration, dataset),
+        EffectKind::CoulombGuideFriction => coulomb_guide_friction(model, calibration, dataset, travels),
         _ => None,
     }
 }

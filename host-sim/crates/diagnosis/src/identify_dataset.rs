@@ -5,7 +5,7 @@
 //! aside, and a reason for every recording left out.
 
 use super::identify::{identify_free_decay, FreeDecayIdentification};
-use super::travel_signals::{torque_balance, TorqueBalance};
+use super::travel_signals::{torque_balance, torque_balance_of, TorqueBalance, TravelTorque};
 use recording::{Recording, RecordingKind, ACC_CAR};
 use rig_config::RigConfig;
 
@@ -69,6 +69,18 @@ pub fn identify_dataset(
     dataset: &[(String, Recording)],
     max_frequency_hz: f64,
 ) -> DatasetIdentification {
+    identify_dataset_on(rig, dataset, &[], max_frequency_hz)
+}
+
+/// [`identify_dataset`] with the travels' torques as derived before:
+/// `torques[i]` that of `dataset[i]` where there is one (a travel without
+/// one, or beyond the slice, has its torque derived here).
+pub fn identify_dataset_on(
+    rig: &RigConfig,
+    dataset: &[(String, Recording)],
+    torques: &[Option<TravelTorque>],
+    max_frequency_hz: f64,
+) -> DatasetIdentification {
     let m = &rig.mechanics;
     let mut out = DatasetIdentification::default();
     let mut decays = Vec::new();
@@ -100,9 +112,13 @@ pub fn identify_dataset(
 
     let guides = out.guide_damping_kg_per_s.map_or(m.c_cw_kg_per_s + m.c_car_kg_per_s, |c| 2.0 * c);
     let mut travels = Vec::new();
-    for (stem, recording) in dataset {
+    for (i, (stem, recording)) in dataset.iter().enumerate() {
         if let RecordingKind::Travel { .. } = recording.meta.kind {
-            match torque_balance(rig, recording, stem, guides) {
+            let balance = match torques.get(i).and_then(Option::as_ref) {
+                Some(t) => torque_balance_of(rig, recording, stem, guides, t),
+                None => torque_balance(rig, recording, stem, guides),
+            };
+            match balance {
                 Ok(b) => travels.push((stem.clone(), b)),
                 Err(e) => out.leave_out(stem, format!("{e:#}")),
             }

@@ -5,9 +5,12 @@
 //!
 //! The pipeline, [`diagnose`] (in [`mod@pipeline`]), step by step:
 //!
-//! 1. [`mod@calibrate`]: EA, guide and sheave damping identified from the data.
-//! 2. [`prepare`]: every recording measured ([`signals`]) and its
-//!    counterpart made with the calibrated nominal model: [`simulate`]
+//! 1. [`prepare`] measures every recording ([`signals`]; a travel's torque
+//!    and shaft angle derived once, [`travel_signals`], and handed to every
+//!    step after it), then [`mod@calibrate`]: EA, guide and sheave damping
+//!    identified from the data.
+//! 2. [`prepare`]: every recording's counterpart made with the calibrated
+//!    nominal model: [`simulate`]
 //!    (closed loop) or, for travels under another drive, the mechanics
 //!    driven by the measured torque ([`driven`]); which drive the rig runs,
 //!    [`drive_finding`] decides on the closed loop's runs.

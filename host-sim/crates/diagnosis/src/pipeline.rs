@@ -14,7 +14,8 @@ use crate::error::{bail, Result};
 use crate::identify_dataset::LeftOut;
 use crate::locate::{locate, Location};
 use crate::measure::{persistent_cell, CellGap, PersistentCell};
-use crate::prepare::{counterpart, measure_and_run_closed_loop, Prepared};
+use crate::prepare::{counterpart, measure, run_closed_loop, Prepared};
+use crate::travel_signals::TravelTorque;
 use crate::verdict::{self, explained_by, verdict_of, GapOptions, GapReport, RecordingGap, Verdict};
 use rayon::prelude::*;
 use recording::Recording;
@@ -41,6 +42,7 @@ pub fn diagnose(
         &nominal.model,
         &nominal.calibration,
         dataset,
+        &nominal.travels,
         &gap.current_balance,
         &nominal.compared,
         nominal.drive.drive,
@@ -109,14 +111,17 @@ struct NominalComparison {
     drive: DriveFinding,
     /// The comparison targets.
     compared: Compared,
+    /// Per recording of the dataset, a travel's torque and shaft angle as
+    /// its measurement derived them.
+    travels: Vec<Option<TravelTorque>>,
     /// The recordings left out, with their reasons.
     left_out: Vec<LeftOut>,
 }
 
-/// Steps 1 to 3: calibrates the model, measures every recording, runs the
-/// closed loop on it, decides the drive on those runs and makes each
-/// recording's counterpart (with the calibration's perturbed models, for
-/// the cells' tolerances).
+/// Steps 1 to 3: measures every recording, calibrates the model on them,
+/// runs the closed loop on each, decides the drive on those runs and makes
+/// each recording's counterpart (with the calibration's perturbed models,
+/// for the cells' tolerances).
 fn nominal_comparison(
     rig: &RigConfig,
     name: &str,
@@ -125,19 +130,31 @@ fn nominal_comparison(
     progress: &(dyn Fn(&str, usize, usize) + Sync),
 ) -> Result<NominalComparison> {
     progress("calibrating", 0, 1);
-    let (model, calibration) = calibrate(rig, dataset);
-    let perturbed_models = [calibration.perturbed(&model, 1.0), calibration.perturbed(&model, -1.0)];
     let mut left_out = Vec::new();
+    let (measured, travels) = measure(rig, dataset, &mut left_out);
+    let (model, calibration) = calibrate(rig, dataset, &travels);
+    let perturbed_models = [calibration.perturbed(&model, 1.0), calibration.perturbed(&model, -1.0)];
 
     progress("nominal model", 0, dataset.len());
-    let runs = measure_and_run_closed_loop(rig, &model, dataset, &mut left_out);
+    let runs = run_closed_loop(&model, dataset, measured);
     let drive = decide_drive(options.drive, dataset, &runs);
     let prepared: Vec<(usize, Result<Prepared>)> = runs
         .into_par_iter()
-        .map(|(i, measured, closed)| {
-            let (stem, recording) = &dataset[i];
+        .map(|run| {
+            let (stem, recording) = &dataset[run.index];
             let models = [&model, &perturbed_models[0], &perturbed_models[1]];
-            (i, counterpart(models, drive.drive, stem, recording, measured, closed))
+            (
+                run.index,
+                counterpart(
+                    models,
+                    drive.drive,
+                    stem,
+                    recording,
+                    run.measured,
+                    travels[run.index].as_ref(),
+                    run.closed,
+                ),
+            )
         })
         .collect();
     let Some(compared) = compared(dataset, prepared, drive.drive, &model, &mut left_out) else {
@@ -145,7 +162,7 @@ fn nominal_comparison(
         bail!("dataset {name}: no recording could be diagnosed: {}", reasons.join("; "));
     };
     progress("nominal model", dataset.len(), dataset.len());
-    Ok(NominalComparison { model, calibration, drive, compared, left_out })
+    Ok(NominalComparison { model, calibration, drive, compared, travels, left_out })
 }
 
 /// The nominal model's gap, step 3's figures.
@@ -175,7 +192,7 @@ struct NominalGap {
 /// and whether the nominal model holds.
 fn nominal_gap(nominal: &NominalComparison, dataset: &[(String, Recording)], options: &GapOptions) -> NominalGap {
     let compared = &nominal.compared;
-    let (cells, recordings) = nominal_gaps(&nominal.model, dataset, compared, nominal.drive.drive);
+    let (cells, recordings) = nominal_gaps(&nominal.model, dataset, &nominal.travels, compared, nominal.drive.drive);
     let n = recordings.len() as f64;
     let excess_db = recordings.iter().map(|r| r.nominal_excess_db).sum::<f64>() / n;
     let noise_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use crate::drive_finding::DriveModel;
 use crate::error::Result;
 use crate::identify_dataset::LeftOut;
-use crate::signals::{self, chain_signals, decimation_factor, ChainSignals};
+use crate::signals::{self, decimation_factor, measured_chain_signals, ChainSignals};
 #[cfg(doc)]
 use crate::simulate;
 use crate::simulate::{
@@ -92,32 +92,66 @@ fn difference(a: &ChainSignals, b: &ChainSignals) -> ChainSignals {
     out
 }
 
-/// The measured chain signals of every recording and, for the decision on
-/// the drive, the closed loop's nominal run of each (an error where it
-/// cannot run, e.g. the project's drive trips on the recording).
-pub(crate) fn measure_and_run_closed_loop(
+/// Step 2, first half: every recording measured, its chain signals and a
+/// travel's torque and shaft angle (derived once, handed on to the steps
+/// that need them), indexed as `dataset`; what cannot be measured goes to
+/// `left_out` with its reason.
+pub(crate) fn measure(
     rig: &RigConfig,
-    model: &RigConfig,
     dataset: &[(String, Recording)],
     left_out: &mut Vec<LeftOut>,
-) -> Vec<(usize, ChainSignals, Result<ChainSignals>)> {
-    let runs: Vec<Result<(ChainSignals, Result<ChainSignals>)>> = dataset
+) -> (Vec<Option<ChainSignals>>, Vec<Option<travel_signals::TravelTorque>>) {
+    let measured: Vec<Result<(ChainSignals, Option<travel_signals::TravelTorque>)>> = dataset
         .par_iter()
         .map(|(stem, recording)| {
-            let factor = decimation_factor(recording.meta.sample_rate_hz);
-            let measured = chain_signals(rig, recording, stem, factor, true)?;
-            let closed = simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
-            Ok((measured, closed))
+            measured_chain_signals(rig, recording, stem, decimation_factor(recording.meta.sample_rate_hz))
         })
         .collect();
-    let mut out = Vec::new();
-    for (i, run) in runs.into_iter().enumerate() {
-        match run {
-            Ok((measured, closed)) => out.push((i, measured, closed)),
-            Err(e) => left_out.push(LeftOut { recording: dataset[i].0.clone(), reason: format!("{e:#}") }),
+    let (mut signals, mut travels) = (Vec::new(), Vec::new());
+    for (i, m) in measured.into_iter().enumerate() {
+        match m {
+            Ok((s, t)) => {
+                signals.push(Some(s));
+                travels.push(t);
+            }
+            Err(e) => {
+                left_out.push(LeftOut { recording: dataset[i].0.clone(), reason: format!("{e:#}") });
+                signals.push(None);
+                travels.push(None);
+            }
         }
     }
-    out
+    (signals, travels)
+}
+
+/// Step 2, second half: the project's closed loop with the calibrated
+/// nominal `model` on every measured recording (`measured`, indexed as
+/// `dataset`).
+pub(crate) fn run_closed_loop(
+    model: &RigConfig,
+    dataset: &[(String, Recording)],
+    measured: Vec<Option<ChainSignals>>,
+) -> Vec<MeasuredRun> {
+    measured
+        .into_par_iter()
+        .enumerate()
+        .filter_map(|(index, measured)| {
+            let measured = measured?;
+            let (stem, recording) = &dataset[index];
+            let closed = simulate_counterpart(model, &Effects::none(), recording, stem, model_step_s(model));
+            Some(MeasuredRun { index, measured, closed })
+        })
+        .collect()
+}
+
+/// One recording measured and run in the project's closed loop.
+pub(crate) struct MeasuredRun {
+    /// Its index in the dataset.
+    pub(crate) index: usize,
+    /// Its chain signals.
+    pub(crate) measured: ChainSignals,
+    /// The closed loop's run with the calibrated nominal model, or why not.
+    pub(crate) closed: Result<ChainSignals>,
 }
 
 /// The series that give a travel's true torque under a current-transducer
@@ -128,8 +162,8 @@ fn transducer_series(
     recording: &Recording,
     stem: &str,
     measured: &ChainSignals,
+    torque: &travel_signals::TravelTorque,
 ) -> Option<transducer::TransducerSeries> {
-    let torque = travel_signals::travel_torque(rig, recording, stem).ok()?;
     let factor = measured.decimation_from(recording.meta.sample_rate_hz);
     transducer::TransducerSeries::of(
         rig,
@@ -152,6 +186,7 @@ pub(crate) fn counterpart(
     stem: &str,
     recording: &Recording,
     mut measured: ChainSignals,
+    travel: Option<&travel_signals::TravelTorque>,
     closed: Result<ChainSignals>,
 ) -> Result<Prepared> {
     let driven = matches!(recording.meta.kind, RecordingKind::Travel { .. }) && drive == DriveModel::Foreign;
@@ -167,14 +202,17 @@ pub(crate) fn counterpart(
     }
     let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
     let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
-    let shaft_angle = driven.then(|| travel_signals::travel_shaft_angle(models[0], recording).1);
-    let direct_axis =
-        driven.then(|| electrical_lines::travel_lines(models[0], recording, stem).map_err(|e| format!("{e:#}")));
+    let shaft_angle = driven.then(|| travel.map(|t| t.angle_alignment.clone())).flatten();
+    let direct_axis = driven
+        .then(|| travel.map(|t| electrical_lines::travel_lines_of(recording, stem, t, models[0].motor.pole_pairs)))
+        .flatten()
+        .map(|lines| lines.map_err(|e| format!("{e:#}")));
     let transducer_lines = match &direct_axis {
         Some(Ok(lines)) => electrical_lines::transducer_torque_lines(&models[0].motor, lines),
         _ => Vec::new(),
     };
-    let transducer = if driven { transducer_series(models[0], recording, stem, &measured) } else { None };
+    let transducer =
+        travel.filter(|_| driven).and_then(|t| transducer_series(models[0], recording, stem, &measured, t));
     let drive_record = DriveRecord {
         torque_nm: &torque,
         speed_estimate_radps: &speed,

@@ -103,13 +103,16 @@ pub fn replay_accelerations(
     Ok((car, cw))
 }
 
-/// The replay's accelerations of the travel `recording` (`stem`) against
-/// the measured cells of `target`, cell by cell (car and counterweight
-/// channels, the measured phases).
+/// The replay's accelerations of the travel `recording` (`stem`), its
+/// shaft following `shaft_angle_rad` (rad, at the recording's rate, on the
+/// currents' time base: [`crate::travel_signals::travel_shaft_angle`]),
+/// against the measured cells of `target`, cell by cell (car and
+/// counterweight channels, the measured phases).
 pub fn replay_cells(
     rig: &RigConfig,
     recording: &recording::Recording,
     stem: &str,
+    shaft_angle_rad: &[f64],
     measured: &super::signals::ChainSignals,
     target: &super::target::Target,
     bands: &super::spectra::Bands,
@@ -121,9 +124,8 @@ pub fn replay_cells(
         bail!("`{stem}`: only travels are replayed");
     };
     let fs = recording.meta.sample_rate_hz;
-    let (angle, _) = crate::travel_signals::travel_shaft_angle(rig, recording);
     let factor = decimation_factor(fs);
-    let angle = if factor > 1 { dsp::decimate(&angle, factor)? } else { angle };
+    let angle = if factor > 1 { dsp::decimate(shaft_angle_rad, factor)? } else { shaft_angle_rad.to_vec() };
     let len = measured.len().min(angle.len());
     let (car, cw) = replay_accelerations(rig, m_car_kg, m_cw_kg, lw_start_m, &angle[..len], measured.sample_rate_hz)?;
     let mut channels = vec![(Channel::CarAcceleration, car)];

@@ -10,7 +10,7 @@ use std::ops::Range;
 use crate::error::{Context, Result};
 
 use crate::identify::release_index;
-use crate::travel_signals::travel_torque;
+use crate::travel_signals::{travel_torque, TravelTorque};
 use dsp::{decimate, travel_phases, welch_psd};
 use plant::free_decay::eqn9_first_frequency_hz;
 use recording::{Recording, RecordingKind, ACC_CAR, ACC_CW, ACC_MACHINE};
@@ -224,15 +224,49 @@ pub fn chain_signals(
     factor: usize,
     measured: bool,
 ) -> Result<ChainSignals> {
+    let torque = travel_torque_of(rig, recording, stem)?;
+    chain_signals_on(rig, recording, stem, factor, measured, torque.as_ref())
+}
+
+/// A measured recording's chain signals ([`chain_signals`], with the
+/// noise densities) and, for a travel, the torque and shaft angle they
+/// were derived from, for the steps after the measurement to use instead
+/// of deriving them again.
+pub fn measured_chain_signals(
+    rig: &RigConfig,
+    recording: &Recording,
+    stem: &str,
+    factor: usize,
+) -> Result<(ChainSignals, Option<TravelTorque>)> {
+    let torque = travel_torque_of(rig, recording, stem)?;
+    Ok((chain_signals_on(rig, recording, stem, factor, true, torque.as_ref())?, torque))
+}
+
+/// A travel's [`TravelTorque`]; none for a free decay.
+fn travel_torque_of(rig: &RigConfig, recording: &Recording, stem: &str) -> Result<Option<TravelTorque>> {
+    match recording.meta.kind {
+        RecordingKind::Travel { .. } => Ok(Some(travel_torque(rig, recording, stem)?)),
+        RecordingKind::FreeDecay { .. } => Ok(None),
+    }
+}
+
+/// [`chain_signals`] on a travel's `torque` (none for a free decay).
+fn chain_signals_on(
+    rig: &RigConfig,
+    recording: &Recording,
+    stem: &str,
+    factor: usize,
+    measured: bool,
+    torque: Option<&TravelTorque>,
+) -> Result<ChainSignals> {
     let fs = recording.meta.sample_rate_hz;
     let mut full: Vec<(Channel, Vec<f64>)> = Vec::new();
-    let mut angle = Vec::new();
-    let is_travel = matches!(recording.meta.kind, RecordingKind::Travel { .. });
-    if is_travel {
-        let torque = travel_torque(rig, recording, stem)?;
-        angle = torque.shaft_angle_rad.clone();
-        full.push((Channel::Torque, torque.torque_nm));
-        full.push((Channel::Speed, torque.speed_radps));
+    let mut angle: &[f64] = &[];
+    let is_travel = torque.is_some();
+    if let Some(torque) = torque {
+        angle = &torque.shaft_angle_rad;
+        full.push((Channel::Torque, torque.torque_nm.clone()));
+        full.push((Channel::Speed, torque.speed_radps.clone()));
     }
     for (channel, name) in [
         (Channel::CarAcceleration, ACC_CAR),

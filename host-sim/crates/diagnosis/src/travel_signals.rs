@@ -302,11 +302,24 @@ pub fn torque_balance(
     stem: &str,
     guide_damping_kg_per_s: f64,
 ) -> Result<TorqueBalance> {
+    let recording::RecordingKind::Travel { .. } = recording.meta.kind else {
+        bail!("recording `{stem}` is not a travel");
+    };
+    torque_balance_of(rig, recording, stem, guide_damping_kg_per_s, &travel_torque(rig, recording, stem)?)
+}
+
+/// [`torque_balance`] on the travel's torque `t` as derived before.
+pub fn torque_balance_of(
+    rig: &rig_config::RigConfig,
+    recording: &recording::Recording,
+    stem: &str,
+    guide_damping_kg_per_s: f64,
+    t: &TravelTorque,
+) -> Result<TorqueBalance> {
     let recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         bail!("recording `{stem}` is not a travel");
     };
     let m = &rig.mechanics;
-    let t = travel_torque(rig, recording, stem)?;
     let stage = t.constant_speed.clone();
     let lw = counterweight_side_length_m(&t.shaft_angle_rad, lw_start_m, m.sheave_radius_m);
     let n = stage.len() as f64;
