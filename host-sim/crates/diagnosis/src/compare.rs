@@ -202,6 +202,8 @@ pub(crate) struct Compared {
     pub(crate) targets: Vec<Target>,
     /// The measured chain signals of each target.
     pub(crate) measured: Vec<ChainSignals>,
+    /// Their spectra on the target's segmentation of them, computed once.
+    pub(crate) measured_spectra: Vec<ChainSpectra>,
     /// Index of each target's recording in the dataset.
     used: Vec<usize>,
     /// The analysis bands (one sample rate for the dataset).
@@ -227,7 +229,7 @@ fn target_of(
     bands_so_far: Option<&Bands>,
     drive: DriveModel,
     model: &RigConfig,
-) -> std::result::Result<(Target, ChainSignals, Bands), String> {
+) -> std::result::Result<(Target, ChainSignals, ChainSpectra, Bands), String> {
     let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, how, .. } = prepared;
     let measured_for_perturbed = measured.clone();
     align_phases(&mut measured, &mut nominal);
@@ -272,7 +274,7 @@ fn target_of(
         nominal: nominal_spectra,
         counterpart: how,
     };
-    Ok((target, measured, bands))
+    Ok((target, measured, measured_spectra, bands))
 }
 
 /// The comparison targets of every prepared recording; what cannot be
@@ -287,6 +289,7 @@ pub(crate) fn compared(
     let (mut targets, mut measured_all, mut used, mut rig_speed_loops) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut direct_axis = (Vec::new(), Vec::new());
+    let mut measured_spectra = Vec::new();
     let mut bands_all: Option<Bands> = None;
     let mut simulations = 0;
     for (i, prepared) in prepared {
@@ -315,7 +318,7 @@ pub(crate) fn compared(
         }
         let lines = prepared.direct_axis.take();
         match target_of(prepared, recording, bands_all.as_ref(), drive, model) {
-            Ok((target, measured, bands)) => {
+            Ok((target, measured, spectra, bands)) => {
                 match lines {
                     Some(Ok(l)) => direct_axis.0.push(l),
                     Some(Err(reason)) => direct_axis.1.push((stem.clone(), reason)),
@@ -323,6 +326,7 @@ pub(crate) fn compared(
                 }
                 targets.push(target);
                 measured_all.push(measured);
+                measured_spectra.push(spectra);
                 used.push(i);
                 bands_all = Some(bands);
             }
@@ -330,7 +334,16 @@ pub(crate) fn compared(
         }
     }
     let bands = bands_all?;
-    Some(Compared { targets, measured: measured_all, used, bands, rig_speed_loops, direct_axis, simulations })
+    Some(Compared {
+        targets,
+        measured: measured_all,
+        measured_spectra,
+        used,
+        bands,
+        rig_speed_loops,
+        direct_axis,
+        simulations,
+    })
 }
 
 /// The nominal model's cells of every target and each recording's gap

@@ -4,8 +4,8 @@
 //! frequencies found in the data against the model's).
 
 use super::measure::{gap_of_cells, CellGap};
-use super::signals::{ChainSignals, Channel, Phase, Subsystem};
-use super::spectra::Bands;
+use super::signals::{Channel, Phase, Subsystem};
+use super::spectra::{Bands, ChainSpectra};
 use super::target::Target;
 use super::RecordingGap;
 
@@ -308,13 +308,12 @@ fn strongest_cells(cells: &[Vec<CellGap>], stems: &[&str], bands: &Bands) -> Vec
 
 /// Step: per recording, the strongest car-acceleration peak of its decay (or
 /// its stop) in the data against the nominal model's.
-fn natural_frequencies(targets: &[Target], measured: &[ChainSignals], bands: &Bands) -> Vec<NaturalFrequency> {
+fn natural_frequencies(targets: &[Target], measured: &[ChainSpectra]) -> Vec<NaturalFrequency> {
     let mut natural_frequencies = Vec::new();
-    for (t, m) in targets.iter().zip(measured) {
-        let phase = if m.phases.iter().any(|(p, _)| *p == Phase::Decay) { Phase::Decay } else { Phase::Stop };
-        let seg = super::spectra::Segmentation::of(m);
-        let spectra = super::spectra::ChainSpectra::compute(m, &seg, bands);
-        if let (Some(measured_hz), Some(model_hz)) = (peak_hz(&spectra, phase), peak_hz(&t.nominal, phase)) {
+    for (t, spectra) in targets.iter().zip(measured) {
+        let decay = matches!(t.recording.meta.kind, recording::RecordingKind::FreeDecay { .. });
+        let phase = if decay { Phase::Decay } else { Phase::Stop };
+        if let (Some(measured_hz), Some(model_hz)) = (peak_hz(spectra, phase), peak_hz(&t.nominal, phase)) {
             natural_frequencies.push(NaturalFrequency { recording: t.stem.clone(), phase, measured_hz, model_hz });
         }
     }
@@ -323,13 +322,13 @@ fn natural_frequencies(targets: &[Target], measured: &[ChainSignals], bands: &Ba
 
 /// Locates the gap of the nominal model from its cells (`cells[r]` for
 /// recording `r`), the recordings' gaps (closed loop and replay) and the
-/// spectra.
+/// spectra (`measured`, each target's measured ones).
 pub fn locate(
     cells: &[Vec<CellGap>],
     recordings: &[RecordingGap],
     bands: &Bands,
     targets: &[Target],
-    measured: &[ChainSignals],
+    measured: &[ChainSpectra],
 ) -> Location {
     let channels = channel_gaps(cells);
     let Entry { subsystem, reasoning } = entry(&SubsystemExcess::of(&channels), &ShaftReplay::of(recordings));
@@ -352,7 +351,7 @@ pub fn locate(
         phases: phases.into_iter().map(|p| p.gap).collect(),
         bands: band_slices,
         strongest_cells: strongest_cells(cells, &stems, bands),
-        natural_frequencies: natural_frequencies(targets, measured, bands),
+        natural_frequencies: natural_frequencies(targets, measured),
     }
 }
 

@@ -7,7 +7,7 @@ use std::time::Instant;
 use crate::attribute::Candidate;
 use crate::attribution::{attribute_mechanics, electrical_lines_of};
 use crate::calibrate::{calibrate, Calibration};
-use crate::compare::{car_acceleration_views, compared, gap_after, nominal_gaps, Compared};
+use crate::compare::{car_acceleration_views, compared, gap_after, nominal_gaps, CarAccelerationViews, Compared};
 use crate::current_balance::{self, RecordingBalance};
 use crate::drive_finding::{decide_drive, DriveFinding};
 use crate::error::{bail, Result};
@@ -17,6 +17,7 @@ use crate::measure::{persistent_cell, CellGap, PersistentCell};
 use crate::prepare::{counterpart, measure, run_closed_loop, Prepared};
 use crate::travel_signals::TravelTorque;
 use crate::verdict::{self, explained_by, verdict_of, GapOptions, GapReport, RecordingGap, Verdict};
+use plant::effects::Effects;
 use rayon::prelude::*;
 use recording::Recording;
 use rig_config::RigConfig;
@@ -58,18 +59,9 @@ pub fn diagnose(
     let explained_by = (verdict == Verdict::Explained).then(|| explained_by(electrical, best));
     let explaining =
         (verdict == Verdict::Explained).then(|| best.map(|b| (b.rig(&nominal.model), &b.effects))).flatten();
-    let targets = nominal.compared.targets.len();
-    let mut simulations = nominal.compared.simulations + planned * targets;
-    let map_after = match explaining {
-        Some((explaining_rig, effects)) => {
-            progress(&format!("checking {}", effects.summary()), 0, targets);
-            simulations += targets;
-            gap_after(explaining_rig, effects, &nominal.compared, &mut gap.recordings)
-        }
-        None => Vec::new(),
-    };
-    let car_acceleration_views = car_acceleration_views(&nominal.model, &nominal.compared, &gap.recordings, explaining);
-    simulations += car_acceleration_views.as_ref().map_or(0, |v| v.series.len().saturating_sub(1));
+    let (map_after, car_acceleration_views, checked) =
+        check_explanation(&nominal, &mut gap.recordings, explaining, progress);
+    let simulations = nominal.compared.simulations + planned * nominal.compared.targets.len() + checked;
     let ranking =
         electrical.map(|e| e.ranking.clone()).unwrap_or_default().into_iter().chain(mechanical_ranking).collect();
     Ok(GapReport {
@@ -196,7 +188,7 @@ fn nominal_gap(nominal: &NominalComparison, dataset: &[(String, Recording)], opt
     let n = recordings.len() as f64;
     let excess_db = recordings.iter().map(|r| r.nominal_excess_db).sum::<f64>() / n;
     let noise_db = recordings.iter().map(|r| r.nominal.noise_db).sum::<f64>() / n;
-    let location = locate(&cells, &recordings, &compared.bands, &compared.targets, &compared.measured);
+    let location = locate(&cells, &recordings, &compared.bands, &compared.targets, &compared.measured_spectra);
     let persistent_cell = persistent_cell(&cells, &compared.bands);
     // Recorded currents that do not sum to zero are measured with an
     // error, however small the gap it leaves: not the nominal rig.
@@ -216,6 +208,32 @@ fn nominal_gap(nominal: &NominalComparison, dataset: &[(String, Recording)], opt
         unbalanced,
         is_nominal,
     }
+}
+
+/// Step 6's check: the explaining model's (`explaining`, its rig and its
+/// effects, if the verdict names one) gap on every recording, written into
+/// `recordings` and returned as the map after, and the car acceleration's
+/// views of the recording the nominal model misses most; with the
+/// simulations both ran.
+fn check_explanation(
+    nominal: &NominalComparison,
+    recordings: &mut [RecordingGap],
+    explaining: Option<(&RigConfig, &Effects)>,
+    progress: &(dyn Fn(&str, usize, usize) + Sync),
+) -> (Vec<CellGap>, Option<CarAccelerationViews>, usize) {
+    let targets = nominal.compared.targets.len();
+    let mut simulations = 0;
+    let map_after = match explaining {
+        Some((explaining_rig, effects)) => {
+            progress(&format!("checking {}", effects.summary()), 0, targets);
+            simulations += targets;
+            gap_after(explaining_rig, effects, &nominal.compared, recordings)
+        }
+        None => Vec::new(),
+    };
+    let views = car_acceleration_views(&nominal.model, &nominal.compared, recordings, explaining);
+    simulations += views.as_ref().map_or(0, |v| v.series.len().saturating_sub(1));
+    (map_after, views, simulations)
 }
 
 /// The mechanics' candidate the verdict rests on: a named one, also when
