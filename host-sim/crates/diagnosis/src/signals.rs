@@ -260,13 +260,14 @@ fn chain_signals_on(
     torque: Option<&TravelTorque>,
 ) -> Result<ChainSignals> {
     let fs = recording.meta.sample_rate_hz;
-    let mut full: Vec<(Channel, Vec<f64>)> = Vec::new();
+    // The full-rate channels, borrowed: decimated into new vectors.
+    let mut full: Vec<(Channel, &[f64])> = Vec::new();
     let mut angle: &[f64] = &[];
     let is_travel = torque.is_some();
     if let Some(torque) = torque {
         angle = &torque.shaft_angle_rad;
-        full.push((Channel::Torque, torque.torque_nm.clone()));
-        full.push((Channel::Speed, torque.speed_radps.clone()));
+        full.push((Channel::Torque, &torque.torque_nm));
+        full.push((Channel::Speed, &torque.speed_radps));
     }
     for (channel, name) in [
         (Channel::CarAcceleration, ACC_CAR),
@@ -274,12 +275,12 @@ fn chain_signals_on(
         (Channel::MachineAcceleration, ACC_MACHINE),
     ] {
         if let Some(c) = recording.column(name) {
-            full.push((channel, c.values.clone()));
+            full.push((channel, &c.values));
         }
     }
     let compared_from = match recording.meta.kind {
         RecordingKind::FreeDecay { mass_kg, rope_length_m } => {
-            let car = full.iter().find(|(c, _)| *c == Channel::CarAcceleration).map(|(_, v)| v.as_slice());
+            let car = full.iter().find(|(c, _)| *c == Channel::CarAcceleration).map(|(_, v)| *v);
             decay_comparison_start(rig, car.unwrap_or(&[]), fs, mass_kg, rope_length_m)
         }
         RecordingKind::Travel { .. } => 0,
@@ -297,7 +298,7 @@ fn chain_signals_on(
     let rate = fs / factor as f64;
     let mut channels = Vec::new();
     for (channel, values) in full {
-        let values = if factor > 1 { decimate(&values, factor)? } else { values };
+        let values = if factor > 1 { decimate(values, factor)? } else { values.to_vec() };
         channels.push((channel, values));
     }
     let len = channels.iter().map(|(_, v)| v.len()).min().unwrap_or(0);
