@@ -369,8 +369,10 @@ pub(crate) fn nominal_gaps(
         .zip(c.targets.par_iter())
         .map(|((&i, measured), target)| {
             let (stem, recording) = &dataset[i];
-            let project = drive == DriveModel::Project;
-            let angle = travels.get(i)?.as_ref().filter(|_| project).map(|t| t.shaft_angle_rad.as_slice())?;
+            if drive != DriveModel::Project {
+                return None;
+            }
+            let angle = &travels.get(i)?.as_ref()?.shaft_angle_rad;
             replay::replay_cells(model, recording, stem, angle, measured, target, bands).ok()
         })
         .collect();

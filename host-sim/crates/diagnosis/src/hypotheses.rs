@@ -29,7 +29,7 @@
 
 use crate::calibrate::Calibration;
 use crate::identify::first_mode_signal;
-use crate::travel_signals::{torque_balance, torque_balance_of, TravelTorque};
+use crate::travel_signals::{torque_balance, TravelTorque};
 use dsp::filter::highpass_zero_phase;
 use plant::effects::EffectKind;
 use plant::free_decay::eqn9_first_frequency_hz;
@@ -305,9 +305,8 @@ fn coulomb_guide_friction(
         .iter()
         .enumerate()
         .filter(|(_, (_, r))| matches!(r.meta.kind, RecordingKind::Travel { .. }))
-        .filter_map(|(i, (stem, r))| match travels.get(i).and_then(Option::as_ref) {
-            Some(t) => torque_balance_of(model, r, stem, 2.0 * c, t).ok(),
-            None => torque_balance(model, r, stem, 2.0 * c).ok(),
+        .filter_map(|(i, (stem, r))| {
+            torque_balance(model, r, stem, 2.0 * c, travels.get(i).and_then(Option::as_ref)).ok()
         })
         .map(|b| {
             b.sheave_damping_nms_per_rad

@@ -5,7 +5,7 @@
 //! aside, and a reason for every recording left out.
 
 use super::identify::{identify_free_decay, FreeDecayIdentification};
-use super::travel_signals::{torque_balance, torque_balance_of, TorqueBalance, TravelTorque};
+use super::travel_signals::{torque_balance, TorqueBalance, TravelTorque};
 use recording::{Recording, RecordingKind, ACC_CAR};
 use rig_config::RigConfig;
 
@@ -114,11 +114,7 @@ pub fn identify_dataset_on(
     let mut travels = Vec::new();
     for (i, (stem, recording)) in dataset.iter().enumerate() {
         if let RecordingKind::Travel { .. } = recording.meta.kind {
-            let balance = match torques.get(i).and_then(Option::as_ref) {
-                Some(t) => torque_balance_of(rig, recording, stem, guides, t),
-                None => torque_balance(rig, recording, stem, guides),
-            };
-            match balance {
+            match torque_balance(rig, recording, stem, guides, torques.get(i).and_then(Option::as_ref)) {
                 Ok(b) => travels.push((stem.clone(), b)),
                 Err(e) => out.leave_out(stem, format!("{e:#}")),
             }

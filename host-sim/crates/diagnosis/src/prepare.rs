@@ -202,17 +202,17 @@ pub(crate) fn counterpart(
     }
     let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
     let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
-    let shaft_angle = driven.then(|| travel.map(|t| t.angle_alignment.clone())).flatten();
-    let direct_axis = driven
-        .then(|| travel.map(|t| electrical_lines::travel_lines_of(recording, stem, t, models[0].motor.pole_pairs)))
-        .flatten()
-        .map(|lines| lines.map_err(|e| format!("{e:#}")));
+    // The travel's torque and angle, where the model is driven by them.
+    let driving = travel.filter(|_| driven);
+    let shaft_angle = driving.map(|t| t.angle_alignment.clone());
+    let direct_axis = driving.map(|t| {
+        electrical_lines::travel_lines_of(recording, stem, t, models[0].motor.pole_pairs).map_err(|e| format!("{e:#}"))
+    });
     let transducer_lines = match &direct_axis {
         Some(Ok(lines)) => electrical_lines::transducer_torque_lines(&models[0].motor, lines),
         _ => Vec::new(),
     };
-    let transducer =
-        travel.filter(|_| driven).and_then(|t| transducer_series(models[0], recording, stem, &measured, t));
+    let transducer = driving.and_then(|t| transducer_series(models[0], recording, stem, &measured, t));
     let drive_record = DriveRecord {
         torque_nm: &torque,
         speed_estimate_radps: &speed,

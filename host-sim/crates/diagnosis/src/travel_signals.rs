@@ -295,29 +295,25 @@ pub struct TorqueBalance {
 /// `guide_damping_kg_per_s` the guides' total viscous damping `c_w + c_c`
 /// (kg/s): the machine torque from the currents (dq0, paper 3.3) averaged
 /// over the constant-speed stage, less the out-of-balance torque of Eqn 4,
-/// against the mean shaft speed.
+/// against the mean shaft speed; the travel's torque is `derived` as its
+/// measurement derived it ([`travel_torque`]; none: derived here).
 pub fn torque_balance(
     rig: &rig_config::RigConfig,
     recording: &recording::Recording,
     stem: &str,
     guide_damping_kg_per_s: f64,
-) -> Result<TorqueBalance> {
-    let recording::RecordingKind::Travel { .. } = recording.meta.kind else {
-        bail!("recording `{stem}` is not a travel");
-    };
-    torque_balance_of(rig, recording, stem, guide_damping_kg_per_s, &travel_torque(rig, recording, stem)?)
-}
-
-/// [`torque_balance`] on the travel's torque `t` as derived before.
-pub fn torque_balance_of(
-    rig: &rig_config::RigConfig,
-    recording: &recording::Recording,
-    stem: &str,
-    guide_damping_kg_per_s: f64,
-    t: &TravelTorque,
+    derived: Option<&TravelTorque>,
 ) -> Result<TorqueBalance> {
     let recording::RecordingKind::Travel { m_car_kg, m_cw_kg, lw_start_m, .. } = recording.meta.kind else {
         bail!("recording `{stem}` is not a travel");
+    };
+    let derived_here;
+    let t = match derived {
+        Some(t) => t,
+        None => {
+            derived_here = travel_torque(rig, recording, stem)?;
+            &derived_here
+        }
     };
     let m = &rig.mechanics;
     let stage = t.constant_speed.clone();
