@@ -34,7 +34,7 @@ use super::drive_law::SpeedController;
 use dsp::{central_difference, highpass_zero_phase, lowpass_complement_zero_phase};
 use plant::angle::AngleSeries;
 use plant::effects::{EffectKind, Effects};
-use plant::line::{BrakeAction, Line, MAX_NODES};
+use plant::line::{BrakeAction, Coefficients, Line, Lumped, MAX_NODES};
 use plant::mechanics::Chain;
 use plant::ripple::RippleTorque;
 use plant::ChainParams;
@@ -64,6 +64,38 @@ pub const REJECTED_FRACTION: f64 = 0.3;
 /// response RK4 then got wrong by enough to leave 6-15 dB of gap in
 /// 160-400 Hz on a rig with a stiffer rope and more guide damping.
 pub const MAX_RATE_PER_STEP: f64 = 0.25;
+/// Largest product of the integration step and the chain's highest rate
+/// where that rate lies above the compared bands
+/// ([`crate::compare::FOREIGN_TOP_HZ`]): the modes there (a discretised
+/// rope's top modes, a clamped sheave's) are not compared, and RK4, stable
+/// up to 2.78, damps them numerically; [`MAX_RATE_PER_STEP`] still holds
+/// for every rate up to the bands' top.
+pub const MAX_RATE_PER_STEP_ABOVE_BANDS: f64 = 2.0;
+
+/// Largest step-rate products of the torque-driven model's RK4: within the
+/// compared bands and above them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepRates {
+    /// Within the bands (up to [`crate::compare::FOREIGN_TOP_HZ`]).
+    pub within_bands: f64,
+    /// For the chain's highest rate.
+    pub highest: f64,
+}
+
+impl StepRates {
+    /// [`MAX_RATE_PER_STEP`] and [`MAX_RATE_PER_STEP_ABOVE_BANDS`].
+    pub const DEFAULT: StepRates =
+        StepRates { within_bands: MAX_RATE_PER_STEP, highest: MAX_RATE_PER_STEP_ABOVE_BANDS };
+
+    /// RK4 steps per sample of `h` s for a chain whose highest rate is
+    /// `omega_radps` (rad/s): every rate up to the bands' top within
+    /// `within_bands`, the highest within `highest`.
+    fn steps(&self, omega_radps: f64, h: f64) -> usize {
+        let band_radps = TAU * crate::compare::FOREIGN_TOP_HZ;
+        let needed = (omega_radps.min(band_radps) / self.within_bands).max(omega_radps / self.highest);
+        ((h * needed).ceil() as usize).max(1)
+    }
+}
 
 /// What the torque-driven counterpart assumes where the recording is silent:
 /// the diagnosis runs it as given and with each moved, so that the gap's
@@ -613,11 +645,11 @@ struct NodeState {
 
 /// RK4 steps per sample of `h` s for `line` on `chain` over the travel
 /// whose sheave edge moves `travel_m` (m) from the start: enough for
-/// `max_rate_per_step` at the stiffer end of the travel (with the brake's
-/// clamp where `clamped`).
-fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, max_rate_per_step: f64, clamped: bool) -> usize {
+/// `rates` at the stiffer end of the travel (with the brake's clamp where
+/// `clamped`).
+fn steps_per_sample(line: &Line, chain: &Chain, travel_m: f64, h: f64, rates: StepRates, clamped: bool) -> usize {
     let omega = [0.0, travel_m].map(|u| line.omega_max_radps(chain, u, clamped)).into_iter().fold(0.0, f64::max);
-    ((h * omega / max_rate_per_step).ceil() as usize).max(1)
+    rates.steps(omega, h)
 }
 
 /// The effects of the library the torque-driven model can hold, as each
@@ -638,7 +670,7 @@ pub fn holds_effect(kind: EffectKind, brake_seen: bool) -> bool {
 /// Car and counterweight accelerations (m/s^2, positive up) of the chain
 /// of `rig` with the mechanical `effects` ([`Line`]; the nominal 5-DOF
 /// chain without them) driven by the measured torque of `travel` plus the
-/// ripple (RK4, [`MAX_RATE_PER_STEP`] steps per sample at least, the
+/// ripple (RK4, [`StepRates::DEFAULT`] steps per sample at least, the
 /// torque linear between samples). With `encoder_error` the recorded angle
 /// is taken back to the true one first.
 pub fn torque_driven_accelerations(
@@ -647,7 +679,7 @@ pub fn torque_driven_accelerations(
     settings: &DrivenSettings,
     effects: &Effects,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    torque_driven_accelerations_with(rig, travel, settings, effects, MAX_RATE_PER_STEP)
+    torque_driven_accelerations_with(rig, travel, settings, effects, StepRates::DEFAULT)
 }
 
 /// The true shaft angle (rad) from the recorded one under `effects`'
@@ -783,8 +815,8 @@ impl StopSequence {
     }
 }
 
-/// [`torque_driven_accelerations`] with `max_rate_per_step` in place of
-/// [`MAX_RATE_PER_STEP`].
+/// [`torque_driven_accelerations`] with the step's `rates` in place of
+/// [`StepRates::DEFAULT`].
 ///
 /// While the machine torque drives the chain, the tracking loop acts on
 /// the rigid-body coordinate (the mass-weighted mean of the line's
@@ -804,7 +836,7 @@ fn torque_driven_accelerations_with(
     travel: &DrivenTravel,
     settings: &DrivenSettings,
     effects: &Effects,
-    max_rate_per_step: f64,
+    rates: StepRates,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let corrected = true_shaft_angle_rad(travel.shaft_angle_rad, effects);
     let true_torque = true_torque_nm(travel, effects);
@@ -826,19 +858,23 @@ fn torque_driven_accelerations_with(
     let moved_m = (travel.shaft_angle_rad[n - 1] - theta0) * r;
     // The clamp of `brake_stop` stiffens the line only once the brake has
     // taken the sheave: before, the line's own rates set the step.
-    let free_steps = steps_per_sample(&line, &chain, moved_m, h, max_rate_per_step, false);
-    let clamped_steps = steps_per_sample(&line, &chain, moved_m, h, max_rate_per_step, effects.brake_stop.is_some());
+    let free_steps = steps_per_sample(&line, &chain, moved_m, h, rates, false);
+    let clamped_steps = steps_per_sample(&line, &chain, moved_m, h, rates, effects.brake_stop.is_some());
     let (state, offset_nm) = start_state(&line, &chain, travel, settings, reference.1[0]);
     // The clamp's angle once the brake has taken the sheave (`brake_stop`);
     // accelerations at sample k + frac of the packed state `y` into `acc`,
     // the speed loop's answer `feedback_nm` (N m) held over the sample.
     let mut clamp_angle_rad: Option<f64> = None;
+    // The line's masses and springs (`step`) are taken at the start of each
+    // RK4 step, as the plant's general line takes them: over one step the
+    // sheave moves a fraction of a millimetre of metres of rope.
     let deriv = |y: &[f64],
                  k: usize,
                  frac: f64,
                  feedback_nm: f64,
                  clamp: Option<f64>,
                  series: &AngleSeries,
+                 step: &Coefficients,
                  acc: &mut [f64]| {
         let (position, velocity) = y.split_at(nodes);
         let j = (k + 1).min(n - 1);
@@ -847,11 +883,10 @@ fn torque_driven_accelerations_with(
         let torque = travel.torque_nm[k] + frac * (travel.torque_nm[j] - travel.torque_nm[k]) + offset + feedback_nm;
         let theta = theta0 + position[layout.sheave] / r;
         let shaft = torque + series.ripple_nm(theta, &ripple);
-        let lumped = line.lumped(&chain, position[layout.sheave]);
-        line.accelerations_of(&chain, &lumped, position, velocity, shaft, hold.brake(clamp), 0.0, acc);
+        line.accelerations_with(step, position, velocity, shaft, hold.brake(clamp), 0.0, acc);
         if let Hold::Drive { .. } = hold {
             let (u, v) = (tracked.0[k] + frac * (tracked.0[j] - tracked.0[k]), tracked.1[k]);
-            let body = tracking_acceleration(&lumped.masses_kg[..nodes], position, velocity, (u, v), tracking);
+            let body = tracking_acceleration(&step.lumped.masses_kg[..nodes], position, velocity, (u, v), tracking);
             acc[..nodes].iter_mut().for_each(|a| *a += body);
         }
     };
@@ -865,6 +900,7 @@ fn torque_driven_accelerations_with(
     let y = &mut packed[..2 * nodes];
     let mut work = [0.0; 5 * 2 * MAX_NODES];
     let mut a = [0.0; MAX_NODES];
+    let mut lumped = Lumped::zeroed();
     for k in 0..n {
         series.ensure(theta0 + y[layout.sheave] / r, &ripple, 0.0);
         let hold = sequence.at(k);
@@ -879,7 +915,8 @@ fn torque_driven_accelerations_with(
             estimate.hold(travel.speed_estimate_radps[k]);
         }
         let feedback_nm = hold.speed_loop(travel, settings).answer_nm(&estimate, travel.speed_estimate_radps[k]);
-        deriv(y, k, 0.0, feedback_nm, clamp_angle_rad, &series, &mut a);
+        line.lumped_into(&chain, y[layout.sheave], &mut lumped);
+        deriv(y, k, 0.0, feedback_nm, clamp_angle_rad, &series, &line.coefficients(&chain, &lumped), &mut a);
         car.push(a[layout.body]);
         cw.push(-a[layout.counterweight()]);
         if k + 1 == n {
@@ -889,10 +926,14 @@ fn torque_driven_accelerations_with(
         let sub = 1.0 / steps as f64;
         for j in 0..steps {
             let start = j as f64 * sub;
+            if j > 0 {
+                line.lumped_into(&chain, y[layout.sheave], &mut lumped);
+            }
+            let step = line.coefficients(&chain, &lumped);
             plant::rk4_step_in_time(y, h * sub, &mut work, |frac, y, dy| {
                 let (dx, dv) = dy.split_at_mut(nodes);
                 dx.copy_from_slice(&y[nodes..]);
-                deriv(y, k, start + frac * sub, feedback_nm, clamp_angle_rad, &series, dv);
+                deriv(y, k, start + frac * sub, feedback_nm, clamp_angle_rad, &series, &step, dv);
             });
         }
         estimate.advance(y[nodes + layout.sheave] / r, travel.speed_estimate_radps[k], h);
@@ -1185,8 +1226,10 @@ mod tests {
         let speed = vec![0.5 / r; n];
         let travel = travel_of(&chain, (&torque, &angle, &speed), 0..n, fs);
         let settings = DrivenSettings::default();
-        let run =
-            |rate: f64| torque_driven_accelerations_with(&rig, &travel, &settings, &Effects::none(), rate).unwrap().0;
+        let run = |rate: f64| {
+            let rates = StepRates { within_bands: rate, highest: rate.max(MAX_RATE_PER_STEP_ABOVE_BANDS) };
+            torque_driven_accelerations_with(&rig, &travel, &settings, &Effects::none(), rates).unwrap().0
+        };
         let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
         let diff = |a: &[f64], b: &[f64]| rms(&a.iter().zip(b).map(|(x, y)| x - y).collect::<Vec<_>>()) / rms(b);
         let (default, half) = (run(MAX_RATE_PER_STEP), run(0.5 * MAX_RATE_PER_STEP));
@@ -1196,6 +1239,49 @@ mod tests {
         assert!(d_default < 1e-3, "default step: {d_default:.2e} of the RMS from the half step");
         // What the split into several steps per sample is for.
         assert!(d_one > 10.0 * d_default, "one step per sample: {d_one:.2e}, default {d_default:.2e}");
+    }
+
+    /// With the rope in elements the line's top modes lie far above the
+    /// compared bands: stepping them at [`MAX_RATE_PER_STEP_ABOVE_BANDS`]
+    /// takes a fraction of the steps and leaves the accelerations below the
+    /// bands' top where a uniformly short step puts them.
+    #[test]
+    fn the_modes_above_the_bands_take_a_longer_step() {
+        let rig = RigConfig::embedded_default().unwrap();
+        let fs = 4096.0;
+        let n = 8192;
+        let r = rig.mechanics.sheave_radius_m;
+        let chain = Chain::new(ChainParams::from_rig(&rig, 70.5), 2.0);
+        let hold = chain.params.out_of_balance_torque_nm(2.0);
+        let t = |k: usize| k as f64 / fs;
+        let torque: Vec<f64> = (0..n)
+            .map(|k| {
+                hold + 2.0 * (TAU * 300.0 * t(k)).sin() + 2.0 * (TAU * 1500.0 * t(k)).sin() + (TAU * 20.0 * t(k)).sin()
+            })
+            .collect();
+        let angle: Vec<f64> = (0..n).map(|k| 0.5 * t(k) / r).collect();
+        let speed = vec![0.5 / r; n];
+        let travel = travel_of(&chain, (&torque, &angle, &speed), 0..n, fs);
+        let mut effects = Effects::none();
+        effects.rope_discretization = Some(plant::effects::RopeDiscretization { elements: 8 });
+        let line = Line::new(&effects);
+        let omega = line.omega_max_radps(&chain, 0.0, false);
+        let uniform = StepRates { within_bands: 0.5 * MAX_RATE_PER_STEP, highest: 0.5 * MAX_RATE_PER_STEP };
+        let (default_steps, uniform_steps) =
+            (StepRates::DEFAULT.steps(omega, 1.0 / fs), uniform.steps(omega, 1.0 / fs));
+        assert!(4 * default_steps <= uniform_steps, "{default_steps} steps a sample against {uniform_steps}");
+        let run = |rates: StepRates| {
+            let car =
+                torque_driven_accelerations_with(&rig, &travel, &DrivenSettings::default(), &effects, rates).unwrap().0;
+            let above = highpass_zero_phase(&car, fs, crate::compare::FOREIGN_TOP_HZ).unwrap();
+            car.iter().zip(above).map(|(a, h)| a - h).collect::<Vec<f64>>()
+        };
+        let (default, fine) = (run(StepRates::DEFAULT), run(uniform));
+        let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+        let diff: Vec<f64> = default.iter().zip(&fine).map(|(a, b)| a - b).collect();
+        let d = rms(&diff) / rms(&fine);
+        println!("within the bands, {default_steps} against {uniform_steps} steps a sample: {d:.2e} of the RMS");
+        assert!(d < 1e-3, "{d:.2e} of the RMS within the bands");
     }
 
     /// A recording that begins with the rig moving at constant speed under
