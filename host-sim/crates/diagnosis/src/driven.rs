@@ -1204,6 +1204,31 @@ mod tests {
         }
     }
 
+    /// Two seconds at 0.5 m/s from the rope length of `chain` sampled at
+    /// `fs` (Hz): the measured torque (N m) holding the out-of-balance
+    /// torque with 2 N m lines at 300 Hz and `second_hz` and a 1 N m line at
+    /// 20 Hz, the shaft angle (rad) and the speed estimate (rad/s).
+    fn constant_speed_inputs(
+        rig: &RigConfig,
+        chain: &Chain,
+        fs: f64,
+        second_hz: f64,
+    ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let n = (2.0 * fs) as usize;
+        let r = rig.mechanics.sheave_radius_m;
+        let hold = chain.params.out_of_balance_torque_nm(chain.lw_start_m);
+        let t = |k: usize| k as f64 / fs;
+        let torque = (0..n)
+            .map(|k| {
+                hold + 2.0 * (TAU * 300.0 * t(k)).sin()
+                    + 2.0 * (TAU * second_hz * t(k)).sin()
+                    + (TAU * 20.0 * t(k)).sin()
+            })
+            .collect();
+        let angle = (0..n).map(|k| 0.5 * t(k) / r).collect();
+        (torque, angle, vec![0.5 / r; n])
+    }
+
     /// The car acceleration of the torque-driven model does not change when
     /// its step is halved: a travel at constant speed driven by a torque
     /// with lines near the car-side rope-mass mode (300 and 450 Hz) and one
@@ -1211,20 +1236,9 @@ mod tests {
     #[test]
     fn halving_the_step_changes_nothing() {
         let rig = RigConfig::embedded_default().unwrap();
-        let fs = 4096.0;
-        let n = 8192;
-        let r = rig.mechanics.sheave_radius_m;
-        let chain = Chain::new(ChainParams::from_rig(&rig, 70.5), 2.0);
-        let hold = chain.params.out_of_balance_torque_nm(2.0);
-        let t = |k: usize| k as f64 / fs;
-        let torque: Vec<f64> = (0..n)
-            .map(|k| {
-                hold + 2.0 * (TAU * 300.0 * t(k)).sin() + 2.0 * (TAU * 450.0 * t(k)).sin() + (TAU * 20.0 * t(k)).sin()
-            })
-            .collect();
-        let angle: Vec<f64> = (0..n).map(|k| 0.5 * t(k) / r).collect();
-        let speed = vec![0.5 / r; n];
-        let travel = travel_of(&chain, (&torque, &angle, &speed), 0..n, fs);
+        let (fs, chain) = (4096.0, Chain::new(ChainParams::from_rig(&rig, 70.5), 2.0));
+        let (torque, angle, speed) = constant_speed_inputs(&rig, &chain, fs, 450.0);
+        let travel = travel_of(&chain, (&torque, &angle, &speed), 0..torque.len(), fs);
         let settings = DrivenSettings::default();
         let run = |rate: f64| {
             let rates = StepRates { within_bands: rate, highest: rate.max(MAX_RATE_PER_STEP_ABOVE_BANDS) };
@@ -1248,20 +1262,9 @@ mod tests {
     #[test]
     fn the_modes_above_the_bands_take_a_longer_step() {
         let rig = RigConfig::embedded_default().unwrap();
-        let fs = 4096.0;
-        let n = 8192;
-        let r = rig.mechanics.sheave_radius_m;
-        let chain = Chain::new(ChainParams::from_rig(&rig, 70.5), 2.0);
-        let hold = chain.params.out_of_balance_torque_nm(2.0);
-        let t = |k: usize| k as f64 / fs;
-        let torque: Vec<f64> = (0..n)
-            .map(|k| {
-                hold + 2.0 * (TAU * 300.0 * t(k)).sin() + 2.0 * (TAU * 1500.0 * t(k)).sin() + (TAU * 20.0 * t(k)).sin()
-            })
-            .collect();
-        let angle: Vec<f64> = (0..n).map(|k| 0.5 * t(k) / r).collect();
-        let speed = vec![0.5 / r; n];
-        let travel = travel_of(&chain, (&torque, &angle, &speed), 0..n, fs);
+        let (fs, chain) = (4096.0, Chain::new(ChainParams::from_rig(&rig, 70.5), 2.0));
+        let (torque, angle, speed) = constant_speed_inputs(&rig, &chain, fs, 1500.0);
+        let travel = travel_of(&chain, (&torque, &angle, &speed), 0..torque.len(), fs);
         let mut effects = Effects::none();
         effects.rope_discretization = Some(plant::effects::RopeDiscretization { elements: 8 });
         let line = Line::new(&effects);
