@@ -105,11 +105,11 @@ pub const RATE_PER_STEP: f64 = 1.0;
 
 /// Largest `rate_per_step` of [`simulate_free_decay_stepped`]: RK4 is
 /// stable up to 2.78 on the imaginary axis.
-pub const MAX_RATE_PER_STEP: f64 = 2.5;
+pub const STABLE_RATE_PER_STEP: f64 = 2.5;
 
 /// [`simulate_free_decay_with`] with RK4 steps of at most
 /// `rate_per_step / w_max` (s; `w_max` the chain's highest rate, rad/s),
-/// `rate_per_step` in (0, [`MAX_RATE_PER_STEP`]]. The highest rates are the
+/// `rate_per_step` in (0, [`STABLE_RATE_PER_STEP`]]. The highest rates are the
 /// discretised rope's own top modes (kilohertz, an artefact of its
 /// elements): a longer step damps them numerically and leaves the modes
 /// far below them as they are (`tests`: the response below 1 kHz within
@@ -124,7 +124,7 @@ pub fn simulate_free_decay_stepped(
     check_spec(spec)?;
     check("sample_rate_hz", sample_rate_hz, sample_rate_hz > 0.0, "> 0 Hz")?;
     check("duration_s", duration_s, duration_s > 0.0 && duration_s * sample_rate_hz < 1.0e8, "> 0 s, < 1e8 samples")?;
-    check("rate_per_step", rate_per_step, rate_per_step > 0.0 && rate_per_step <= MAX_RATE_PER_STEP, "in (0, 2.5]")?;
+    check("rate_per_step", rate_per_step, rate_per_step > 0.0 && rate_per_step <= STABLE_RATE_PER_STEP, "in (0, 2.5]")?;
     let chain = DecayChain::new(spec, effects);
     let substeps = (chain.w_max(spec) / sample_rate_hz / rate_per_step).ceil().max(1.0) as usize;
     let h = 1.0 / sample_rate_hz / substeps as f64;
