@@ -37,6 +37,7 @@ use plant::effects::{EffectKind, Effects};
 use plant::line::{BrakeAction, Coefficients, Line, Lumped, MAX_NODES};
 use plant::mechanics::Chain;
 use plant::ripple::RippleTorque;
+use plant::step_rates::StepRates;
 use plant::ChainParams;
 use rig_config::RigConfig;
 
@@ -68,34 +69,18 @@ pub const MAX_RATE_PER_STEP: f64 = 0.25;
 /// where that rate lies above the compared bands
 /// ([`crate::compare::FOREIGN_TOP_HZ`]): the modes there (a discretised
 /// rope's top modes, a clamped sheave's) are not compared, and RK4, stable
-/// up to 2.78, damps them numerically; [`MAX_RATE_PER_STEP`] still holds
-/// for every rate up to the bands' top.
+/// up to `2 sqrt(2)` (2.83), damps them numerically; [`MAX_RATE_PER_STEP`]
+/// still holds for every rate up to the bands' top.
 pub const MAX_RATE_PER_STEP_ABOVE_BANDS: f64 = 2.0;
 
-/// Largest step-rate products of the torque-driven model's RK4: within the
-/// compared bands and above them.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StepRates {
-    /// Within the bands (up to [`crate::compare::FOREIGN_TOP_HZ`]).
-    pub within_bands: f64,
-    /// For the chain's highest rate.
-    pub highest: f64,
-}
-
-impl StepRates {
-    /// [`MAX_RATE_PER_STEP`] and [`MAX_RATE_PER_STEP_ABOVE_BANDS`].
-    pub const DEFAULT: StepRates =
-        StepRates { within_bands: MAX_RATE_PER_STEP, highest: MAX_RATE_PER_STEP_ABOVE_BANDS };
-
-    /// RK4 steps per sample of `h` s for a chain whose highest rate is
-    /// `omega_radps` (rad/s): every rate up to the bands' top within
-    /// `within_bands`, the highest within `highest`.
-    fn steps(&self, omega_radps: f64, h: f64) -> usize {
-        let band_radps = TAU * crate::compare::FOREIGN_TOP_HZ;
-        let needed = (omega_radps.min(band_radps) / self.within_bands).max(omega_radps / self.highest);
-        ((h * needed).ceil() as usize).max(1)
-    }
-}
+/// The torque-driven model's RK4 steps: [`MAX_RATE_PER_STEP`] up to the
+/// bands compared under another drive ([`crate::compare::FOREIGN_TOP_HZ`]),
+/// [`MAX_RATE_PER_STEP_ABOVE_BANDS`] for the chain's highest rate.
+pub const STEP_RATES: StepRates = StepRates {
+    within_bands: MAX_RATE_PER_STEP,
+    highest: MAX_RATE_PER_STEP_ABOVE_BANDS,
+    band_top_hz: crate::compare::FOREIGN_TOP_HZ,
+};
 
 /// What the torque-driven counterpart assumes where the recording is silent:
 /// the diagnosis runs it as given and with each moved, so that the gap's
@@ -670,7 +655,7 @@ pub fn holds_effect(kind: EffectKind, brake_seen: bool) -> bool {
 /// Car and counterweight accelerations (m/s^2, positive up) of the chain
 /// of `rig` with the mechanical `effects` ([`Line`]; the nominal 5-DOF
 /// chain without them) driven by the measured torque of `travel` plus the
-/// ripple (RK4, [`StepRates::DEFAULT`] steps per sample at least, the
+/// ripple (RK4, [`STEP_RATES`] steps per sample at least, the
 /// torque linear between samples). With `encoder_error` the recorded angle
 /// is taken back to the true one first.
 pub fn torque_driven_accelerations(
@@ -679,7 +664,7 @@ pub fn torque_driven_accelerations(
     settings: &DrivenSettings,
     effects: &Effects,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    torque_driven_accelerations_with(rig, travel, settings, effects, StepRates::DEFAULT)
+    torque_driven_accelerations_with(rig, travel, settings, effects, STEP_RATES)
 }
 
 /// The true shaft angle (rad) from the recorded one under `effects`'
@@ -816,7 +801,7 @@ impl StopSequence {
 }
 
 /// [`torque_driven_accelerations`] with the step's `rates` in place of
-/// [`StepRates::DEFAULT`].
+/// [`STEP_RATES`].
 ///
 /// While the machine torque drives the chain, the tracking loop acts on
 /// the rigid-body coordinate (the mass-weighted mean of the line's
@@ -1241,7 +1226,8 @@ mod tests {
         let travel = travel_of(&chain, (&torque, &angle, &speed), 0..torque.len(), fs);
         let settings = DrivenSettings::default();
         let run = |rate: f64| {
-            let rates = StepRates { within_bands: rate, highest: rate.max(MAX_RATE_PER_STEP_ABOVE_BANDS) };
+            let rates =
+                StepRates { within_bands: rate, highest: rate.max(MAX_RATE_PER_STEP_ABOVE_BANDS), ..STEP_RATES };
             torque_driven_accelerations_with(&rig, &travel, &settings, &Effects::none(), rates).unwrap().0
         };
         let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
@@ -1269,9 +1255,8 @@ mod tests {
         effects.rope_discretization = Some(plant::effects::RopeDiscretization { elements: 8 });
         let line = Line::new(&effects);
         let omega = line.omega_max_radps(&chain, 0.0, false);
-        let uniform = StepRates { within_bands: 0.5 * MAX_RATE_PER_STEP, highest: 0.5 * MAX_RATE_PER_STEP };
-        let (default_steps, uniform_steps) =
-            (StepRates::DEFAULT.steps(omega, 1.0 / fs), uniform.steps(omega, 1.0 / fs));
+        let uniform = StepRates::uniform(0.5 * MAX_RATE_PER_STEP);
+        let (default_steps, uniform_steps) = (STEP_RATES.steps(omega, 1.0 / fs), uniform.steps(omega, 1.0 / fs));
         assert!(4 * default_steps <= uniform_steps, "{default_steps} steps a sample against {uniform_steps}");
         let run = |rates: StepRates| {
             let car =
@@ -1279,7 +1264,7 @@ mod tests {
             let above = highpass_zero_phase(&car, fs, crate::compare::FOREIGN_TOP_HZ).unwrap();
             car.iter().zip(above).map(|(a, h)| a - h).collect::<Vec<f64>>()
         };
-        let (default, fine) = (run(StepRates::DEFAULT), run(uniform));
+        let (default, fine) = (run(STEP_RATES), run(uniform));
         let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
         let diff: Vec<f64> = default.iter().zip(&fine).map(|(a, b)| a - b).collect();
         let d = rms(&diff) / rms(&fine);

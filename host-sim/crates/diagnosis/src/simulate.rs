@@ -15,6 +15,7 @@ use closed_loop::synthetic::DECAY_ROPE_ELEMENTS;
 use closed_loop::{simulate_travel, SimOptions, TravelSpec};
 use plant::effects::Effects;
 use plant::free_decay::{simulate_free_decay_stepped, FreeDecaySpec};
+use plant::step_rates::StepRates;
 use recording::{CarDirection, Column, Recording, RecordingKind, RecordingMeta, ACC_CAR, TIME_S};
 use rig_config::RigConfig;
 
@@ -110,7 +111,7 @@ fn simulate_decay(
     // `duration_s` (its samples do not depend on the duration).
     let simulate = |initial_acceleration_mps2: f64, duration_s: f64| {
         let spec = FreeDecaySpec { initial_acceleration_mps2, ..spec };
-        simulate_free_decay_stepped(&spec, effects, sample_rate_hz, duration_s, DECAY_RATE_PER_STEP)
+        simulate_free_decay_stepped(&spec, effects, sample_rate_hz, duration_s, DECAY_STEP_RATES)
             .with_context(|| format!("`{stem}`: simulating the free decay"))
     };
     // The held displacement is the test's, not the model's: the model's
@@ -150,12 +151,18 @@ fn simulate_decay(
     })
 }
 
-/// Largest product of a decay counterpart's RK4 step and its chain's
-/// highest rate ([`simulate_free_decay_stepped`]): the top modes of the
-/// decay's discretised rope (kilohertz) damped numerically, the compared
-/// bands (up to 1 kHz) kept within 1e-4 of a four times shorter step; half
-/// the steps of the plant's default.
-pub const DECAY_RATE_PER_STEP: f64 = 2.0;
+/// A decay counterpart's RK4 steps: the torque-driven model's bounds
+/// ([`crate::driven::MAX_RATE_PER_STEP`] up to the gap measure's top band,
+/// [`crate::spectra::HIGHEST_BAND_HZ`], which covers every decay's compared
+/// bands; [`crate::driven::MAX_RATE_PER_STEP_ABOVE_BANDS`] for the chain's
+/// highest rate): the top modes of the decay's discretised rope (kilohertz)
+/// damped numerically, every line below 1 kHz within 1e-4 of a uniformly
+/// shorter step.
+pub const DECAY_STEP_RATES: StepRates = StepRates {
+    within_bands: crate::driven::MAX_RATE_PER_STEP,
+    highest: crate::driven::MAX_RATE_PER_STEP_ABOVE_BANDS,
+    band_top_hz: crate::spectra::HIGHEST_BAND_HZ,
+};
 
 /// RMS of the first second of `v` sampled at `rate_hz` (all of it if shorter).
 fn first_second_rms(v: &[f64], rate_hz: f64) -> f64 {

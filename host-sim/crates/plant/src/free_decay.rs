@@ -10,6 +10,7 @@
 use super::effects::tension_stiffening::{static_tension_n, StiffeningSegment};
 use super::effects::{Effects, TensionStiffening};
 use super::spring_line::{self, NodeForce};
+use super::step_rates::{StepRates, STABLE_RATE_PER_STEP};
 use super::Rk4;
 
 /// One free-decay test.
@@ -96,37 +97,37 @@ pub fn simulate_free_decay_with(
     sample_rate_hz: f64,
     duration_s: f64,
 ) -> Result<Vec<f64>, FreeDecayError> {
-    simulate_free_decay_stepped(spec, effects, sample_rate_hz, duration_s, RATE_PER_STEP)
+    simulate_free_decay_stepped(spec, effects, sample_rate_hz, duration_s, StepRates::uniform(RATE_PER_STEP))
 }
 
 /// Largest product of [`simulate_free_decay_with`]'s RK4 step and the
 /// chain's highest rate (its Gershgorin bound `w_max`, rad/s).
 pub const RATE_PER_STEP: f64 = 1.0;
 
-/// Largest `rate_per_step` of [`simulate_free_decay_stepped`]: RK4 is
-/// stable up to 2.78 on the imaginary axis.
-pub const STABLE_RATE_PER_STEP: f64 = 2.5;
-
-/// [`simulate_free_decay_with`] with RK4 steps of at most
-/// `rate_per_step / w_max` (s; `w_max` the chain's highest rate, rad/s),
-/// `rate_per_step` in (0, [`STABLE_RATE_PER_STEP`]]. The highest rates are the
-/// discretised rope's own top modes (kilohertz, an artefact of its
-/// elements): a longer step damps them numerically and leaves the modes
-/// far below them as they are (`tests`: the response below 1 kHz within
-/// 1e-4 of a step four times shorter at 2).
+/// [`simulate_free_decay_with`] with RK4 steps split as `rates` ask for
+/// the chain's highest rate `w_max` (its Gershgorin bound, rad/s):
+/// [`StepRates::within_bands`] for every rate up to the bands' top,
+/// [`StepRates::highest`] (at most [`STABLE_RATE_PER_STEP`]) for `w_max`.
+/// The highest rates are the discretised rope's own top modes (kilohertz,
+/// an artefact of its elements): a longer step there damps them numerically
+/// and leaves the modes far below them as they are (`tests`: the response
+/// below 1 kHz within 1e-4 of a step four times shorter).
 pub fn simulate_free_decay_stepped(
     spec: &FreeDecaySpec,
     effects: &Effects,
     sample_rate_hz: f64,
     duration_s: f64,
-    rate_per_step: f64,
+    rates: StepRates,
 ) -> Result<Vec<f64>, FreeDecayError> {
     check_spec(spec)?;
     check("sample_rate_hz", sample_rate_hz, sample_rate_hz > 0.0, "> 0 Hz")?;
     check("duration_s", duration_s, duration_s > 0.0 && duration_s * sample_rate_hz < 1.0e8, "> 0 s, < 1e8 samples")?;
-    check("rate_per_step", rate_per_step, rate_per_step > 0.0 && rate_per_step <= STABLE_RATE_PER_STEP, "in (0, 2.5]")?;
+    let stable = |r: f64| r > 0.0 && r <= STABLE_RATE_PER_STEP;
+    check("rates.within_bands", rates.within_bands, stable(rates.within_bands), "in (0, 2.5]")?;
+    check("rates.highest", rates.highest, stable(rates.highest), "in (0, 2.5]")?;
+    check("rates.band_top_hz", rates.band_top_hz, rates.band_top_hz > 0.0, "> 0 Hz")?;
     let chain = DecayChain::new(spec, effects);
-    let substeps = (chain.w_max(spec) / sample_rate_hz / rate_per_step).ceil().max(1.0) as usize;
+    let substeps = rates.steps(chain.w_max(spec), 1.0 / sample_rate_hz);
     let h = 1.0 / sample_rate_hz / substeps as f64;
     let mut state = chain.released_state(spec);
     let nodes = chain.nodes;
@@ -427,9 +428,10 @@ mod tests {
         assert!(second(&large) > 10.0 * second(&large_linear), "{} against {}", second(&large), second(&large_linear));
     }
 
-    /// A step at `h w_max = 2` damps the discretised rope's top modes
-    /// (kilohertz) but leaves the decay's lines where a step four times
-    /// shorter puts them: the first mode, its harmonics of the stiffening
+    /// Steps at `h w_max = 2` for the discretised rope's top modes
+    /// (kilohertz), which they damp, and `h w <= 0.25` up to 1 kHz leave
+    /// the decay's lines where a uniform step sixteen times shorter than
+    /// the first puts them: the first mode, its harmonics of the stiffening
     /// rope and the rope's second mode, all below 1 kHz.
     #[test]
     fn a_longer_step_keeps_the_lines_below_a_kilohertz() {
@@ -444,8 +446,9 @@ mod tests {
             elements: 20,
             ..spec(3.0)
         };
-        let fine = simulate_free_decay_stepped(&spec, &effects, fs, 0.5, 0.5).unwrap();
-        let coarse = simulate_free_decay_stepped(&spec, &effects, fs, 0.5, 2.0).unwrap();
+        let split = StepRates { within_bands: 0.25, highest: 2.0, band_top_hz: 1000.0 };
+        let fine = simulate_free_decay_stepped(&spec, &effects, fs, 0.5, StepRates::uniform(0.125)).unwrap();
+        let coarse = simulate_free_decay_stepped(&spec, &effects, fs, 0.5, split).unwrap();
         let f1 = eqn9_first_frequency_hz(spec.rope_ea_n, 0.1, 4.0, 45.5);
         // The rope's second mode: `x tan x = mu l / m` has its next root
         // just above pi, so near `f1 pi / x1` for this light rope.
@@ -459,7 +462,9 @@ mod tests {
         let power: f64 = fine.iter().map(|a| a * a).sum();
         assert!((err / power).sqrt() < 2e-3, "RMS difference {} of the RMS", (err / power).sqrt());
         // Past RK4's stability the step is refused.
-        assert!(simulate_free_decay_stepped(&spec, &effects, fs, 0.5, 3.0).is_err());
+        assert!(simulate_free_decay_stepped(&spec, &effects, fs, 0.5, StepRates::uniform(3.0)).is_err());
+        let no_band = StepRates { band_top_hz: 0.0, ..split };
+        assert!(simulate_free_decay_stepped(&spec, &effects, fs, 0.5, no_band).is_err());
     }
 
     /// A decay's samples do not depend on how long it is simulated: the

@@ -39,6 +39,7 @@ pub mod ripple;
 pub mod rope;
 pub mod sensors;
 pub mod spring_line;
+pub mod step_rates;
 
 pub use mechanics::{Chain, ChainState};
 pub use rope::ChainParams;
