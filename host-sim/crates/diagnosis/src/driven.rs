@@ -901,7 +901,9 @@ fn torque_driven_accelerations_with(
         }
         let feedback_nm = hold.speed_loop(travel, settings).answer_nm(&estimate, travel.speed_estimate_radps[k]);
         line.lumped_into(&chain, y[layout.sheave], &mut lumped);
-        deriv(y, k, 0.0, feedback_nm, clamp_angle_rad, &series, &line.coefficients(&chain, &lumped), &mut a);
+        // The sample's masses and springs serve its output and its first step.
+        let mut step = line.coefficients(&chain, &lumped);
+        deriv(y, k, 0.0, feedback_nm, clamp_angle_rad, &series, &step, &mut a);
         car.push(a[layout.body]);
         cw.push(-a[layout.counterweight()]);
         if k + 1 == n {
@@ -913,8 +915,8 @@ fn torque_driven_accelerations_with(
             let start = j as f64 * sub;
             if j > 0 {
                 line.lumped_into(&chain, y[layout.sheave], &mut lumped);
+                step = line.coefficients(&chain, &lumped);
             }
-            let step = line.coefficients(&chain, &lumped);
             plant::rk4_step_in_time(y, h * sub, &mut work, |frac, y, dy| {
                 let (dx, dv) = dy.split_at_mut(nodes);
                 dx.copy_from_slice(&y[nodes..]);
