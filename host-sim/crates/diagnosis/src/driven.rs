@@ -57,10 +57,11 @@ pub const TRACKING_REFERENCE_LOWPASS_HZ: f64 = 5.0;
 /// rejection of it (and gives its phase) when at least this fraction of the
 /// order's amplitude.
 pub const REJECTED_FRACTION: f64 = 0.3;
-/// Largest product of the integration step and the chain's highest rate
-/// (Gershgorin's bound, [`plant::line::Line::omega_max_radps`]) in the
-/// torque-driven model: a sample is split into as many RK4 steps as this
-/// needs. One step per sample (4 kHz) put `h omega` near 0.75 for the
+/// Largest product of the integration step and any rate of the chain up
+/// to the compared bands' top (the chain's highest rate is Gershgorin's
+/// bound, [`plant::line::Line::omega_max_radps`]) in the torque-driven
+/// model and the decay counterparts: a sample is split into as many RK4
+/// steps as this needs ([`STEP_RATES`]). One step per sample (4 kHz) put `h omega` near 0.75 for the
 /// car-side rope-mass mode (up to about 490 Hz on the reference rig), whose
 /// response RK4 then got wrong by enough to leave 6-15 dB of gap in
 /// 160-400 Hz on a rig with a stiffer rope and more guide damping.
