@@ -360,7 +360,17 @@ mod tests {
     use super::*;
 
     fn cell(channel: Channel, phase: Phase, band: usize, d_db: f64) -> CellGap {
-        CellGap { channel, phase, band, measured: 1.0, simulated: 1.0, d_db, noise_db: 0.0, tolerance_db: 0.0 }
+        CellGap {
+            channel,
+            phase,
+            band,
+            measured: 1.0,
+            simulated: 1.0,
+            d_db,
+            noise_db: 0.0,
+            noise_bound_db: 0.0,
+            tolerance_db: 0.0,
+        }
     }
 
     fn bands() -> Bands {
@@ -389,7 +399,7 @@ mod tests {
     fn channel_gaps_average_over_the_recordings_that_have_the_channel() {
         // Without noise or tolerance a recording's excess is the RMS of its d.
         let mut beyond = cell(Channel::CarAcceleration, Phase::Stop, 0, -5.0);
-        (beyond.noise_db, beyond.tolerance_db) = (1.0, 1.0); // 5 - 2 * 1 - 1 = 2 dB beyond
+        (beyond.noise_bound_db, beyond.tolerance_db) = (2.0, 1.0); // 5 - 2 - 1 = 2 dB beyond
         let cells = vec![
             vec![cell(Channel::Torque, Phase::Start, 0, 3.0), cell(Channel::Torque, Phase::Stop, 1, -3.0)],
             vec![beyond, cell(Channel::Torque, Phase::Start, 0, 1.0)],

@@ -9,11 +9,21 @@
 //! measured estimate: a cell averaging `K` bins and segments with signal
 //! power `S` and noise `N` has a log standard deviation of about
 //! `4.34 / sqrt(K) * sqrt(N (2 S + N)) / (S + N)` dB; the RMS of that over
-//! the cells is the noise gap, and the excess gap `sqrt(gap^2 - noise^2)`
-//! (dB) is what a model can still explain. Reports give all three.
+//! the cells is the noise gap. A cell counts towards the excess gap only
+//! where the signal powers its measured power allows (noise `N`, `K`
+//! averages: the noncentral chi-square law of `2 K` degrees of freedom,
+//! [`dsp::chi_square`], at the level `1 - 2 NOISE_TAIL`, two normal
+//! standard deviations) all lie away from the model's, and by how far. A
+//! single estimate (an angle-locked line) in noise reads below a fiftieth
+//! of its mean one time in fifty: such a reading allows anything from no
+//! signal to about the noise, which a symmetric `+-2 sigma` in dB counted
+//! as a gap of 8 dB and more below a model line at the noise. For many
+//! averages the interval is the `+-2 sigma` one. Reports give the gap, the
+//! noise gap and the excess.
 
 use super::signals::{Channel, Phase};
 use super::spectra::{Bands, CellKey, CellPowers};
+use dsp::signal_power_interval;
 
 /// Dynamic range of the comparison: a floor this far below the channel's
 /// strongest measured cell (-80 dB) is added to both sides of every cell,
@@ -38,17 +48,32 @@ pub struct CellGap {
     pub d_db: f64,
     /// Expected scatter of `d` from the measurement's own noise, dB.
     pub noise_db: f64,
+    /// How far towards zero the measured power's noise lets `d` reach, dB:
+    /// from the reading to the end of the interval of signal powers it
+    /// allows at the level `1 - 2 NOISE_TAIL` (the noncentral chi-square
+    /// law of its averages), on the model's side; 0 where `|d|` is within
+    /// the tolerance (the cell counts nothing whatever the bound).
+    pub noise_bound_db: f64,
     /// The model's reproducibility in this cell, dB.
     pub tolerance_db: f64,
 }
 
 impl CellGap {
-    /// How far `|d|` lies beyond twice its noise scatter and the model's
+    /// How far `|d|` lies beyond its noise bound and the model's
     /// reproducibility, dB (0 inside them).
     pub fn beyond_db(&self) -> f64 {
-        (self.d_db.abs() - 2.0 * self.noise_db - self.tolerance_db).max(0.0)
+        (self.d_db.abs() - self.noise_bound_db - self.tolerance_db).max(0.0)
+    }
+
+    /// [`CellGap::beyond_db`] with the sign of `d`, dB.
+    pub fn signed_beyond_db(&self) -> f64 {
+        self.d_db.signum() * self.beyond_db()
     }
 }
+
+/// The chance that noise alone puts a cell's `d` below its interval, and
+/// above it: the normal law's tail beyond two standard deviations.
+pub const NOISE_TAIL: f64 = 0.022_750_131_948_179_2;
 
 /// Fewest recordings in which a cell must lie beyond noise and tolerance to
 /// be persistent.
@@ -181,13 +206,27 @@ impl GapValue {
     }
 }
 
-fn cell(measured: f64, averages: f64, simulated: f64, noise: f64, floor: f64) -> (f64, f64) {
+/// One cell's `d`, its noise scatter `sigma` (dB) and its noise bound
+/// ([`CellGap::noise_bound_db`], computed only where `|d|` exceeds
+/// `tolerance`): the signal powers the measured power allows
+/// ([`dsp::chi_square::signal_power_interval`] at [`NOISE_TAIL`]), and how
+/// far from the reading towards the model's power that interval reaches.
+/// The cell's averages count as `0.6 K` independent estimates (the Hann
+/// segments' overlap), a single one as one.
+fn cell(measured: f64, averages: f64, simulated: f64, noise: f64, floor: f64, tolerance: f64) -> (f64, f64, f64) {
     let sim = simulated + noise;
     let d = 10.0 * ((measured + floor) / (sim + floor)).log10();
     let s = (measured - noise).max(0.0);
     let effective = if averages > 1.0 { 0.6 * averages } else { 1.0 };
     let sigma = 4.34 / effective.sqrt() * (noise * (2.0 * s + noise)).sqrt() / (s + noise + floor);
-    (d, sigma)
+    let bound = if d.abs() <= tolerance {
+        0.0
+    } else {
+        let (low, high) = signal_power_interval(measured, noise, effective, NOISE_TAIL);
+        let end = if d < 0.0 { high } else { low };
+        (10.0 * ((end + noise + floor) / (measured + floor)).log10()).abs()
+    };
+    (d, sigma, bound)
 }
 
 fn channel_floors(measured: &CellPowers) -> Vec<(Channel, f64)> {
@@ -218,7 +257,8 @@ pub fn cell_gaps(
         let Some((q, _, _)) = simulated.get((*channel, *phase, *band)) else { continue };
         let floor = floors.iter().find(|(c, _)| c == channel).map_or(1e-30, |(_, f)| *f) * scale;
         let n = noise.iter().find(|(c, _)| c == channel).map_or(0.0, |(_, n)| *n) * scale;
-        let (d, sigma) = cell(*p, *k, q, n, floor);
+        let tolerance_db = tolerance_of(tolerances, (*channel, *phase, *band));
+        let (d, sigma, bound) = cell(*p, *k, q, n, floor, tolerance_db);
         out.push(CellGap {
             channel: *channel,
             phase: *phase,
@@ -227,7 +267,8 @@ pub fn cell_gaps(
             simulated: q + n,
             d_db: d,
             noise_db: sigma,
-            tolerance_db: tolerance_of(tolerances, (*channel, *phase, *band)),
+            noise_bound_db: bound,
+            tolerance_db,
         });
     }
     out
@@ -274,12 +315,52 @@ mod tests {
     #[test]
     fn a_cell_of_pure_noise_scatters_by_the_chi_square_law() {
         // Signal-free cell: sigma = 4.34 / sqrt(0.6 K).
-        let (d, s) = cell(1.0, 100.0, 0.0, 1.0, 1e-30);
+        let (d, s, _) = cell(1.0, 100.0, 0.0, 1.0, 1e-30, 0.5);
         assert!(d.abs() < 1e-9);
         assert!((s - 4.34 / 60f64.sqrt()).abs() < 1e-9, "{s}");
         // Signal far above the noise: no scatter, d is the level ratio.
-        let (d, s) = cell(1000.0, 100.0, 100.0, 0.0, 1e-30);
-        assert!((d - 10.0).abs() < 1e-9 && s == 0.0);
+        let (d, s, bound) = cell(1000.0, 100.0, 100.0, 0.0, 1e-30, 0.5);
+        assert!((d - 10.0).abs() < 1e-9 && s == 0.0 && bound == 0.0);
+    }
+
+    /// Readings of a cell whose model is right (a line or band of power
+    /// `S` plus complex Gaussian noise of power `N` per estimate, averaged
+    /// over `K` independent estimates) lie beyond their noise bound in
+    /// `2 NOISE_TAIL` of the draws (`NOISE_TAIL` without signal: a reading
+    /// too low for pure noise allows no signal, which is the model's), from
+    /// a single noise-dominated line to a band of many averages; the
+    /// symmetric `+-2 sigma` in dB puts a single noise-dominated line's
+    /// readings beyond three times as often.
+    #[test]
+    fn readings_of_a_right_model_lie_beyond_their_bound_at_the_tails_rate() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let normal = rand_distr::Normal::new(0.0, 1.0).unwrap();
+        let trials = 10_000;
+        for (estimates, s) in [(1usize, 0.0f64), (1, 0.15), (1, 3.0), (3, 0.5), (40, 1.0)] {
+            let n = 1.0;
+            // The cell's averages as the spectra count them: K / 0.6.
+            let averages = if estimates == 1 { 1.0 } else { estimates as f64 / 0.6 };
+            let (mut beyond, mut beyond_sigma) = (0, 0);
+            for _ in 0..trials {
+                let p = (0..estimates)
+                    .map(|_| {
+                        let (re, im): (f64, f64) = (rng.sample(normal), rng.sample(normal));
+                        (s.sqrt() + re * (n / 2.0f64).sqrt()).powi(2) + im * im * n / 2.0
+                    })
+                    .sum::<f64>()
+                    / estimates as f64;
+                let (d, sigma, bound) = cell(p, averages, s, n, 1e-30, 0.0);
+                beyond += usize::from(d.abs() > bound + 1e-9);
+                beyond_sigma += usize::from(d.abs() > 2.0 * sigma);
+            }
+            let rate = beyond as f64 / trials as f64;
+            let expected = if s == 0.0 { NOISE_TAIL } else { 2.0 * NOISE_TAIL };
+            assert!((rate - expected).abs() < 0.012, "K {estimates}, S/N {s}: {rate}");
+            if (estimates, s) == (1, 0.15) {
+                assert!(beyond_sigma as f64 / trials as f64 > 3.0 * 2.0 * NOISE_TAIL, "{beyond_sigma}");
+            }
+        }
     }
 
     fn car_cell(band: usize, d_db: f64) -> CellGap {
@@ -291,6 +372,7 @@ mod tests {
             simulated: 1.0,
             d_db,
             noise_db: 0.25,
+            noise_bound_db: 0.5,
             tolerance_db: 0.5,
         }
     }

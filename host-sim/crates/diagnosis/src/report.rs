@@ -25,13 +25,6 @@ pub fn gap_map(cells: &[CellGap], bands: usize) -> Vec<(Channel, Phase, Vec<Opti
     mean_map(cells, bands, |c| c.d_db)
 }
 
-/// The excess of a cell, dB: how far `d` strays beyond twice the cell's
-/// noise scatter plus its tolerance, with the sign of `d` (0 within them),
-/// the part of the cell the excess gap of [`super::measure`] counts.
-pub fn cell_excess_db(c: &CellGap) -> f64 {
-    c.d_db.signum() * (c.d_db.abs() - 2.0 * c.noise_db - c.tolerance_db).max(0.0)
-}
-
 /// Mean of `value` per (channel, phase, band) over the recordings.
 fn mean_map(
     cells: &[CellGap],
@@ -64,7 +57,7 @@ fn mean_map(
 
 /// Draws the gap maps of `cells` (one panel per channel present; columns
 /// the travel phases present, rows the bands by their centre frequency):
-/// the mean excess of each cell over the recordings ([`cell_excess_db`]),
+/// the mean excess of each cell over the recordings ([`CellGap::signed_beyond_db`]),
 /// on a colour scale centred on zero (white: the model meets the data
 /// within noise and tolerance; red: the data holds more power than the
 /// model; blue: less), grey where a channel has no cell.
@@ -75,7 +68,7 @@ pub fn gap_map_plot(
     bands_hz: &[(f64, f64)],
     limit_db: Option<f64>,
 ) -> Result<()> {
-    let map = mean_map(cells, bands_hz.len(), cell_excess_db);
+    let map = mean_map(cells, bands_hz.len(), CellGap::signed_beyond_db);
     if map.is_empty() || bands_hz.is_empty() {
         return Ok(());
     }
@@ -109,11 +102,11 @@ pub fn gap_map_plot(
 }
 
 /// The colour scale of a gap map of `cells`, dB: the largest magnitude of
-/// its mean cell excess ([`cell_excess_db`]), so that a map is read at the
+/// its mean cell excess ([`CellGap::signed_beyond_db`]), so that a map is read at the
 /// gap's own size (a 0.2 dB gap is not white on a scale made for 20 dB);
 /// `None` when every cell is within noise and tolerance.
 pub fn gap_map_limit_db(cells: &[CellGap], bands: usize) -> Option<f64> {
-    let largest = mean_map(cells, bands, cell_excess_db)
+    let largest = mean_map(cells, bands, CellGap::signed_beyond_db)
         .iter()
         .flat_map(|(.., row)| row.iter().flatten())
         .fold(0.0f64, |m, v| m.max(v.abs()));

@@ -20,6 +20,7 @@
 
 mod biquad;
 pub mod burg;
+pub mod chi_square;
 pub mod difference;
 pub mod dq0;
 pub mod filter;
@@ -54,6 +55,7 @@ pub(crate) mod test_signals {
 }
 
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
+pub use chi_square::signal_power_interval;
 pub use difference::central_difference;
 pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::{highpass_causal, highpass_zero_phase, lowpass_complement_zero_phase};
