@@ -10,20 +10,19 @@
 //! power `S` and noise `N` has a log standard deviation of about
 //! `4.34 / sqrt(K) * sqrt(N (2 S + N)) / (S + N)` dB; the RMS of that over
 //! the cells is the noise gap. A cell counts towards the excess gap only
-//! where the signal powers its measured power allows (noise `N`, `K`
-//! averages: the noncentral chi-square law of `2 K` degrees of freedom,
-//! [`dsp::chi_square`], at the level `1 - 2 NOISE_TAIL`, two normal
-//! standard deviations) all lie away from the model's, and by how far. A
-//! single estimate (an angle-locked line) in noise reads below a fiftieth
-//! of its mean one time in fifty: such a reading allows anything from no
-//! signal to about the noise, which a symmetric `+-2 sigma` in dB counted
-//! as a gap of 8 dB and more below a model line at the noise. For many
-//! averages the interval is the `+-2 sigma` one. Reports give the gap, the
-//! noise gap and the excess.
+//! where `d` lies beyond its noise bound plus a tolerance. A band averages
+//! many estimates and its bound is `2 sigma`. A line (the angle-locked
+//! amplitude over the constant-speed stage) is a single estimate, whose
+//! law is far from log-normal: in noise it reads below a fiftieth of its
+//! mean one time in fifty, which `2 sigma` counted as a gap of 8 dB and
+//! more. Its bound is how far towards the model the signal powers its
+//! reading allows reach (the noncentral chi-square law of two degrees of
+//! freedom, [`dsp::chi_square`], at the level `1 - 2 NOISE_TAIL`, two normal
+//! standard deviations). Reports give the gap, the noise gap and the excess.
 
 use super::signals::{Channel, Phase};
 use super::spectra::{Bands, CellKey, CellPowers};
-use dsp::signal_power_interval;
+use dsp::signal_power_limit;
 
 /// Dynamic range of the comparison: a floor this far below the channel's
 /// strongest measured cell (-80 dB) is added to both sides of every cell,
@@ -208,11 +207,11 @@ impl GapValue {
 
 /// One cell's `d`, its noise scatter `sigma` (dB) and its noise bound
 /// ([`CellGap::noise_bound_db`], computed only where `|d|` exceeds
-/// `tolerance`): the signal powers the measured power allows
-/// ([`dsp::chi_square::signal_power_interval`] at [`NOISE_TAIL`]), and how
+/// `tolerance`). A band's averages count as `0.6 K` independent estimates
+/// (the Hann segments' overlap), its bound is `2 sigma`. A single estimate
+/// (a line) takes the signal powers its measured power allows
+/// ([`dsp::chi_square::signal_power_interval`] at [`NOISE_TAIL`]) and how
 /// far from the reading towards the model's power that interval reaches.
-/// The cell's averages count as `0.6 K` independent estimates (the Hann
-/// segments' overlap), a single one as one.
 fn cell(measured: f64, averages: f64, simulated: f64, noise: f64, floor: f64, tolerance: f64) -> (f64, f64, f64) {
     let sim = simulated + noise;
     let d = 10.0 * ((measured + floor) / (sim + floor)).log10();
@@ -221,9 +220,13 @@ fn cell(measured: f64, averages: f64, simulated: f64, noise: f64, floor: f64, to
     let sigma = 4.34 / effective.sqrt() * (noise * (2.0 * s + noise)).sqrt() / (s + noise + floor);
     let bound = if d.abs() <= tolerance {
         0.0
+    } else if averages > 1.0 {
+        // Averaged: the law is near log-normal, the interval +-2 sigma.
+        2.0 * sigma
     } else {
-        let (low, high) = signal_power_interval(measured, noise, effective, NOISE_TAIL);
-        let end = if d < 0.0 { high } else { low };
+        // Below the model the interval's upper end, above it the lower.
+        let quantile = if d < 0.0 { NOISE_TAIL } else { 1.0 - NOISE_TAIL };
+        let end = signal_power_limit(measured, noise, effective, quantile);
         (10.0 * ((end + noise + floor) / (measured + floor)).log10()).abs()
     };
     (d, sigma, bound)
@@ -323,41 +326,31 @@ mod tests {
         assert!((d - 10.0).abs() < 1e-9 && s == 0.0 && bound == 0.0);
     }
 
-    /// Readings of a cell whose model is right (a line or band of power
-    /// `S` plus complex Gaussian noise of power `N` per estimate, averaged
-    /// over `K` independent estimates) lie beyond their noise bound in
+    /// Readings of a line whose model is right (a line of power `S` plus
+    /// complex Gaussian noise of power `N`) lie beyond their noise bound in
     /// `2 NOISE_TAIL` of the draws (`NOISE_TAIL` without signal: a reading
     /// too low for pure noise allows no signal, which is the model's), from
-    /// a single noise-dominated line to a band of many averages; the
-    /// symmetric `+-2 sigma` in dB puts a single noise-dominated line's
-    /// readings beyond three times as often.
+    /// pure noise to a line well above it; the symmetric `+-2 sigma` in dB
+    /// puts a noise-dominated line's readings beyond three times as often.
     #[test]
-    fn readings_of_a_right_model_lie_beyond_their_bound_at_the_tails_rate() {
+    fn readings_of_a_right_line_lie_beyond_their_bound_at_the_tails_rate() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
         let normal = rand_distr::Normal::new(0.0, 1.0).unwrap();
-        let trials = 10_000;
-        for (estimates, s) in [(1usize, 0.0f64), (1, 0.15), (1, 3.0), (3, 0.5), (40, 1.0)] {
-            let n = 1.0;
-            // The cell's averages as the spectra count them: K / 0.6.
-            let averages = if estimates == 1 { 1.0 } else { estimates as f64 / 0.6 };
+        let (trials, n) = (10_000, 1.0);
+        for s in [0.0f64, 0.15, 3.0, 30.0] {
             let (mut beyond, mut beyond_sigma) = (0, 0);
             for _ in 0..trials {
-                let p = (0..estimates)
-                    .map(|_| {
-                        let (re, im): (f64, f64) = (rng.sample(normal), rng.sample(normal));
-                        (s.sqrt() + re * (n / 2.0f64).sqrt()).powi(2) + im * im * n / 2.0
-                    })
-                    .sum::<f64>()
-                    / estimates as f64;
-                let (d, sigma, bound) = cell(p, averages, s, n, 1e-30, 0.0);
+                let (re, im): (f64, f64) = (rng.sample(normal), rng.sample(normal));
+                let p = (s.sqrt() + re * (n / 2.0f64).sqrt()).powi(2) + im * im * n / 2.0;
+                let (d, sigma, bound) = cell(p, 1.0, s, n, 1e-30, 0.0);
                 beyond += usize::from(d.abs() > bound + 1e-9);
                 beyond_sigma += usize::from(d.abs() > 2.0 * sigma);
             }
             let rate = beyond as f64 / trials as f64;
             let expected = if s == 0.0 { NOISE_TAIL } else { 2.0 * NOISE_TAIL };
-            assert!((rate - expected).abs() < 0.012, "K {estimates}, S/N {s}: {rate}");
-            if (estimates, s) == (1, 0.15) {
+            assert!((rate - expected).abs() < 0.012, "S/N {s}: {rate}");
+            if s == 0.15 {
                 assert!(beyond_sigma as f64 / trials as f64 > 3.0 * 2.0 * NOISE_TAIL, "{beyond_sigma}");
             }
         }

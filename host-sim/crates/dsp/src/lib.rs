@@ -55,7 +55,7 @@ pub(crate) mod test_signals {
 }
 
 pub use burg::{burg, burg_spectrogram, burg_tapered, decimate, select_order, ArModel, OrderCriterion};
-pub use chi_square::signal_power_interval;
+pub use chi_square::{signal_power_interval, signal_power_limit};
 pub use difference::central_difference;
 pub use dq0::{dq_currents, machine_torque_nm};
 pub use filter::{highpass_causal, highpass_zero_phase, lowpass_complement_zero_phase};
