@@ -48,10 +48,11 @@ pub struct CellGap {
     /// Expected scatter of `d` from the measurement's own noise, dB.
     pub noise_db: f64,
     /// How far towards zero the measured power's noise lets `d` reach, dB:
-    /// from the reading to the end of the interval of signal powers it
-    /// allows at the level `1 - 2 NOISE_TAIL` (the noncentral chi-square
-    /// law of its averages), on the model's side; 0 where `|d|` is within
-    /// the tolerance (the cell counts nothing whatever the bound).
+    /// for a band twice its noise scatter, for a line (a single estimate)
+    /// from the reading to the end, on the model's side, of the interval of
+    /// signal powers it allows at the level `1 - 2 NOISE_TAIL` (the
+    /// noncentral chi-square law of two degrees of freedom); 0 where `|d|`
+    /// is within the tolerance (the cell counts nothing whatever the bound).
     pub noise_bound_db: f64,
     /// The model's reproducibility in this cell, dB.
     pub tolerance_db: f64,
