@@ -861,6 +861,7 @@ fn torque_driven_accelerations_with(
                  clamp: Option<f64>,
                  series: &AngleSeries,
                  step: &Coefficients,
+                 total_kg: f64,
                  acc: &mut [f64]| {
         let (position, velocity) = y.split_at(nodes);
         let j = (k + 1).min(n - 1);
@@ -872,7 +873,8 @@ fn torque_driven_accelerations_with(
         line.accelerations_with(step, position, velocity, shaft, hold.brake(clamp), 0.0, acc);
         if let Hold::Drive { .. } = hold {
             let (u, v) = (tracked.0[k] + frac * (tracked.0[j] - tracked.0[k]), tracked.1[k]);
-            let body = tracking_acceleration(&step.lumped.masses_kg[..nodes], position, velocity, (u, v), tracking);
+            let body =
+                tracking_acceleration(&step.lumped.masses_kg[..nodes], total_kg, position, velocity, (u, v), tracking);
             acc[..nodes].iter_mut().for_each(|a| *a += body);
         }
     };
@@ -904,7 +906,8 @@ fn torque_driven_accelerations_with(
         line.lumped_into(&chain, y[layout.sheave], &mut lumped);
         // The sample's masses and springs serve its output and its first step.
         let mut step = line.coefficients(&chain, &lumped);
-        deriv(y, k, 0.0, feedback_nm, clamp_angle_rad, &series, &step, &mut a);
+        let mut total_kg = total_mass_kg(&step.lumped.masses_kg[..nodes]);
+        deriv(y, k, 0.0, feedback_nm, clamp_angle_rad, &series, &step, total_kg, &mut a);
         car.push(a[layout.body]);
         cw.push(-a[layout.counterweight()]);
         if k + 1 == n {
@@ -917,11 +920,12 @@ fn torque_driven_accelerations_with(
             if j > 0 {
                 line.lumped_into(&chain, y[layout.sheave], &mut lumped);
                 step = line.coefficients(&chain, &lumped);
+                total_kg = total_mass_kg(&step.lumped.masses_kg[..nodes]);
             }
             plant::rk4_step_in_time(y, h * sub, &mut work, |frac, y, dy| {
                 let (dx, dv) = dy.split_at_mut(nodes);
                 dx.copy_from_slice(&y[nodes..]);
-                deriv(y, k, start + frac * sub, feedback_nm, clamp_angle_rad, &series, &step, dv);
+                deriv(y, k, start + frac * sub, feedback_nm, clamp_angle_rad, &series, &step, total_kg, dv);
             });
         }
         estimate.advance(y[nodes + layout.sheave] / r, travel.speed_estimate_radps[k], h);
@@ -978,22 +982,35 @@ fn continued_past(shaft_angle_rad: &[f64], b: usize, fs: f64) -> Vec<f64> {
 
 /// The acceleration (m/s^2) the tracking force gives every node of the
 /// line: the `(kp, kd)` gains (1/s^2, 1/s) on the departure of the line's
-/// centre of mass (`masses`, kg; `position`, m; `velocity`, m/s) from the
-/// reference `(u, v)` (m, m/s).
+/// centre of mass (`masses`, kg, summing to `total_kg`; `position`, m;
+/// `velocity`, m/s) from the reference `(u, v)` (m, m/s). Both moments are
+/// summed in one pass, each in the nodes' order ([`mass_weighted_mean`]'s
+/// values to the bit).
 fn tracking_acceleration(
     masses: &[f64],
+    total_kg: f64,
     position: &[f64],
     velocity: &[f64],
     (u, v): (f64, f64),
     (kp, kd): (f64, f64),
 ) -> f64 {
-    kp * (u - mass_weighted_mean(masses, position)) + kd * (v - mass_weighted_mean(masses, velocity))
+    let (mut at_m, mut moving) = (-0.0, -0.0);
+    for ((m, x), w) in masses.iter().zip(position).zip(velocity) {
+        at_m += m * x;
+        moving += m * w;
+    }
+    kp * (u - at_m / total_kg) + kd * (v - moving / total_kg)
+}
+
+/// The sum of the nodes' `masses` (kg), in their order.
+fn total_mass_kg(masses: &[f64]) -> f64 {
+    masses.iter().sum()
 }
 
 /// The mean of the nodes' `x` weighted by their `masses` (kg): the
 /// rigid-body coordinate of positions or velocities.
 fn mass_weighted_mean(masses: &[f64], x: &[f64]) -> f64 {
-    masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / masses.iter().sum::<f64>()
+    masses.iter().zip(x).map(|(m, x)| m * x).sum::<f64>() / total_mass_kg(masses)
 }
 
 /// The line's state packed for the integrator: the `nodes` positions (m),
@@ -1147,6 +1164,26 @@ mod tests {
             sample_rate_hz,
             transducer_lines: &[],
             transducer: None,
+        }
+    }
+
+    /// The tracking force's one-pass moments give, to the bit, the centre
+    /// of mass the nodes' two weighted means give (positions and
+    /// velocities of either sign, masses of a rope line and its end masses).
+    #[test]
+    fn the_tracking_force_is_the_weighted_means_to_the_bit() {
+        use rand::{rngs::StdRng, Rng, SeedableRng};
+        let mut rng = StdRng::seed_from_u64(11);
+        for nodes in [1, 5, 12, MAX_NODES] {
+            let masses: Vec<f64> =
+                (0..nodes).map(|i| if i % 4 == 0 { 70.5 } else { rng.gen_range(0.05..3.0) }).collect();
+            let position: Vec<f64> = (0..nodes).map(|_| rng.gen_range(-0.02..0.02)).collect();
+            let velocity: Vec<f64> = (0..nodes).map(|_| rng.gen_range(-1.6..1.6)).collect();
+            let (reference, gains) = ((rng.gen_range(-0.02..0.02), rng.gen_range(-1.6..1.6)), (3.9e3, 88.0));
+            let both = tracking_acceleration(&masses, total_mass_kg(&masses), &position, &velocity, reference, gains);
+            let apart = gains.0 * (reference.0 - mass_weighted_mean(&masses, &position))
+                + gains.1 * (reference.1 - mass_weighted_mean(&masses, &velocity));
+            assert_eq!(both.to_bits(), apart.to_bits(), "{nodes} nodes: {both} against {apart}");
         }
     }
 
