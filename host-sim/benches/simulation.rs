@@ -1,8 +1,11 @@
 //! Criterion benchmarks of the simulation's speed: one PWM half period of
 //! the nominal plant (the exact step with a 16384 Hz sample in it, and the
 //! reference RK4 over the same interval), one half period of the plant with
-//! the 21-node line, the car-frame mode and the brake clamp (RK4), and a
-//! whole closed-loop travel (the `host-sim bench` travel).
+//! the 21-node line, the car-frame mode and the brake clamp (RK4), a
+//! whole closed-loop travel (the `host-sim bench` travel), and the gap
+//! diagnosis's torque-driven model of that travel (the run `gap` repeats for
+//! every hypothesis on a recording under another drive) with the nominal
+//! chain, tension stiffening and the diverting pulley.
 //!
 //! ```text
 //! cargo bench -p host-sim --bench simulation
@@ -12,6 +15,7 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use drive_core::config::Direction;
 
 use closed_loop::{simulate_travel, SimOptions, TravelSpec};
+use diagnosis::driven::{motion_from_angle, torque_driven_accelerations, DrivenSettings, DrivenTravel};
 use plant::effects::{EffectKind, Effects};
 use plant::{Integrator, Plant, PlantInputs};
 use rig_config::RigConfig;
@@ -75,5 +79,88 @@ fn whole_travel(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, plant_step, whole_travel);
+/// What the torque-driven model takes of a travel recording: motor
+/// torque (N m), encoder angle (rad) and speed estimate (rad/s), every
+/// `step`-th sample of the closed-loop `run` (the recording at its rate
+/// divided by `step`), with the constant-speed stage where the speed
+/// reference stands at its top.
+struct Recorded {
+    torque_nm: Vec<f64>,
+    angle_rad: Vec<f64>,
+    speed_radps: Vec<f64>,
+    constant_speed: std::ops::Range<usize>,
+    sample_rate_hz: f64,
+    lw_start_m: f64,
+}
+
+impl Recorded {
+    fn of(run: &closed_loop::TravelRun, step: usize) -> Self {
+        let every = |v: &[f64]| v.iter().step_by(step).copied().collect::<Vec<f64>>();
+        let reference = every(&run.ref_speed_mps);
+        let top = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let at_top = |v: &f64| v.abs() >= 0.999 * top;
+        let first = reference.iter().position(at_top).unwrap_or(0);
+        let last = reference.iter().rposition(at_top).map_or(0, |k| k + 1);
+        Self {
+            torque_nm: every(&run.motor_torque_nm),
+            angle_rad: every(&run.angle_rad),
+            speed_radps: every(&run.speed_radps),
+            constant_speed: first..last,
+            sample_rate_hz: run.sample_rate_hz / step as f64,
+            lw_start_m: run.lw_m[0],
+        }
+    }
+
+    fn travel(&self, m_car_kg: f64, m_cw_kg: f64) -> DrivenTravel<'_> {
+        DrivenTravel {
+            m_car_kg,
+            m_cw_kg,
+            lw_start_m: self.lw_start_m,
+            torque_nm: &self.torque_nm,
+            shaft_angle_rad: &self.angle_rad,
+            speed_estimate_radps: &self.speed_radps,
+            controller: None,
+            motion: motion_from_angle(&self.angle_rad, self.sample_rate_hz),
+            constant_speed: self.constant_speed.clone(),
+            reference_end: None,
+            sample_rate_hz: self.sample_rate_hz,
+            transducer_lines: &[],
+            transducer: None,
+        }
+    }
+}
+
+/// The torque-driven model of the diagnosis on the nominal travel's own
+/// recording (16384 Hz, and every fourth sample of it: 4096 Hz; no speed
+/// loop identified), with the nominal chain and two effects that change
+/// it: tension stiffening (a spring law per rope spring) and the diverting
+/// pulley (a node more, the general line).
+fn torque_driven_travel(c: &mut Criterion) {
+    let rig = RigConfig::embedded_default().unwrap();
+    let spec = TravelSpec::full_travel(&rig, 70.5, Direction::Up);
+    let run = simulate_travel(&rig, &spec, &SimOptions::for_rig(&rig), None).unwrap();
+    let (full, quarter) = (Recorded::of(&run, 1), Recorded::of(&run, 4));
+    let mut stiffening = Effects::none();
+    stiffening.set(EffectKind::TensionStiffening, &[0.45, 323.73]).unwrap();
+    let mut pulley = Effects::none();
+    pulley.set(EffectKind::DivertingPulley, &EffectKind::DivertingPulley.defaults()).unwrap();
+    let mut group = c.benchmark_group("torque-driven model of the travel (19.15 s recorded)");
+    group.sample_size(10);
+    let settings = DrivenSettings::default();
+    let cases = [
+        ("nominal chain, 16384 Hz", &full, Effects::none()),
+        ("nominal chain, 4096 Hz", &quarter, Effects::none()),
+        ("tension stiffening, 16384 Hz", &full, stiffening),
+        ("diverting pulley, 16384 Hz", &full, pulley),
+    ];
+    for (name, recorded, effects) in cases {
+        let travel = recorded.travel(70.5, rig.mechanics.m_cw_kg);
+        group.bench_function(name, |b| {
+            b.iter(|| black_box(torque_driven_accelerations(&rig, &travel, &settings, &effects).unwrap()))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, plant_step, whole_travel, torque_driven_travel);
 criterion_main!(benches);
