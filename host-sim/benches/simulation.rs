@@ -82,8 +82,8 @@ fn whole_travel(c: &mut Criterion) {
 /// What the torque-driven model takes of a travel recording: motor
 /// torque (N m), encoder angle (rad) and speed estimate (rad/s), every
 /// `step`-th sample of the closed-loop `run` (the recording at its rate
-/// divided by `step`), with the constant-speed stage where the speed
-/// reference stands at its top.
+/// divided by `step`), with the constant-speed stage found in the speed
+/// estimate as the diagnosis finds it ([`dsp::constant_speed_stage`]).
 struct Recorded {
     torque_nm: Vec<f64>,
     angle_rad: Vec<f64>,
@@ -96,17 +96,13 @@ struct Recorded {
 impl Recorded {
     fn of(run: &closed_loop::TravelRun, step: usize) -> Self {
         let every = |v: &[f64]| v.iter().step_by(step).copied().collect::<Vec<f64>>();
-        let reference = every(&run.ref_speed_mps);
-        let top = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let at_top = |v: &f64| v.abs() >= 0.999 * top;
-        let first = reference.iter().position(at_top).unwrap_or(0);
-        let last = reference.iter().rposition(at_top).map_or(0, |k| k + 1);
+        let (speed_radps, sample_rate_hz) = (every(&run.speed_radps), run.sample_rate_hz / step as f64);
         Self {
             torque_nm: every(&run.motor_torque_nm),
             angle_rad: every(&run.angle_rad),
-            speed_radps: every(&run.speed_radps),
-            constant_speed: first..last,
-            sample_rate_hz: run.sample_rate_hz / step as f64,
+            constant_speed: dsp::constant_speed_stage(&speed_radps, sample_rate_hz).unwrap(),
+            speed_radps,
+            sample_rate_hz,
             lw_start_m: run.lw_m[0],
         }
     }
