@@ -23,7 +23,8 @@
 //! rejects a ripple order, the currents carry its mirror image: the order's
 //! phase is then read from the measured torque's angle-locked line, less
 //! the line the drive's own current transducers put there
-//! ([`TransducerTorqueLine`]).
+//! ([`TransducerTorqueLine`]), through the speed loop on the chain
+//! ([`crate::ripple_phase`]).
 
 use std::f64::consts::TAU;
 use std::ops::Range;
@@ -53,10 +54,6 @@ pub const TRACKING_DAMPING: f64 = 1.0;
 /// The measured angle is low-passed at this frequency before the tracking
 /// loop uses it, Hz (encoder quantisation would otherwise reach the torque).
 pub const TRACKING_REFERENCE_LOWPASS_HZ: f64 = 5.0;
-/// A ripple order's line in the measured torque counts as the drive's
-/// rejection of it (and gives its phase) when at least this fraction of the
-/// order's amplitude.
-pub const REJECTED_FRACTION: f64 = 0.3;
 /// Largest product of the integration step and any rate of the chain up
 /// to the compared bands' top (the chain's highest rate is Gershgorin's
 /// bound, [`plant::line::Line::omega_max_radps`]) in the torque-driven
@@ -91,7 +88,7 @@ pub struct DrivenSettings {
     /// Bandwidth of the tracking loop, Hz.
     pub tracking_bandwidth_hz: f64,
     /// Ripple phases read from the measured torque where the drive rejects
-    /// an order ([`ripple_matched_to_the_drive`]); `false`: the rig file's.
+    /// an order ([`crate::ripple_phase::ripple_matched_to_the_drive`]); `false`: the rig file's.
     pub ripple_phases_from_torque: bool,
     /// Added to every ripple order's phase, rad: the rig file gives no
     /// phases, so the tolerance is taken over the phase circle.
@@ -505,70 +502,6 @@ pub fn rigid_inertia_kg_m2(params: &ChainParams) -> f64 {
     params.sheave_inertia_kg_m2 + masses_kg * r * r
 }
 
-/// The sensitivity `S = 1 / (1 + L)` of the rig drive's speed loop at the
-/// angular frequency `omega_radps` (rad/s, signed: negative for a line
-/// that turns back with the shaft, where `S` is the conjugate), on the
-/// rigid chain of inertia `inertia_kg_m2` (kg m^2): `L = (K_p + K_i / s)
-/// e^{-s tau_d} / (1 + s tau_l) / (J s)`. A torque that the drive adds to
-/// its own output (its transducers' error) reaches the shaft as `S` times
-/// it; a torque from outside (the ripple) leaves `-(1 - S)` times it in
-/// the currents.
-pub fn speed_loop_sensitivity(controller: &SpeedController, inertia_kg_m2: f64, omega_radps: f64) -> [f64; 2] {
-    use nalgebra::Complex;
-    let s = Complex::new(0.0, omega_radps);
-    let controller_gain = Complex::new(controller.kp_nms_per_rad, 0.0) + controller.ki_nm_per_rad / s;
-    let estimate = (-s * controller.estimate_delay_s).exp() / (1.0 + s * controller.estimate_lag_s);
-    let open_loop = controller_gain * estimate / (s * inertia_kg_m2);
-    let sensitivity = 1.0 / (1.0 + open_loop);
-    [sensitivity.re, sensitivity.im]
-}
-
-/// The ripple of `rig` with each order's phase read from the measured
-/// torque's angle-locked line over the constant-speed stage where that
-/// line, less the drive's transducer line at that order as its speed loop
-/// lets it through ([`TransducerTorqueLine`], [`speed_loop_sensitivity`];
-/// the whole line where the loop is not identified), is at least
-/// [`REJECTED_FRACTION`] of the order's amplitude: the rig's speed loop
-/// rejects it, the currents carry `-T A cos(n theta + phi)` with `T = 1 -
-/// S` its complementary sensitivity, whose phase (up to a radian near the
-/// speed loop's crossover) is taken off where the loop is identified. The
-/// rig file's phase elsewhere.
-pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> RippleTorque {
-    let mut ripple = RippleTorque::from_rig(&rig.ripple);
-    let stage = travel.constant_speed.clone();
-    let n = stage.len() as f64;
-    if n < 2.0 {
-        return ripple;
-    }
-    let angle = &travel.shaft_angle_rad[stage.clone()];
-    let shaft_speed_radps = (angle[angle.len() - 1] - angle[0]) * travel.sample_rate_hz / (n - 1.0);
-    let params = travel_chain_params(rig, travel);
-    let inertia = rigid_inertia_kg_m2(&params);
-    for h in &mut ripple.harmonics {
-        let (mut re, mut im) = (0.0, 0.0);
-        for k in stage.clone() {
-            let (s, c) = (h.mechanical_order * travel.shaft_angle_rad[k]).sin_cos();
-            re += travel.torque_nm[k] * c;
-            im -= travel.torque_nm[k] * s;
-        }
-        let (mut re, mut im) = (2.0 * re / n, 2.0 * im / n);
-        let sensitivity =
-            travel.controller.map(|c| speed_loop_sensitivity(&c, inertia, h.mechanical_order * shaft_speed_radps));
-        if let Some(line) = travel.transducer_lines.iter().find(|l| l.mechanical_order == h.mechanical_order) {
-            let [sr, si] = sensitivity.unwrap_or([1.0, 0.0]);
-            let [ur, ui] = line.phasor_nm;
-            re -= sr * ur - si * ui;
-            im -= sr * ui + si * ur;
-        }
-        if re.hypot(im) >= REJECTED_FRACTION * h.amplitude_nm {
-            // The currents carry `-T A`, `T = 1 - S` the loop's rejection.
-            let rejection_phase_rad = sensitivity.map_or(0.0, |[sr, si]| (-si).atan2(1.0 - sr));
-            h.phase_rad = (-im).atan2(-re) - rejection_phase_rad;
-        }
-    }
-    ripple
-}
-
 /// The rig drive's speed estimate of the model's shaft, as the identified
 /// estimate's dead time and lag make it, and the integral of its departure
 /// from the rig's estimate.
@@ -699,7 +632,7 @@ fn check_finite(state: &[f64], t_s: f64) -> Result<()> {
 /// shifted by the settings' phase.
 fn ripple_of(rig: &RigConfig, travel: &DrivenTravel, settings: &DrivenSettings) -> RippleTorque {
     let mut ripple = if settings.ripple_phases_from_torque {
-        ripple_matched_to_the_drive(rig, travel)
+        crate::ripple_phase::ripple_matched_to_the_drive(rig, travel)
     } else {
         RippleTorque::from_rig(&rig.ripple)
     };
@@ -1184,48 +1117,6 @@ mod tests {
             let apart = gains.0 * (reference.0 - mass_weighted_mean(&masses, &position))
                 + gains.1 * (reference.1 - mass_weighted_mean(&masses, &velocity));
             assert_eq!(both.to_bits(), apart.to_bits(), "{nodes} nodes: {both} against {apart}");
-        }
-    }
-
-    /// The speed loop's sensitivity against the loop run in time: a rigid
-    /// inertia under a PI on a delayed, lagged speed estimate, a torque line
-    /// added to the drive's output; the line of the torque it then puts out
-    /// is `S` times the added one (both directions of turning).
-    #[test]
-    fn the_sensitivity_is_what_the_loop_does_in_time() {
-        let controller = SpeedController {
-            kp_nms_per_rad: 26.0,
-            ki_nm_per_rad: 80.0,
-            estimate_lag_s: 0.0005,
-            estimate_delay_s: 0.003,
-            dynamic_fit: 1.0,
-        };
-        let (inertia, fs) = (1.1, 20_000.0);
-        let delay = (controller.estimate_delay_s * fs).round() as usize;
-        for omega in [TAU * 5.4, -TAU * 5.4, TAU * 11.0] {
-            let (mut speed, mut estimate, mut integral) = (0.0, 0.0, 0.0);
-            let mut past = std::collections::VecDeque::from(vec![0.0; delay + 1]);
-            let seconds = 30.0;
-            let (mut re, mut im, mut count) = (0.0, 0.0, 0.0);
-            for k in 0..(seconds * fs) as usize {
-                let t = k as f64 / fs;
-                past.push_back(speed);
-                let seen = past.pop_front().unwrap();
-                estimate += (seen - estimate) / (1.0 + controller.estimate_lag_s * fs);
-                integral += -estimate / fs;
-                let added = (omega * t).cos();
-                let torque = controller.kp_nms_per_rad * -estimate + controller.ki_nm_per_rad * integral + added;
-                speed += torque / inertia / fs;
-                if t > seconds / 2.0 {
-                    re += torque * (omega * t).cos();
-                    im -= torque * (omega * t).sin();
-                    count += 1.0;
-                }
-            }
-            let measured = [2.0 * re / count, 2.0 * im / count];
-            let [sr, si] = speed_loop_sensitivity(&controller, inertia, omega);
-            let miss = (sr - measured[0]).hypot(si - measured[1]);
-            assert!(miss < 0.02 * sr.hypot(si), "omega {omega}: S = {sr} + {si} j against {measured:?}");
         }
     }
 

@@ -12,7 +12,8 @@
 //! 2. [`prepare`]: every recording's counterpart made with the calibrated
 //!    nominal model: [`simulate`]
 //!    (closed loop) or, for travels under another drive, the mechanics
-//!    driven by the measured torque ([`driven`]); which drive the rig runs,
+//!    driven by the measured torque ([`driven`], the ripple's phases read
+//!    from that torque by [`ripple_phase`]); which drive the rig runs,
 //!    [`drive_finding`] decides on the closed loop's runs.
 //! 3. [`compare`]: the comparison targets ([`target`]) and the nominal
 //!    model's gap in cells of channel x travel phase x band ([`measure`]),
@@ -66,6 +67,7 @@ pub mod pipeline;
 pub mod prepare;
 pub mod replay;
 pub mod report;
+pub mod ripple_phase;
 pub mod screen;
 pub mod signals;
 pub mod simulate;
