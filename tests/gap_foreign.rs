@@ -664,7 +664,7 @@ fn foreign_rig_current_sensor_error_recorded_by_the_drive_leaves_its_currents_cl
     assert!(true_lines.present_orders.contains(&1.0), "clamps: lines at {:?}", true_lines.present_orders);
 }
 
-/// The sweep over foreign draws (about 18 minutes a draw on two cores): every
+/// The sweep over foreign draws (6-18 minutes a draw on two cores): every
 /// nominal and parameter-only rig `nominal` and calibrated within the bounds,
 /// the effects at twice the noise or more named first in 80 % of the cases and
 /// explained in 70 %, the effect outside the library `unexplained`.
