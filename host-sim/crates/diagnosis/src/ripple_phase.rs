@@ -117,18 +117,30 @@ pub fn angle_locked_line(torque_nm: &[f64], angle_rad: &[f64], order: f64) -> Op
 /// of the order's amplitude and explains at least [`EXPLAINED_SHARE`] of
 /// the lines' power; the rig file's phase elsewhere.
 pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> RippleTorque {
+    let mut chain = rig.observer_model();
+    chain.m_cw_kg = travel.m_cw_kg as f32;
+    ripple_read_through(rig, travel, &|lw_m, omega_radps| chain_mobility(&chain, travel.m_car_kg, lw_m, omega_radps))
+}
+
+/// [`ripple_matched_to_the_drive`] on a sheave of mobility `mobility(l_w,
+/// omega)` (rad/s per N m) at the counterweight-side rope length `l_w`
+/// (m) and the angular frequency `omega` (rad/s, signed).
+fn ripple_read_through(
+    rig: &RigConfig,
+    travel: &DrivenTravel,
+    mobility: &dyn Fn(f64, f64) -> Complex<f64>,
+) -> RippleTorque {
     let mut ripple = RippleTorque::from_rig(&rig.ripple);
     let windows = revolution_windows(travel.shaft_angle_rad, travel.constant_speed.clone());
     if windows.is_empty() {
         return ripple;
     }
-    let mut chain = rig.observer_model();
-    chain.m_cw_kg = travel.m_cw_kg as f32;
     for h in &mut ripple.harmonics {
         let transducer = travel.transducer_lines.iter().find(|l| l.mechanical_order == h.mechanical_order);
         let mut reading = PhaseReading::default();
         for window in &windows {
-            if let Some((line, rejection)) = window_line(rig, travel, &chain, h.mechanical_order, window, transducer) {
+            if let Some((line, rejection)) = window_line(rig, travel, mobility, h.mechanical_order, window, transducer)
+            {
                 reading.add(line, rejection, window.len() as f64);
             }
         }
@@ -141,12 +153,12 @@ pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> Ri
 
 /// One window's line of order `order` in the drive's torque, less the
 /// transducer line `transducer` as the speed loop passes it, and the
-/// loop's rejection `T = 1 - S` there (1 where the loop is not
-/// identified).
+/// loop's rejection `T = 1 - S` there on a sheave of mobility `mobility`
+/// ([`ripple_read_through`]; 1 where the loop is not identified).
 fn window_line(
     rig: &RigConfig,
     travel: &DrivenTravel,
-    chain: &ChainModel,
+    mobility: &dyn Fn(f64, f64) -> Complex<f64>,
     order: f64,
     window: &Range<usize>,
     transducer: Option<&TransducerTorqueLine>,
@@ -157,9 +169,7 @@ fn window_line(
     let omega = order * (angle[angle.len() - 1] - angle[0]) / seconds;
     let mean_angle = angle.iter().sum::<f64>() / angle.len() as f64;
     let lw_m = travel.lw_start_m + rig.mechanics.sheave_radius_m * mean_angle;
-    let sensitivity = travel
-        .controller
-        .map(|c| speed_loop_sensitivity(&c, chain_mobility(chain, travel.m_car_kg, lw_m, omega), omega));
+    let sensitivity = travel.controller.map(|c| speed_loop_sensitivity(&c, mobility(lw_m, omega), omega));
     if let Some(t) = transducer {
         line -= sensitivity.unwrap_or(Complex::new(1.0, 0.0)) * Complex::new(t.phasor_nm[0], t.phasor_nm[1]);
     }
@@ -320,7 +330,9 @@ mod tests {
         let driven = travel.driven(&params);
         let read = ripple_matched_to_the_drive(&ripple_rig, &driven).harmonics[0].phase_rad;
         let miss = |p: f64| (Complex::from_polar(1.0, p) / Complex::from_polar(1.0, phase)).arg().abs();
-        let rigid = rigid_reading(&ripple_rig, &driven, &params);
+        let inertia = crate::driven::rigid_inertia_kg_m2(&params);
+        let rigid = ripple_read_through(&ripple_rig, &driven, &|_, omega| rigid_mobility(inertia, omega)).harmonics[0]
+            .phase_rad;
         println!(
             "order 12 at {f_mid:.2} Hz mid-stage: chain-aware miss {:.3} rad, rigid {:.3} rad",
             miss(read),
@@ -351,23 +363,6 @@ mod tests {
         assert!(turning.explained() < EXPLAINED_SHARE, "{}", turning.explained());
         assert_eq!(turning.phase_rad(2.0), None);
         assert_eq!(following.phase_rad(2.0 / REJECTED_FRACTION * 1.01), None);
-    }
-
-    /// The reading of [`ripple_matched_to_the_drive`] with the rigid
-    /// chain's mobility in every window (rad).
-    fn rigid_reading(rig: &RigConfig, travel: &DrivenTravel, params: &ChainParams) -> f64 {
-        let inertia = crate::driven::rigid_inertia_kg_m2(params);
-        let order = 12.0;
-        let mut reading = PhaseReading::default();
-        for window in revolution_windows(travel.shaft_angle_rad, travel.constant_speed.clone()) {
-            let angle = &travel.shaft_angle_rad[window.clone()];
-            let line = angle_locked_line(&travel.torque_nm[window.clone()], angle, order).unwrap();
-            let omega = order * (angle[angle.len() - 1] - angle[0]) * travel.sample_rate_hz / (angle.len() - 1) as f64;
-            let s = speed_loop_sensitivity(&controller(), rigid_mobility(inertia, omega), omega);
-            reading.add(line, 1.0 - s, window.len() as f64);
-        }
-        let _ = rig;
-        reading.ripple_nm().unwrap().arg()
     }
 
     fn controller() -> SpeedController {
