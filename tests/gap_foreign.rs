@@ -19,7 +19,9 @@
 //! `nominal` and `rail_joints`):
 //! `cargo test --release -p host-sim --test integration gap_foreign:: -- --ignored --nocapture`
 //! (`GAP_FOREIGN_DRAWS=N` draws, default 2, from `GAP_FOREIGN_FIRST`,
-//! default 100: the foreign rig of `--foreign-seed 100` and on).
+//! default 100: the foreign rig of `--foreign-seed 100` and on;
+//! `GAP_FOREIGN_DUMP=DIR` writes each case's recordings to
+//! `DIR/draw<d>_<case>/` for `host-sim gap`).
 
 use closed_loop::foreign::ForeignRig;
 use closed_loop::synthetic::{make_foreign_dataset_hooked, DatasetSpec, TravelHooks};
@@ -187,6 +189,19 @@ fn diagnosed(model: &RigConfig, name: &str, data: &[(String, Recording)]) -> Gap
     diagnose(model, name, data, &GapOptions::default(), &|_, _, _| {}).expect("the diagnosis runs")
 }
 
+/// Writes a case's recordings to `$GAP_FOREIGN_DUMP/draw<d>_<case>/` when
+/// that variable names a directory, so that one case of the sweep can be
+/// run again with `host-sim gap` (as recordings in files: the values go
+/// through the format's text).
+fn dump(d: u64, case: &str, data: &[(String, Recording)]) {
+    let Ok(root) = std::env::var("GAP_FOREIGN_DUMP") else { return };
+    let dir = std::path::Path::new(&root).join(format!("draw{d}_{case}"));
+    std::fs::create_dir_all(&dir).expect("the dump directory can be made");
+    for (stem, recording) in data {
+        recording::write_recording(&dir, stem, recording).expect("the dump is written");
+    }
+}
+
 /// A rig whose EA and damping are drawn within +-20 % and +-50 %.
 fn parameter_only(nominal: &RigConfig, rng: &mut StdRng) -> RigConfig {
     let mut truth = nominal.clone();
@@ -260,6 +275,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
     let variant = acquisition_variant(&foreign);
     let truth = parameter_only(&model, &mut rng);
     if selected("nominal") {
+        dump(d, "nominal", &nominal);
         let report = diagnosed(&model, "nominal", &nominal);
         cases.push(Case {
             draw: d,
@@ -317,6 +333,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
             .map(|v| if v.abs() < 1e-3 && *v != 0.0 { format!("{v:.3e}") } else { format!("{v:.4}") })
             .collect();
         let truth = format!("{} [{}]", kind.name(), values_text.join(", "));
+        dump(d, kind.name(), &data);
         let report = diagnosed(&model, &truth, &data);
         let change = Change::between(&data, reference);
         cases.push(Case {

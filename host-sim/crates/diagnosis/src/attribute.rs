@@ -8,7 +8,8 @@
 //! - grid: effects whose parameters move natural frequencies (tension
 //!   stiffening, pulley, rope elements, frame mode, brake clamp) are
 //!   simulated on a grid of their fitted parameters, refined around the
-//!   best point on all recordings; a fold picks the grid point best on its
+//!   best point on all recordings (and past it where it ends its searched
+//!   line); a fold picks the grid point best on its
 //!   training recordings. The grid of an effect that places a resonance
 //!   with one parameter (pulley, tension stiffening, brake clamp) is the
 //!   bracket its screen found ([`super::screen`]), not a fixed coarse one;
@@ -33,7 +34,7 @@ use super::measure::gap;
 use super::screen;
 use super::spectra::{Bands, CellPowers, ChainSpectra, CrossPowers};
 use super::target::Target;
-use plant::effects::{EffectKind, Effects, Fit as Declared, FromData, Neutral, ParamScale};
+use plant::effects::{EffectKind, Effects, Fit as Declared, FromData, Neutral, ParamScale, ParamSpec};
 use recording::RecordingKind;
 use rig_config::RigConfig;
 
@@ -278,8 +279,12 @@ fn fitted_count(kind: EffectKind) -> usize {
     kind.parameters().iter().filter(|s| s.fitted).count()
 }
 
-/// Grid points to add around `best` (midpoints towards its neighbours along
-/// every fitted dimension, in the parameter's scale).
+/// Grid points to add around `best` along every fitted dimension, in the
+/// parameter's scale: midpoints towards its neighbours, and where it ends
+/// its searched line, a point as far beyond that end as its neighbour lies
+/// within (kept in the accepted range: halfway to the range's end where
+/// the step would leave it): a best point at the end of its line is not
+/// yet a minimum, and the search goes on past it.
 fn refinement(kind: EffectKind, grid: &[Vec<f64>], best: usize) -> Vec<Vec<f64>> {
     let specs = kind.parameters();
     let b = &grid[best];
@@ -293,29 +298,55 @@ fn refinement(kind: EffectKind, grid: &[Vec<f64>], best: usize) -> Vec<Vec<f64>>
         let line: Vec<f64> = grid.iter().filter(|p| same_elsewhere(p)).map(|p| p[j]).collect();
         let lower = line.iter().copied().filter(|&x| x < b[j]).fold(f64::NEG_INFINITY, f64::max);
         let upper = line.iter().copied().filter(|&x| x > b[j]).fold(f64::INFINITY, f64::min);
-        for n in [lower, upper] {
-            if !n.is_finite() {
-                continue;
-            }
-            let mid = match spec.scale {
-                ParamScale::Log => (n * b[j]).sqrt(),
-                ParamScale::Integer => {
-                    let m = (0.5 * (n + b[j])).round();
-                    if m == n || m == b[j] {
-                        continue;
-                    }
-                    m
-                }
-                _ => 0.5 * (n + b[j]),
-            };
+        let towards = [lower, upper].into_iter().filter(|n| n.is_finite()).filter_map(|n| midpoint(spec, n, b[j]));
+        let beyond = match (lower.is_finite(), upper.is_finite()) {
+            (false, true) => beyond_the_end(spec, b[j], upper),
+            (true, false) => beyond_the_end(spec, b[j], lower),
+            _ => None,
+        };
+        for x in towards.chain(beyond) {
             let mut p = b.clone();
-            p[j] = mid;
+            p[j] = x;
             if !grid.contains(&p) && !out.contains(&p) {
                 out.push(p);
             }
         }
     }
     out
+}
+
+/// The point halfway between `a` and `b` in `spec`'s scale (`None` for
+/// whole numbers with none between them).
+fn midpoint(spec: &ParamSpec, a: f64, b: f64) -> Option<f64> {
+    match spec.scale {
+        ParamScale::Log => Some((a * b).sqrt()),
+        ParamScale::Integer => Some((0.5 * (a + b)).round()).filter(|m| *m != a && *m != b),
+        _ => Some(0.5 * (a + b)),
+    }
+}
+
+/// The point past `end` (the end of a searched line) as far from it as its
+/// `neighbour` on the line, in `spec`'s scale; where that leaves the
+/// accepted range (or, on a linear scale, reaches its bound), halfway (in
+/// the scale) between `end` and the range's bound; `None` when `end` is
+/// the bound (or a phase, which has no end).
+fn beyond_the_end(spec: &ParamSpec, end: f64, neighbour: f64) -> Option<f64> {
+    let bound = if neighbour > end { spec.min } else { spec.max };
+    let step = match spec.scale {
+        ParamScale::Log if end > 0.0 && neighbour > 0.0 => end * end / neighbour,
+        ParamScale::Log | ParamScale::Angle => return None,
+        _ => 2.0 * end - neighbour,
+    };
+    // A linear range's bound is where the effect vanishes (the screen's
+    // dense line leaves it out too); another scale's bound is a value.
+    let inside = match (neighbour > end, spec.scale == ParamScale::Linear) {
+        (true, true) => step > bound,
+        (true, false) => step >= bound,
+        (false, true) => step < bound,
+        (false, false) => step <= bound,
+    };
+    let x = if inside { step } else { midpoint(spec, end, bound)? };
+    Some(x).filter(|&x| x != end && x.is_finite() && (spec.min..=spec.max).contains(&x))
 }
 
 /// Per recording, the spectra of one model's run (`None` where it failed).
@@ -1381,11 +1412,26 @@ mod tests {
         // Integer scale: 4 between 2 and 8 gives 3 and 6.
         let grid = [vec![2.0], vec![4.0], vec![8.0]];
         assert_eq!(refinement(EffectKind::RopeDiscretization, &grid, 1), [vec![3.0], vec![6.0]]);
-        // Log scale: geometric mean towards the one neighbour.
+        // Log scale: geometric mean towards the one neighbour, and as far
+        // past the line's end (4e3 / 4 = 1e3, the range's bound).
         let grid = [vec![4.0e3, 5.0], vec![1.6e4, 5.0]];
         let r = refinement(EffectKind::BrakeStop, &grid, 0);
-        assert_eq!(r.len(), 1);
+        assert_eq!(r.len(), 2);
         assert!((r[0][0] - 8.0e3).abs() < 1e-9 && r[0][1] == 5.0);
+        assert!((r[1][0] - 1.0e3).abs() < 1e-9 && r[1][1] == 5.0);
+        // Linear scale: past the lower end by the neighbour's step; where
+        // that reaches the bound at which the effect vanishes, halfway to it.
+        let near = |r: Vec<Vec<f64>>, want: &[f64]| {
+            r.len() == want.len() && r.iter().zip(want).all(|(p, w)| (p[0] - w).abs() < 1e-12)
+        };
+        let grid = [vec![0.5, 323.73], vec![0.55, 323.73], vec![0.6, 323.73]];
+        assert!(near(refinement(EffectKind::TensionStiffening, &grid, 0), &[0.525, 0.45]));
+        assert!(near(refinement(EffectKind::TensionStiffening, &grid, 2), &[0.575, 0.65]));
+        let grid = [vec![0.05, 323.73], vec![0.1, 323.73]];
+        assert!(near(refinement(EffectKind::TensionStiffening, &grid, 0), &[0.075, 0.025]));
+        // A best point on the range's bound has nothing past it.
+        let grid = [vec![4.0], vec![8.0]];
+        assert_eq!(refinement(EffectKind::RopeDiscretization, &grid, 1), [vec![6.0]]);
 
         let mut families = vec![
             grid_family(EffectKind::RopeDiscretization, &[2.0, 4.0]),
