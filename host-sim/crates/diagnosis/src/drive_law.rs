@@ -336,10 +336,10 @@ mod tests {
             let y = lag_of_linear_input(&x, fs, tau);
             // The steady state's sine and cosine parts over the last second.
             let (mut s, mut c) = (0.0, 0.0);
-            for (k, v) in y.iter().enumerate().skip(n / 2) {
+            for k in n / 2..n {
                 let phase = TAU * f * k as f64 / fs;
-                s += v * phase.sin();
-                c += v * phase.cos();
+                s += y[k] * phase.sin();
+                c += y[k] * phase.cos();
             }
             let (s, c) = (2.0 * s / (n / 2) as f64, 2.0 * c / (n / 2) as f64);
             let w = TAU * f * tau;
