@@ -28,23 +28,11 @@ use dsp::{central_difference, highpass_zero_phase};
 /// Hz: above the speed reference's content and the lowest ripple orders,
 /// below the anti-alias and the speed estimate's quantisation.
 pub const FIT_BAND_HZ: (f64, f64) = (4.0, 40.0);
-/// Step of the candidate dead times of the rig drive's speed estimate (a
-/// counting window, a speed loop slower than the samples), s: a quarter
-/// of a millisecond, an eighth of a cycle at [`FIT_BAND_HZ`]'s top.
-pub const ESTIMATE_DELAY_STEP_S: f64 = 0.00025;
-/// Longest candidate dead time of the speed estimate, s.
-pub const ESTIMATE_DELAY_MAX_S: f64 = 0.008;
-/// Shortest nonzero candidate time constant of the speed estimate's
-/// filter, s; the candidates rise from it in quarter octaves (19 % each)
-/// up to [`ESTIMATE_LAG_MAX_S`], and zero (no filter) is one of them.
-pub const ESTIMATE_LAG_MIN_S: f64 = 0.00025;
-/// Longest candidate time constant of the speed estimate's filter, s.
-pub const ESTIMATE_LAG_MAX_S: f64 = 0.032;
-/// Rate (Hz, at least) at which the estimate's dynamics are searched: the
-/// signals compared are band-limited to [`FIT_BAND_HZ`], so every
-/// `fs / SEARCH_RATE_HZ`-th sample carries them, and a dead time between
-/// those samples is read by linear interpolation.
-pub const SEARCH_RATE_HZ: f64 = 1024.0;
+/// Candidate time constants of the rig drive's speed-estimate filter, s.
+pub const ESTIMATE_LAGS_S: [f64; 8] = [0.0, 0.0005, 0.001, 0.002, 0.004, 0.008, 0.016, 0.032];
+/// Candidate dead times of the rig drive's speed estimate (a counting
+/// window, a speed loop slower than the samples), s.
+pub const ESTIMATE_DELAYS_S: [f64; 8] = [0.0, 0.0005, 0.001, 0.002, 0.003, 0.004, 0.006, 0.008];
 /// Smallest share of the torque's variance in [`FIT_BAND_HZ`] the
 /// identified law must explain (1 - residual / torque variance) for the
 /// drive to count as a PI on its speed estimate.
@@ -99,28 +87,6 @@ pub fn lag(x: &[f64], fs: f64, tau_s: f64) -> Vec<f64> {
         .collect()
 }
 
-/// First-order lag of time constant `tau_s` (s) applied to `x` at `fs`
-/// Hz, exact for an input linear between its samples: unlike [`lag`]
-/// (the input held over a sample), its delay does not depend on the
-/// rate, so a lag found at one rate is the lag at another.
-fn lag_of_linear_input(x: &[f64], fs: f64, tau_s: f64) -> Vec<f64> {
-    if tau_s <= 0.0 {
-        return x.to_vec();
-    }
-    let a = (-1.0 / (fs * tau_s)).exp();
-    // The response to a unit ramp over one sample, beyond the step's.
-    let ramp = 1.0 - fs * tau_s * (1.0 - a);
-    let mut y = x.first().copied().unwrap_or(0.0);
-    let mut previous = y;
-    x.iter()
-        .map(|&v| {
-            y = a * y + (1.0 - a) * previous + ramp * (v - previous);
-            previous = v;
-            y
-        })
-        .collect()
-}
-
 /// `x` band-passed to [`FIT_BAND_HZ`] (zero phase).
 fn fit_band(x: &[f64], fs: f64) -> Result<Vec<f64>> {
     let above = highpass_zero_phase(x, fs, FIT_BAND_HZ.0)?;
@@ -134,27 +100,18 @@ pub fn delay(x: &[f64], samples: usize) -> Vec<f64> {
     (0..x.len()).map(|k| if k >= samples { x[k - samples] } else { first }).collect()
 }
 
-/// The dead time and lag that bring the encoder's speed over `range`
-/// closest to the drive's estimate in [`FIT_BAND_HZ`], s: every dead time
-/// in steps of [`ESTIMATE_DELAY_STEP_S`] up to [`ESTIMATE_DELAY_MAX_S`]
-/// with every time constant of [`estimate_lag_candidates_s`]. Both
-/// signals are band-passed first (the band-pass, the delay and the lag
-/// commute) and compared at [`SEARCH_RATE_HZ`].
+/// The dead time and lag (of [`ESTIMATE_DELAYS_S`] and
+/// [`ESTIMATE_LAGS_S`]) that bring the encoder's speed over `range`
+/// closest to the drive's estimate in [`FIT_BAND_HZ`], s.
 fn estimate_dynamics_s(data: &ControllerData, range: std::ops::Range<usize>) -> Result<(f64, f64)> {
     let fs = data.sample_rate_hz;
-    let stride = ((fs / SEARCH_RATE_HZ).floor() as usize).max(1);
-    let every = |x: Vec<f64>| -> Vec<f64> { x.into_iter().step_by(stride).collect() };
-    let encoder = every(fit_band(&central_difference(&data.shaft_angle_rad[range.clone()], fs), fs)?);
-    let estimate = every(fit_band(&data.speed_estimate_radps[range], fs)?);
-    let rate = fs / stride as f64;
-    let lags = estimate_lag_candidates_s();
-    let steps = (ESTIMATE_DELAY_MAX_S / ESTIMATE_DELAY_STEP_S).round() as usize;
+    let encoder = central_difference(&data.shaft_angle_rad[range.clone()], fs);
+    let estimate = fit_band(&data.speed_estimate_radps[range], fs)?;
     let mut best = ((0.0, 0.0), f64::INFINITY);
-    for step in 0..=steps {
-        let dead = step as f64 * ESTIMATE_DELAY_STEP_S;
-        let delayed = fractional_delay(&encoder, dead * rate);
-        for &tau in &lags {
-            let lagged = lag_of_linear_input(&delayed, rate, tau);
+    for dead in ESTIMATE_DELAYS_S {
+        let delayed = delay(&encoder, (dead * fs).round() as usize);
+        for tau in ESTIMATE_LAGS_S {
+            let lagged = fit_band(&lag(&delayed, fs, tau), fs)?;
             let error: f64 = lagged.iter().zip(&estimate).map(|(a, b)| (a - b).powi(2)).sum();
             if error < best.1 {
                 best = ((dead, tau), error);
@@ -162,24 +119,6 @@ fn estimate_dynamics_s(data: &ControllerData, range: std::ops::Range<usize>) -> 
         }
     }
     Ok(best.0)
-}
-
-/// The candidate time constants of the speed estimate's filter, s: zero,
-/// then [`ESTIMATE_LAG_MIN_S`] rising in quarter octaves up to
-/// [`ESTIMATE_LAG_MAX_S`].
-pub fn estimate_lag_candidates_s() -> Vec<f64> {
-    let steps = (4.0 * (ESTIMATE_LAG_MAX_S / ESTIMATE_LAG_MIN_S).log2()).round() as i32;
-    std::iter::once(0.0).chain((0..=steps).map(|k| ESTIMATE_LAG_MIN_S * 2f64.powf(f64::from(k) / 4.0))).collect()
-}
-
-/// `x` delayed by `samples` (>= 0, fractional: linear interpolation
-/// between neighbours; the first value held before).
-fn fractional_delay(x: &[f64], samples: f64) -> Vec<f64> {
-    let (whole, part) = (samples.floor() as usize, samples - samples.floor());
-    let first = x.first().copied().unwrap_or(0.0);
-    let at = |k: usize| if k >= whole { x[k - whole] } else { first };
-    let before = |k: usize| if k > whole { x[k - whole - 1] } else { first };
-    (0..x.len()).map(|k| (1.0 - part) * at(k) + part * before(k)).collect()
 }
 
 /// The fit's regressors over `range`: a constant, the speed error, its
@@ -314,39 +253,11 @@ mod tests {
         let found = identify_speed_controller(&data).unwrap();
         assert!((found.kp_nms_per_rad - 15.0).abs() < 0.05, "{found:?}");
         assert!((found.ki_nm_per_rad - 90.0).abs() < 0.5, "{found:?}");
-        // 8 samples (1.95 ms; the drive's filter, holding its input over
-        // a sample, is 0.12 ms faster than a lag of a continuous input)
-        // and 4 ms: within a step of the candidates.
-        assert!((found.estimate_delay_s - 0.00183).abs() <= ESTIMATE_DELAY_STEP_S, "{found:?}");
-        assert!((found.estimate_lag_s / 0.004 - 1.0).abs() < 0.19, "{found:?}");
+        assert_eq!((found.estimate_delay_s, found.estimate_lag_s), (0.002, 0.004), "{found:?}");
         assert!(found.dynamic_fit > 0.999, "{found:?}");
         // Without the reference: the constant-speed stage alone.
         let found = identify_speed_controller(&ControllerData { reference_radps: None, ..data }).unwrap();
         assert!((found.kp_nms_per_rad - 15.0).abs() < 0.3, "{found:?}");
-    }
-
-    /// The lag of a linearly interpolated input answers a sine as the
-    /// continuous lag does, `1 / (1 + j w tau)`, at any rate.
-    #[test]
-    fn the_lag_of_a_linear_input_is_the_continuous_lag_at_any_rate() {
-        let (f, tau) = (20.0, 0.005);
-        for fs in [1024.0, 4096.0, 16384.0] {
-            let n = (2.0 * fs) as usize;
-            let x: Vec<f64> = (0..n).map(|k| (TAU * f * k as f64 / fs).sin()).collect();
-            let y = lag_of_linear_input(&x, fs, tau);
-            // The steady state's sine and cosine parts over the last second.
-            let (mut s, mut c) = (0.0, 0.0);
-            for k in n / 2..n {
-                let phase = TAU * f * k as f64 / fs;
-                s += y[k] * phase.sin();
-                c += y[k] * phase.cos();
-            }
-            let (s, c) = (2.0 * s / (n / 2) as f64, 2.0 * c / (n / 2) as f64);
-            let w = TAU * f * tau;
-            let (gain, phase) = (1.0 / (1.0 + w * w).sqrt(), -w.atan());
-            assert!(((s * s + c * c).sqrt() - gain).abs() < 2e-3 * gain, "{fs} Hz: {s} {c}");
-            assert!((c.atan2(s) - phase).abs() < 2e-3, "{fs} Hz: {} against {phase}", c.atan2(s));
-        }
     }
 
     #[test]
