@@ -196,7 +196,6 @@ fn diagnosed(model: &RigConfig, name: &str, data: &[(String, Recording)]) -> Gap
 fn dump(d: u64, case: &str, data: &[(String, Recording)]) {
     let Ok(root) = std::env::var("GAP_FOREIGN_DUMP") else { return };
     let dir = std::path::Path::new(&root).join(format!("draw{d}_{case}"));
-    std::fs::create_dir_all(&dir).expect("the dump directory can be made");
     for (stem, recording) in data {
         recording::write_recording(&dir, stem, recording).expect("the dump is written");
     }
@@ -287,6 +286,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
             report,
         });
         let data = foreign_dataset(&truth, &foreign, Effects::none());
+        dump(d, "param_only", &data);
         let m = &truth.mechanics;
         let name = format!(
             "EA {:.3e} N, guide {:.0} kg/s, c_sheave {:.2} N m s/rad",
@@ -348,6 +348,7 @@ fn sweep_draw(d: u64, cases: &mut Vec<Case>) {
     }
     if selected("rail_joints") {
         let data = rail_joints_dataset(&model, &foreign);
+        dump(d, "rail_joints", &data);
         let report = diagnosed(&model, OUTSIDE, &data);
         let change = Change::between(&data, &nominal);
         let truth = OUTSIDE.into();
