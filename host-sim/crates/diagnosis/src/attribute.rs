@@ -18,7 +18,9 @@
 //!   simulated once per probe; their influence for any parameter value is
 //!   the same combination of the probe runs' spectra (amplitude and phase as
 //!   the two components `a cos`, `a sin`), and a fold fits the combination
-//!   on its training recordings (Nelder-Mead).
+//!   on its training recordings (Nelder-Mead). The model is linear in
+//!   these strengths only to first order, so a fit that shrinks the gap
+//!   is taken again with probes around its answer ([`relinearize`]).
 //!
 //! Effects are ranked by the held-out excess gap after the fit, with a
 //! penalty of [`PARAMETER_PENALTY`] per fitted parameter; when no single
@@ -37,6 +39,8 @@ use super::target::Target;
 use plant::effects::{EffectKind, Effects, Fit as Declared, FromData, Neutral, ParamScale, ParamSpec};
 use recording::RecordingKind;
 use rig_config::RigConfig;
+
+mod relinearize;
 
 /// Relative penalty per fitted parameter on the held-out gap when ranking.
 pub const PARAMETER_PENALTY: f64 = 0.03;
@@ -503,6 +507,30 @@ struct LinearEffect {
     search: Search,
     /// Per probe, its runs.
     probes: Vec<Runs>,
+    /// The coefficients the probes are taken around ([`linear_parameters`]'s,
+    /// one per probe): zero for probes around the nominal model.
+    origin: Vec<f64>,
+    /// Per probe, the step of its coefficient from the origin.
+    steps: Vec<f64>,
+}
+
+impl LinearEffect {
+    /// Probes around the nominal model, one unit step each.
+    fn around_nominal(kind: EffectKind, search: Search, probes: Vec<Runs>) -> Self {
+        let n = probes.len();
+        Self { kind, search, probes, origin: vec![0.0; n], steps: vec![1.0; n] }
+    }
+
+    /// The coefficients ([`linear_parameters`]'s) of the fitted ones `c`
+    /// (one per probe, in probe steps from the origin).
+    fn absolute(&self, c: &[f64]) -> Vec<f64> {
+        self.origin.iter().zip(&self.steps).zip(c).map(|((o, s), c)| o + s * c).collect()
+    }
+
+    /// The fitted coefficients of the coefficients `absolute`.
+    fn relative(&self, absolute: &[f64]) -> Vec<f64> {
+        self.origin.iter().zip(&self.steps).zip(absolute).map(|((o, s), a)| (a - o) / s).collect()
+    }
 }
 
 /// A family's best fit on a set of recordings.
@@ -530,6 +558,9 @@ struct Family {
     /// The calibration under the family's hypothesis, whose rig its runs
     /// use (`None`: the calibrated rig).
     refit: Option<Refit>,
+    /// The runs the linear probes are differences from: the nominal
+    /// model's when `None`, else the model at the probes' origin.
+    reference: Option<Runs>,
 }
 
 impl Family {
@@ -546,7 +577,11 @@ impl Family {
                     .into_par_iter()
                     .map(|t| {
                         let base = base.runs[t].as_ref()?;
-                        let mut parts: Vec<&ChainSpectra> = vec![base, &lab.targets[t].nominal];
+                        let reference = match &self.reference {
+                            Some(runs) => runs[t].as_ref()?,
+                            None => &lab.targets[t].nominal,
+                        };
+                        let mut parts: Vec<&ChainSpectra> = vec![base, reference];
                         for l in &self.linear {
                             for p in &l.probes {
                                 parts.push(p[t].as_ref()?);
@@ -566,8 +601,9 @@ impl Family {
         for l in &self.linear {
             match l.kind.fit() {
                 Declared::Linear(strengths) if l.probes.len() == strengths.len() => {
-                    out.extend(strengths.iter().map(|&(i, probe)| {
-                        known.iter().find(|k| k.effect == l.kind && k.index == i).map(|k| k.value / probe)
+                    out.extend(strengths.iter().enumerate().map(|(p, &(i, probe))| {
+                        let known = known.iter().find(|k| k.effect == l.kind && k.index == i)?;
+                        Some((known.value / probe - l.origin[p]) / l.steps[p])
                     }));
                 }
                 _ => out.extend(std::iter::repeat_n(None, l.probes.len())),
@@ -582,7 +618,7 @@ impl Family {
         for l in &self.linear {
             let n = l.probes.len();
             if let Search::Linear { kind, .. } = &l.search {
-                out.extend(clamp_coefficients(*kind, &c[i..i + n]));
+                out.extend(l.relative(&clamp_coefficients(*kind, &l.absolute(&c[i..i + n]))));
             }
             i += n;
         }
@@ -660,7 +696,7 @@ impl Family {
         for l in &self.linear {
             let n = l.probes.len();
             if let Search::Linear { kind, .. } = &l.search {
-                out.push((l.kind, linear_parameters(*kind, &c[i..i + n])));
+                out.push((l.kind, linear_parameters(*kind, &l.absolute(&c[i..i + n]))));
             }
             i += n;
         }
@@ -976,17 +1012,19 @@ fn family_of(planned: &PlannedEffect, runs: &[Runs], nominal_runs: &Runs) -> Fam
             linear: Vec::new(),
             cross: Vec::new(),
             refit: None,
+            reference: None,
         },
         Search::Linear { .. } => Family {
             kinds: vec![kind],
             bases: vec![Base { point: Vec::new(), runs: nominal_runs.clone() }],
-            linear: vec![LinearEffect {
+            linear: vec![LinearEffect::around_nominal(
                 kind,
-                search: planned.search.clone(),
-                probes: planned.models.iter().map(|&m| runs[m].clone()).collect(),
-            }],
+                planned.search.clone(),
+                planned.models.iter().map(|&m| runs[m].clone()).collect(),
+            )],
             cross: Vec::new(),
             refit: None,
+            reference: None,
         },
     }
 }
@@ -1116,8 +1154,13 @@ pub fn attribute(lab: &Lab, kinds: &[EffectKind]) -> Vec<Candidate> {
     }
     let nominal_mean = nominal.iter().sum::<f64>() / nominal.len().max(1) as f64;
     refine_grids(lab, &mut families, nominal_mean, &mut count);
+    // A linear effect's fit taken again around its answer; the pairs
+    // combine the probes around the nominal model.
+    let relinearized: Vec<Option<Family>> =
+        families.iter().map(|f| relinearize::around_the_fit(lab, f, nominal_mean, &mut count)).collect();
     (lab.progress)(count.planned, count.planned);
-    let mut candidates: Vec<Candidate> = families.iter().map(|f| evaluate(lab, f, &nominal)).collect();
+    let mut candidates: Vec<Candidate> =
+        families.iter().zip(&relinearized).map(|(f, r)| evaluate(lab, r.as_ref().unwrap_or(f), &nominal)).collect();
     rank(&mut candidates);
     if wants_pairs(&candidates) {
         add_pairs(lab, &families, &mut candidates, &nominal, &nominal_runs, &mut count);
@@ -1140,6 +1183,7 @@ fn refit_family(lab: &Lab, kind: EffectKind, refit: &Refit, count: &mut RunCount
         linear: Vec::new(),
         cross: Vec::new(),
         refit: Some(refit.clone()),
+        reference: None,
     }
 }
 
@@ -1253,6 +1297,7 @@ fn pair_family(a: &Family, b: &Family, grid: Option<GridPair>, pair_runs: &[Runs
             linear: Vec::new(),
             cross: Vec::new(),
             refit: None,
+            reference: None,
         },
         None => {
             let (grid_f, lin): (Option<&Family>, Vec<&Family>) = match (a.linear.is_empty(), b.linear.is_empty()) {
@@ -1267,6 +1312,7 @@ fn pair_family(a: &Family, b: &Family, grid: Option<GridPair>, pair_runs: &[Runs
                 linear: lin.iter().flat_map(|f| f.linear.clone()).collect(),
                 cross: Vec::new(),
                 refit: None,
+                reference: None,
             }
         }
     }
@@ -1337,6 +1383,7 @@ mod tests {
             linear: Vec::new(),
             cross: Vec::new(),
             refit: None,
+            reference: None,
         }
     }
 
@@ -1344,13 +1391,14 @@ mod tests {
         Family {
             kinds: vec![kind],
             bases: vec![Base { point: Vec::new(), runs: runs(1) }],
-            linear: vec![LinearEffect {
+            linear: vec![LinearEffect::around_nominal(
                 kind,
-                search: search(kind, None),
-                probes: (0..probes).map(|p| runs(20 + p)).collect(),
-            }],
+                search(kind, None),
+                (0..probes).map(|p| runs(20 + p)).collect(),
+            )],
             cross: Vec::new(),
             refit: None,
+            reference: None,
         }
     }
 

@@ -628,11 +628,17 @@ fn check_finite(state: &[f64], t_s: f64) -> Result<()> {
 }
 
 /// The shaft's ripple torque the model adds to the measured torque: the
-/// rig's, its phases matched to the drive's torque when `settings` say so,
-/// shifted by the settings' phase.
-fn ripple_of(rig: &RigConfig, travel: &DrivenTravel, settings: &DrivenSettings) -> RippleTorque {
+/// rig's, its phases matched to the drive's torque when `settings` say so
+/// (less the torque `transducer_error_nm` (N m) a hypothesised transducer
+/// error adds, as the drive answers it), shifted by the settings' phase.
+fn ripple_of(
+    rig: &RigConfig,
+    travel: &DrivenTravel,
+    settings: &DrivenSettings,
+    transducer_error_nm: Option<&[f64]>,
+) -> RippleTorque {
     let mut ripple = if settings.ripple_phases_from_torque {
-        crate::ripple_phase::ripple_matched_to_the_drive(rig, travel)
+        crate::ripple_phase::ripple_matched_to_the_drive(rig, travel, transducer_error_nm)
     } else {
         RippleTorque::from_rig(&rig.ripple)
     };
@@ -759,6 +765,8 @@ fn torque_driven_accelerations_with(
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let corrected = true_shaft_angle_rad(travel.shaft_angle_rad, effects);
     let true_torque = true_torque_nm(travel, effects);
+    let transducer_error_nm: Option<Vec<f64>> =
+        true_torque.as_ref().map(|t| t.iter().zip(travel.torque_nm).map(|(t, r)| t - r).collect());
     let travel = &travel.with(true_torque.as_deref(), corrected.as_deref());
     let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
     if n < 2 {
@@ -771,7 +779,7 @@ fn torque_driven_accelerations_with(
     let chain = Chain::new(params, travel.lw_start_m);
     let line = Line::new(effects);
     let (layout, nodes) = (line.layout, line.layout.nodes);
-    let ripple = ripple_of(rig, travel, settings);
+    let ripple = ripple_of(rig, travel, settings, transducer_error_nm.as_deref());
     let tracking = tracking_gains(settings.tracking_bandwidth_hz);
     let (h, theta0) = (1.0 / fs, travel.shaft_angle_rad[0]);
     let moved_m = (travel.shaft_angle_rad[n - 1] - theta0) * r;

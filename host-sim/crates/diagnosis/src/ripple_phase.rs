@@ -110,16 +110,20 @@ pub fn angle_locked_line(torque_nm: &[f64], angle_rad: &[f64], order: f64) -> Op
 /// torque's angle-locked lines over the constant-speed stage of `travel`,
 /// window by window ([`revolution_windows`]), each less the drive's
 /// transducer line at that order as its speed loop lets it through
-/// ([`TransducerTorqueLine`]). The currents carry `-T A e^{j phi}`: where
+/// ([`TransducerTorqueLine`]; under a hypothesised transducer error, the
+/// line of the torque `error_nm` (N m, on the travel's grid) that the
+/// error adds to the recorded one, in its place). The currents carry
+/// `-T A e^{j phi}`: where
 /// the loop is identified, `T` is the chain's at each window's rope
 /// lengths (module documentation), elsewhere `T = 1`. An order's phase is
 /// read where the ripple the lines give is at least [`REJECTED_FRACTION`]
 /// of the order's amplitude and explains at least [`EXPLAINED_SHARE`] of
 /// the lines' power; the rig file's phase elsewhere.
-pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> RippleTorque {
+pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel, error_nm: Option<&[f64]>) -> RippleTorque {
     let mut chain = rig.observer_model();
     chain.m_cw_kg = travel.m_cw_kg as f32;
-    ripple_read_through(rig, travel, &|lw_m, omega_radps| chain_mobility(&chain, travel.m_car_kg, lw_m, omega_radps))
+    let mobility = |lw_m, omega_radps| chain_mobility(&chain, travel.m_car_kg, lw_m, omega_radps);
+    ripple_read_through(rig, travel, error_nm, &mobility)
 }
 
 /// [`ripple_matched_to_the_drive`] on a sheave of mobility `mobility(l_w,
@@ -128,6 +132,7 @@ pub fn ripple_matched_to_the_drive(rig: &RigConfig, travel: &DrivenTravel) -> Ri
 fn ripple_read_through(
     rig: &RigConfig,
     travel: &DrivenTravel,
+    error_nm: Option<&[f64]>,
     mobility: &dyn Fn(f64, f64) -> Complex<f64>,
 ) -> RippleTorque {
     let mut ripple = RippleTorque::from_rig(&rig.ripple);
@@ -136,7 +141,14 @@ fn ripple_read_through(
         return ripple;
     }
     for h in &mut ripple.harmonics {
-        let transducer = travel.transducer_lines.iter().find(|l| l.mechanical_order == h.mechanical_order);
+        let transducer = match error_nm {
+            Some(error_nm) => TransducerLine::Hypothesised(error_nm),
+            None => travel
+                .transducer_lines
+                .iter()
+                .find(|l| l.mechanical_order == h.mechanical_order)
+                .map_or(TransducerLine::None, TransducerLine::Measured),
+        };
         let mut reading = PhaseReading::default();
         for window in &windows {
             if let Some((line, rejection)) = window_line(rig, travel, mobility, h.mechanical_order, window, transducer)
@@ -151,17 +163,32 @@ fn ripple_read_through(
     ripple
 }
 
+/// The torque line the rig drive's current transducers put on the shaft,
+/// which the drive's speed loop answers as it answers the ripple.
+#[derive(Clone, Copy)]
+enum TransducerLine<'a> {
+    /// None known.
+    None,
+    /// Measured in the direct-axis current, over the whole stage.
+    Measured(&'a TransducerTorqueLine),
+    /// The torque (N m, on the travel's grid) a hypothesised transducer
+    /// error adds to the recorded one: its line read window by window.
+    Hypothesised(&'a [f64]),
+}
+
 /// One window's line of order `order` in the drive's torque, less the
 /// transducer line `transducer` as the speed loop passes it, and the
 /// loop's rejection `T = 1 - S` there on a sheave of mobility `mobility`
-/// ([`ripple_read_through`]; 1 where the loop is not identified).
+/// ([`ripple_read_through`]; 1 where the loop is not identified). The
+/// shaft gets the ripple `A` and the transducers' line `E`; the drive
+/// answers both, so the torque it puts out carries `-T A + S E`.
 fn window_line(
     rig: &RigConfig,
     travel: &DrivenTravel,
     mobility: &dyn Fn(f64, f64) -> Complex<f64>,
     order: f64,
     window: &Range<usize>,
-    transducer: Option<&TransducerTorqueLine>,
+    transducer: TransducerLine,
 ) -> Option<(Complex<f64>, Complex<f64>)> {
     let angle = &travel.shaft_angle_rad[window.clone()];
     let mut line = angle_locked_line(&travel.torque_nm[window.clone()], angle, order)?;
@@ -170,8 +197,14 @@ fn window_line(
     let mean_angle = angle.iter().sum::<f64>() / angle.len() as f64;
     let lw_m = travel.lw_start_m + rig.mechanics.sheave_radius_m * mean_angle;
     let sensitivity = travel.controller.map(|c| speed_loop_sensitivity(&c, mobility(lw_m, omega), omega));
-    if let Some(t) = transducer {
-        line -= sensitivity.unwrap_or(Complex::new(1.0, 0.0)) * Complex::new(t.phasor_nm[0], t.phasor_nm[1]);
+    let passed = sensitivity.unwrap_or(Complex::new(1.0, 0.0));
+    match transducer {
+        TransducerLine::None => {}
+        TransducerLine::Measured(t) => line -= passed * Complex::new(t.phasor_nm[0], t.phasor_nm[1]),
+        TransducerLine::Hypothesised(error_nm) => {
+            let error = error_nm.get(window.clone()).and_then(|e| angle_locked_line(e, angle, order));
+            line -= passed * error.unwrap_or_default();
+        }
     }
     Some((line, sensitivity.map_or(Complex::new(1.0, 0.0), |s| 1.0 - s)))
 }
@@ -323,15 +356,17 @@ mod tests {
         let f_mid = plant::modes::natural_modes(&params, lw_start + 1.5).frequencies_hz[1];
         let shaft_speed = TAU * f_mid / order;
         let seconds = 3.0 / (shaft_speed * r);
-        let travel = travel_in_time(&params, lw_start, shaft_speed, seconds, [order, amplitude, phase]);
+        let travel =
+            travel_in_time(&params, lw_start, shaft_speed, seconds, [order, amplitude, phase], [order, 0.0, 0.0]);
         let mut ripple_rig = rig.clone();
         ripple_rig.ripple.retain(|c| c.mechanical_order == 12);
         ripple_rig.ripple[0].amplitude_nm = amplitude;
         let driven = travel.driven(&params);
-        let read = ripple_matched_to_the_drive(&ripple_rig, &driven).harmonics[0].phase_rad;
+        let read = ripple_matched_to_the_drive(&ripple_rig, &driven, None).harmonics[0].phase_rad;
         let miss = |p: f64| (Complex::from_polar(1.0, p) / Complex::from_polar(1.0, phase)).arg().abs();
         let inertia = crate::driven::rigid_inertia_kg_m2(&params);
-        let rigid = ripple_read_through(&ripple_rig, &driven, &|_, omega| rigid_mobility(inertia, omega)).harmonics[0]
+        let rigid = ripple_read_through(&ripple_rig, &driven, None, &|_, omega| rigid_mobility(inertia, omega))
+            .harmonics[0]
             .phase_rad;
         println!(
             "order 12 at {f_mid:.2} Hz mid-stage: chain-aware miss {:.3} rad, rigid {:.3} rad",
@@ -340,6 +375,50 @@ mod tests {
         );
         assert!(miss(read) < 0.15, "read {read} rad against {phase} rad");
         assert!(miss(rigid) > 2.0 * miss(read), "the rigid chain's reading misses by {} rad", miss(rigid));
+    }
+
+    /// Under a transducer error the machine's torque carries the error's
+    /// line `E` beside the drive's answer; the shaft gets the ripple and
+    /// `E`, and the drive answers both. Read from the machine's torque less
+    /// `E` as the loop passes it (the hypothesis that names `E`), the
+    /// ripple's phase is found within 0.15 rad; read from the drive's own
+    /// record without the hypothesis, or from the machine's torque with
+    /// `E` left in, the error pulls it off.
+    #[test]
+    fn the_phase_is_read_less_a_hypothesised_transducer_error() {
+        let rig = RigConfig::embedded_default().unwrap();
+        let params = ChainParams::from_rig(&rig, 70.5);
+        let (order, amplitude, phase) = (12.0, 1.0, 0.8);
+        let error = [order, 0.8, 2.6];
+        let lw_start = 2.5;
+        let f_mid = plant::modes::natural_modes(&params, lw_start + 1.5).frequencies_hz[1];
+        let shaft_speed = TAU * f_mid / order;
+        let seconds = 3.0 / (shaft_speed * params.sheave_radius_m);
+        let travel = travel_in_time(&params, lw_start, shaft_speed, seconds, [order, amplitude, phase], error);
+        let mut ripple_rig = rig.clone();
+        ripple_rig.ripple.retain(|c| c.mechanical_order == 12);
+        ripple_rig.ripple[0].amplitude_nm = amplitude;
+        let error_nm: Vec<f64> = travel.angle_rad.iter().map(|a| error[1] * (error[0] * a + error[2]).cos()).collect();
+        let machine_nm: Vec<f64> = travel.torque_nm.iter().zip(&error_nm).map(|(t, e)| t + e).collect();
+        let mut machine = travel.driven(&params);
+        machine.torque_nm = &machine_nm;
+        let hypothesis = ripple_matched_to_the_drive(&ripple_rig, &machine, Some(&error_nm));
+        let unaware = ripple_matched_to_the_drive(&ripple_rig, &travel.driven(&params), None);
+        // The machine's torque with the error left in: the loop's answer
+        // to it reads as ripple.
+        let left_in = ripple_matched_to_the_drive(&ripple_rig, &machine, None);
+        let miss = |m: &RippleTorque| {
+            (Complex::from_polar(1.0, m.harmonics[0].phase_rad) / Complex::from_polar(1.0, phase)).arg().abs()
+        };
+        println!(
+            "under the hypothesis miss {:.3} rad, without it {:.3} rad, with the error left in {:.3} rad",
+            miss(&hypothesis),
+            miss(&unaware),
+            miss(&left_in)
+        );
+        assert!(miss(&hypothesis) < 0.15, "{hypothesis:?}");
+        assert!(miss(&unaware) > 0.5, "the error should pull the unaware reading off: {unaware:?}");
+        assert!(miss(&left_in) > 4.0 * miss(&hypothesis), "the error left in should pull the reading off: {left_in:?}");
     }
 
     /// The reading gives the phase of lines that follow the rejection, and
@@ -419,6 +498,7 @@ mod tests {
         shaft_speed: f64,
         seconds: f64,
         ripple: [f64; 3],
+        transducer_error: [f64; 3],
     ) -> TravelInTime {
         let c = controller();
         let (fs, every) = (40_960.0, 10);
@@ -444,7 +524,10 @@ mod tests {
             estimate += (past.pop_front().unwrap() - estimate) / (1.0 + c.estimate_lag_s * fs);
             integral -= estimate * h;
             let drive = -c.kp_nms_per_rad * estimate + c.ki_nm_per_rad * integral;
-            let shaft = drive + ripple[1] * (ripple[0] * angle + ripple[2]).cos();
+            // The drive's transducers err: the machine puts out the drive's
+            // torque plus the error's line, the drive records its own.
+            let error = transducer_error[1] * (transducer_error[0] * angle + transducer_error[2]).cos();
+            let shaft = drive + error + ripple[1] * (ripple[0] * angle + ripple[2]).cos();
             if k % every == 0 {
                 recorded.torque_nm.push(drive);
                 recorded.angle_rad.push(angle);
