@@ -640,6 +640,14 @@ impl Family {
         sum / set.len().max(1) as f64
     }
 
+    /// The free coefficients (those not `held`) of no effect: zero, or,
+    /// for probes around an answer, that answer's distance from no effect
+    /// in probe steps.
+    fn neutral_start(&self, held: &[Option<f64>]) -> Vec<f64> {
+        let neutral = self.linear.iter().flat_map(|l| l.relative(&vec![0.0; l.probes.len()]));
+        neutral.zip(held).filter(|(_, h)| h.is_none()).map(|(n, _)| n).collect()
+    }
+
     /// Best fit on `set`, the known coefficients held.
     fn fit(&self, lab: &Lab, set: &[usize]) -> Fit {
         let held = self.held_coefficients(lab.known);
@@ -655,9 +663,14 @@ impl Family {
             let (c, s) = if d == 0 {
                 (Vec::new(), score(b, &[]))
             } else {
+                // Every fit starts from no effect, also where the probes
+                // are taken around an answer on all recordings: a fold's
+                // fit owes nothing to its held-out recordings.
+                let neutral = self.neutral_start(&held);
                 let starts = starting_points(d);
-                let (mut x0, mut s0) = (vec![0.0; d], f64::INFINITY);
+                let (mut x0, mut s0) = (neutral.clone(), f64::INFINITY);
                 for x in starts {
+                    let x: Vec<f64> = x.iter().zip(&neutral).map(|(x, n)| x + n).collect();
                     let s = score(b, &x);
                     if s < s0 {
                         (x0, s0) = (x, s);
@@ -670,7 +683,7 @@ impl Family {
                         for i in 0..d {
                             for v in [-4.0, -2.5, -1.5, -0.75, -0.25, 0.0, 0.25, 0.75, 1.5, 2.5, 4.0] {
                                 let mut x = x0.clone();
-                                x[i] = v;
+                                x[i] = neutral[i] + v;
                                 let s = score(b, &x);
                                 if s < s0 {
                                     (x0, s0) = (x, s);
