@@ -5,18 +5,21 @@
 //! model is linear in the strengths only to first order: a dry friction
 //! that sticks, a transducer error whose torque moves the ripple phases the
 //! model reads from the drive's torque ([`crate::ripple_phase`]). Where
-//! the first fit shrinks the gap, the model is run at its answer and at one
-//! probe step from it along each strength, and the effect fitted again on
-//! those runs, up to [`super::REFINEMENT_ROUNDS`] times (as a grid is
-//! refined around its best point): the combination is then exact at the
-//! answer and first order around it.
+//! the first fit shrinks the gap, the model is run at its answer and at a
+//! step from it along each strength ([`probe_step`]), and the effect
+//! fitted again on those runs, up to [`super::REFINEMENT_ROUNDS`] times
+//! (as a grid is refined around its best point): the combination is then
+//! exact at the answer and first order around it.
 
 use super::Lab;
 use super::{
     clamp_coefficients, linear_parameters, Base, Family, LinearEffect, RunCount, Runs, Search, REFINEMENT_ROUNDS,
     REFINE_IF_BELOW,
 };
-use plant::effects::{EffectKind, Effects};
+use plant::effects::{EffectKind, Effects, Fit as Declared};
+
+/// The smallest step of a probe around an answer, in first-stage probes.
+const MIN_STEP: f64 = 0.1;
 
 /// The family of a single linear effect (`family`, probes around the
 /// nominal model) fitted again around its answer on all recordings, round
@@ -43,16 +46,25 @@ pub(super) fn around_the_fit(lab: &Lab, family: &Family, nominal_mean: f64, coun
     current
 }
 
-/// The step (in coefficients) of probe `i` from `origin` for `kind`: one
-/// unit, or the first of a unit back, half a unit forward or back that
-/// keeps the effect's parameters within their ranges.
+/// The step (in coefficients, a first-stage probe being one) of probe `i`
+/// from `origin` for `kind`: half the answer's distance from no effect
+/// along that strength (an amplitude's, for a polar effect), within a
+/// tenth of a probe and a whole one; forward, else back, else half as
+/// far, whichever keeps the effect's parameters within their ranges. A
+/// step comparable to the answer keeps the linearisation local: a dry
+/// friction probed at 40 N says little about the model at 2 N.
 fn probe_step(kind: EffectKind, origin: &[f64], i: usize) -> f64 {
+    let distance = match kind.fit() {
+        Declared::Polar { .. } => origin.iter().map(|c| c * c).sum::<f64>().sqrt(),
+        _ => origin[i].abs(),
+    };
+    let size = (0.5 * distance).clamp(MIN_STEP, 1.0);
     let within = |s: f64| {
         let mut c = origin.to_vec();
         c[i] += s;
         clamp_coefficients(kind, &c).iter().zip(&c).all(|(a, b)| (a - b).abs() <= 1e-12 * b.abs().max(1.0))
     };
-    [1.0, -1.0, 0.5, -0.5].into_iter().find(|&s| within(s)).unwrap_or(1.0)
+    [size, -size, 0.5 * size, -0.5 * size].into_iter().find(|&s| within(s)).unwrap_or(size)
 }
 
 /// Step: the family of `kind` with its probes around the coefficients
@@ -99,7 +111,6 @@ fn family_around(
 mod tests {
     use super::super::{search, KnownParameter};
     use super::*;
-    use plant::effects::Fit as Declared;
 
     /// The linear and polar effects of the library.
     fn linear_kinds() -> Vec<EffectKind> {
