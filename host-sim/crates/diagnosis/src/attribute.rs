@@ -529,7 +529,12 @@ impl LinearEffect {
 
     /// The fitted coefficients of the coefficients `absolute`.
     fn relative(&self, absolute: &[f64]) -> Vec<f64> {
-        self.origin.iter().zip(&self.steps).zip(absolute).map(|((o, s), a)| (a - o) / s).collect()
+        absolute.iter().enumerate().map(|(p, &a)| self.relative_at(p, a)).collect()
+    }
+
+    /// Probe `p`'s fitted coefficient of its coefficient `absolute`.
+    fn relative_at(&self, p: usize, absolute: f64) -> f64 {
+        (absolute - self.origin[p]) / self.steps[p]
     }
 }
 
@@ -558,9 +563,10 @@ struct Family {
     /// The calibration under the family's hypothesis, whose rig its runs
     /// use (`None`: the calibrated rig).
     refit: Option<Refit>,
-    /// The runs the linear probes are differences from: the nominal
-    /// model's when `None`, else the model at the probes' origin.
-    reference: Option<Runs>,
+    /// Whether the linear probes are differences from the base's runs (the
+    /// model at the probes' origin, [`relinearize`]) rather than from the
+    /// nominal model's.
+    probes_from_base: bool,
 }
 
 impl Family {
@@ -577,10 +583,7 @@ impl Family {
                     .into_par_iter()
                     .map(|t| {
                         let base = base.runs[t].as_ref()?;
-                        let reference = match &self.reference {
-                            Some(runs) => runs[t].as_ref()?,
-                            None => &lab.targets[t].nominal,
-                        };
+                        let reference = if self.probes_from_base { base } else { &lab.targets[t].nominal };
                         let mut parts: Vec<&ChainSpectra> = vec![base, reference];
                         for l in &self.linear {
                             for p in &l.probes {
@@ -603,7 +606,7 @@ impl Family {
                 Declared::Linear(strengths) if l.probes.len() == strengths.len() => {
                     out.extend(strengths.iter().enumerate().map(|(p, &(i, probe))| {
                         let known = known.iter().find(|k| k.effect == l.kind && k.index == i)?;
-                        Some((known.value / probe - l.origin[p]) / l.steps[p])
+                        Some(l.relative_at(p, known.value / probe))
                     }));
                 }
                 _ => out.extend(std::iter::repeat_n(None, l.probes.len())),
@@ -1025,7 +1028,7 @@ fn family_of(planned: &PlannedEffect, runs: &[Runs], nominal_runs: &Runs) -> Fam
             linear: Vec::new(),
             cross: Vec::new(),
             refit: None,
-            reference: None,
+            probes_from_base: false,
         },
         Search::Linear { .. } => Family {
             kinds: vec![kind],
@@ -1037,7 +1040,7 @@ fn family_of(planned: &PlannedEffect, runs: &[Runs], nominal_runs: &Runs) -> Fam
             )],
             cross: Vec::new(),
             refit: None,
-            reference: None,
+            probes_from_base: false,
         },
     }
 }
@@ -1196,7 +1199,7 @@ fn refit_family(lab: &Lab, kind: EffectKind, refit: &Refit, count: &mut RunCount
         linear: Vec::new(),
         cross: Vec::new(),
         refit: Some(refit.clone()),
-        reference: None,
+        probes_from_base: false,
     }
 }
 
@@ -1310,7 +1313,7 @@ fn pair_family(a: &Family, b: &Family, grid: Option<GridPair>, pair_runs: &[Runs
             linear: Vec::new(),
             cross: Vec::new(),
             refit: None,
-            reference: None,
+            probes_from_base: false,
         },
         None => {
             let (grid_f, lin): (Option<&Family>, Vec<&Family>) = match (a.linear.is_empty(), b.linear.is_empty()) {
@@ -1325,7 +1328,7 @@ fn pair_family(a: &Family, b: &Family, grid: Option<GridPair>, pair_runs: &[Runs
                 linear: lin.iter().flat_map(|f| f.linear.clone()).collect(),
                 cross: Vec::new(),
                 refit: None,
-                reference: None,
+                probes_from_base: false,
             }
         }
     }
@@ -1396,7 +1399,7 @@ mod tests {
             linear: Vec::new(),
             cross: Vec::new(),
             refit: None,
-            reference: None,
+            probes_from_base: false,
         }
     }
 
@@ -1411,7 +1414,7 @@ mod tests {
             )],
             cross: Vec::new(),
             refit: None,
-            reference: None,
+            probes_from_base: false,
         }
     }
 

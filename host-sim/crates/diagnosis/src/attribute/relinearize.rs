@@ -97,11 +97,11 @@ fn family_around(
     }
     let mut around = Family {
         kinds: vec![kind],
-        bases: vec![Base { point: Vec::new(), runs: centre.clone() }],
+        bases: vec![Base { point: Vec::new(), runs: centre }],
         linear: vec![LinearEffect { kind, search: search.clone(), probes, origin: origin.to_vec(), steps }],
         cross: Vec::new(),
         refit: None,
-        reference: Some(centre),
+        probes_from_base: true,
     };
     around.prepare(lab);
     around
@@ -176,7 +176,7 @@ mod tests {
             linear: vec![linear],
             cross: Vec::new(),
             refit: None,
-            reference: None,
+            probes_from_base: false,
         };
         let held = family.held_coefficients(&known);
         assert_eq!(held.len(), 4);
