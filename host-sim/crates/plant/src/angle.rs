@@ -36,10 +36,9 @@ pub struct AngleSeries {
     /// derivatives divided by `m!` (`m` = 1, 2, 3): `binom(j + m, m)
     /// ripple_nm[j + m]`, for [`AngleSeries::ripple_taylor`].
     ripple_shifted: [[f64; DEGREE + 1]; 3],
-    /// Coefficients of `delta^j` of `cos(p theta)`, 1 / rad^j.
-    cos_p: [f64; DEGREE + 1],
-    /// Coefficients of `delta^j` of `sin(p theta)`, 1 / rad^j.
-    sin_p: [f64; DEGREE + 1],
+    /// Coefficients of `delta^j` of `cos(p theta)` and `sin(p theta)`, 1 /
+    /// rad^j, side by side: the two polynomials evaluated as one of pairs.
+    cos_sin_p: [[f64; 2]; DEGREE + 1],
 }
 
 impl Default for AngleSeries {
@@ -49,8 +48,7 @@ impl Default for AngleSeries {
             half_width_rad: 0.0,
             ripple_nm: [0.0; DEGREE + 1],
             ripple_shifted: [[0.0; DEGREE + 1]; 3],
-            cos_p: [0.0; DEGREE + 1],
-            sin_p: [0.0; DEGREE + 1],
+            cos_sin_p: [[0.0; 2]; DEGREE + 1],
         }
     }
 }
@@ -91,6 +89,37 @@ fn estrin(c: &[f64; DEGREE + 1], x: f64) -> f64 {
     let low = (p01 + p23 * x2) + (p45 + p67 * x2) * x4;
     let high = (p89 + p1011 * x2) + c[12] * x4;
     low + high * x8
+}
+
+/// [`estrin`] of two polynomials at once, their coefficients side by side:
+/// every operation of the scheme on both lanes (the same values, one
+/// vector instruction for two).
+fn estrin_pairs(c: &[[f64; 2]; DEGREE + 1], x: f64) -> [f64; 2] {
+    // `a + b x` lane by lane (a product, then a sum: no fused operation).
+    let affine = |a: [f64; 2], b: [f64; 2], x: f64| [a[0] + b[0] * x, a[1] + b[1] * x];
+    let x2 = x * x;
+    let x4 = x2 * x2;
+    let x8 = x4 * x4;
+    let p01 = affine(c[0], c[1], x);
+    let p23 = affine(c[2], c[3], x);
+    let p45 = affine(c[4], c[5], x);
+    let p67 = affine(c[6], c[7], x);
+    let p89 = affine(c[8], c[9], x);
+    let p1011 = affine(c[10], c[11], x);
+    let low = affine(affine(p01, p23, x2), affine(p45, p67, x2), x4);
+    let high = affine(affine(p89, p1011, x2), c[12], x4);
+    affine(low, high, x8)
+}
+
+/// The angle-locked terms computed directly at shaft angle `theta_rad`
+/// (rad), where the polynomials do not hold: the ripple torque (N m) of
+/// `ripple` (zero without it), `cos(p theta)` and `sin(p theta)` for
+/// `pole_pairs` `p`. Out of line: the polynomials' callers stay short.
+#[cold]
+#[inline(never)]
+fn direct_terms(theta_rad: f64, ripple: Option<&RippleTorque>, pole_pairs: f64) -> (f64, f64, f64) {
+    let (s, c) = (pole_pairs * theta_rad).sin_cos();
+    (ripple.map_or(0.0, |r| r.torque_nm(theta_rad)), c, s)
 }
 
 impl AngleSeries {
@@ -152,8 +181,18 @@ impl AngleSeries {
             }
         }
         let electrical = pole_pairs * theta_rad;
-        add_cos_series(&mut self.cos_p, 1.0, pole_pairs, electrical);
-        add_cos_series(&mut self.sin_p, 1.0, pole_pairs, electrical - 0.5 * std::f64::consts::PI);
+        let mut cos_p = [0.0; DEGREE + 1];
+        let mut sin_p = [0.0; DEGREE + 1];
+        add_cos_series(&mut cos_p, 1.0, pole_pairs, electrical);
+        add_cos_series(&mut sin_p, 1.0, pole_pairs, electrical - 0.5 * std::f64::consts::PI);
+        self.cos_sin_p = std::array::from_fn(|j| [cos_p[j], sin_p[j]]);
+    }
+
+    /// `cos(p theta)` and `sin(p theta)` from the polynomials at `delta`
+    /// (rad) from the reference.
+    fn cos_sin(&self, delta: f64) -> (f64, f64) {
+        let [c, s] = estrin_pairs(&self.cos_sin_p, delta);
+        (c, s)
     }
 
     /// Taylor coefficients of the ripple torque about `theta_rad` (rad):
@@ -182,12 +221,13 @@ impl AngleSeries {
 
     /// `cos(p theta)` and `sin(p theta)` at shaft angle `theta_rad` (rad),
     /// the same values as [`AngleSeries::eval`]'s without the ripple.
+    #[inline]
     pub fn park(&self, theta_rad: f64, pole_pairs: f64) -> (f64, f64) {
         let delta = theta_rad - self.theta_ref_rad;
         if delta.abs() <= self.half_width_rad {
-            (estrin(&self.cos_p, delta), estrin(&self.sin_p, delta))
+            self.cos_sin(delta)
         } else {
-            let (s, c) = (pole_pairs * theta_rad).sin_cos();
+            let (_, c, s) = direct_terms(theta_rad, None, pole_pairs);
             (c, s)
         }
     }
@@ -195,13 +235,14 @@ impl AngleSeries {
     /// Ripple torque (N m), `cos(p theta)` and `sin(p theta)` at shaft
     /// angle `theta_rad` (rad): from the polynomials where they hold, else
     /// computed directly from `ripple` and `pole_pairs`.
+    #[inline]
     pub fn eval(&self, theta_rad: f64, ripple: &RippleTorque, pole_pairs: f64) -> (f64, f64, f64) {
         let delta = theta_rad - self.theta_ref_rad;
         if delta.abs() <= self.half_width_rad {
-            (estrin(&self.ripple_nm, delta), estrin(&self.cos_p, delta), estrin(&self.sin_p, delta))
+            let (c, s) = self.cos_sin(delta);
+            (estrin(&self.ripple_nm, delta), c, s)
         } else {
-            let (s, c) = (pole_pairs * theta_rad).sin_cos();
-            (ripple.torque_nm(theta_rad), c, s)
+            direct_terms(theta_rad, Some(ripple), pole_pairs)
         }
     }
 }

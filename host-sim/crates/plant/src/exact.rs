@@ -130,7 +130,7 @@ impl Coefficients {
         self.respond(v, a, sheave, 0.0)
     }
 
-    /// The line's response ([`spring_line::accelerations`]) to the
+    /// The line's response ([`spring_line::linear_accelerations`]) to the
     /// displacements `u` (m) and rates `rate` (m/s) with the force `sheave`
     /// (N) on the sheave edge and `f_car` (N) on the car: `(force_i - c_i
     /// rate_i) / m_i`, the sheave's zero when held. Accelerations from
@@ -140,7 +140,7 @@ impl Coefficients {
         let mut out = [0.0; DOF];
         let k = &self.spring;
         let applied = [NodeForce { node: SHEAVE, force_n: sheave }, NodeForce { node: CAR, force_n: f_car }];
-        spring_line::accelerations(|i, e| k[i] * e, &self.damping, &self.inv_mass, u, rate, &applied, &mut out);
+        spring_line::linear_accelerations(k, &self.damping, &self.inv_mass, u, rate, &applied, &mut out);
         if self.held {
             out[SHEAVE] = 0.0;
         }

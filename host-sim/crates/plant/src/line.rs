@@ -364,7 +364,7 @@ impl Line {
             None => {
                 let drive =
                     NodeForce { node: sheave, force_n: (torque - step.out_of_balance_nm) * step.inv_radius_per_m };
-                spring_line::accelerations(spring, c, inv_m, position_m, velocity_mps, &[drive, car], accel);
+                spring_line::linear_accelerations(k, c, inv_m, position_m, velocity_mps, &[drive, car], accel);
             }
             Some(e) => {
                 // The rope at the sheave sits at g(theta), and every force on
@@ -373,7 +373,7 @@ impl Line {
                 let mut ends = [0.0; MAX_NODES];
                 ends[..n].copy_from_slice(&position_m[..n]);
                 ends[sheave] = e.rope_displacement_m(r, theta);
-                spring_line::accelerations(spring, c, inv_m, &ends, velocity_mps, &[car], accel);
+                spring_line::linear_accelerations(k, c, inv_m, &ends, velocity_mps, &[car], accel);
                 let lever = e.lever_ratio(theta);
                 let elastic = spring(sheave, ends[sheave + 1] - ends[sheave])
                     - spring(sheave - 1, ends[sheave] - ends[sheave - 1]);

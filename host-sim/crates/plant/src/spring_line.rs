@@ -37,20 +37,77 @@ pub fn accelerations(
     accel: &mut [f64],
 ) {
     let n = inv_mass.len();
-    let (x, v, c, a) = (&position_m[..n], &velocity_mps[..n], &damping[..n], &mut accel[..n]);
+    let (x, a) = (&position_m[..n], &mut accel[..n]);
+    spring_forces(&tension, x, a);
+    finish_accelerations(damping, inv_mass, velocity_mps, applied, a);
+}
+
+/// [`accelerations`] of linear springs, `T_i = springs[i] (x_(i+1) - x_i)`
+/// with `springs` in N/m: the same values, in loops without a call per
+/// spring (that vectorise).
+pub fn linear_accelerations(
+    springs: &[f64],
+    damping: &[f64],
+    inv_mass: &[f64],
+    position_m: &[f64],
+    velocity_mps: &[f64],
+    applied: &[NodeForce],
+    accel: &mut [f64],
+) {
+    let n = inv_mass.len();
+    if n == 0 {
+        return;
+    }
+    // Slices of the nodes' length: the loops run without bounds checks
+    // (and vectorise).
+    let (a, k, x) = (&mut accel[..n], &springs[..n - 1], &position_m[..n]);
     // The tension of the spring on node i's lower side.
     let mut below = 0.0;
-    for i in 0..n {
-        let above = if i + 1 < n { tension(i, x[i + 1] - x[i]) } else { 0.0 };
-        let mut force = above - below;
-        for f in applied {
-            if f.node == i {
-                force += f.force_n;
-            }
-        }
-        a[i] = (force - c[i] * v[i]) * inv_mass[i];
+    for i in 0..n - 1 {
+        let above = k[i] * (x[i + 1] - x[i]);
+        a[i] = above - below;
         below = above;
     }
+    a[n - 1] = 0.0 - below;
+    finish_accelerations(damping, inv_mass, velocity_mps, applied, a);
+}
+
+/// From the springs' net forces in `accel` (N) to the accelerations
+/// (m/s^2): the `applied` forces added in their order (the same sums as
+/// adding them node by node), then `(force - c v) / m` with `damping` `c`
+/// (kg/s), `inv_mass` `1 / m` (1/kg) and `velocity_mps` `v` (m/s).
+fn finish_accelerations(
+    damping: &[f64],
+    inv_mass: &[f64],
+    velocity_mps: &[f64],
+    applied: &[NodeForce],
+    accel: &mut [f64],
+) {
+    for f in applied {
+        if let Some(force) = accel.get_mut(f.node) {
+            *force += f.force_n;
+        }
+    }
+    let n = accel.len();
+    let (c, v, inv_mass) = (&damping[..n], &velocity_mps[..n], &inv_mass[..n]);
+    for i in 0..n {
+        accel[i] = (accel[i] - c[i] * v[i]) * inv_mass[i];
+    }
+}
+
+/// The springs' net force on each node, N, into `force` (as long as `x`):
+/// `T_i - T_(i-1)` with `T_i = tension(i, x_(i+1) - x_i)`, no spring below
+/// the first node nor above the last.
+fn spring_forces(tension: &impl Fn(usize, f64) -> f64, x: &[f64], force: &mut [f64]) {
+    let Some(last) = x.len().checked_sub(1) else { return };
+    // The tension of the spring on node i's lower side.
+    let mut below = 0.0;
+    for i in 0..last {
+        let above = tension(i, x[i + 1] - x[i]);
+        force[i] = above - below;
+        below = above;
+    }
+    force[last] = 0.0 - below;
 }
 
 /// Adds the force the effects apply at the guides
@@ -66,6 +123,7 @@ pub fn add_guide_forces(effects: &Effects, nodes: &[usize], velocity_mps: &[f64]
 
 /// Adds a damper of `damping_kg_per_s` (kg/s) between the nodes `ends`
 /// (on their relative velocity) to their accelerations (m/s^2) in `accel`.
+#[inline]
 pub fn add_damper(
     ends: (usize, usize),
     damping_kg_per_s: f64,
