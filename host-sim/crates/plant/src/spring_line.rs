@@ -123,7 +123,7 @@ pub fn add_guide_forces(effects: &Effects, nodes: &[usize], velocity_mps: &[f64]
 
 /// Adds a damper of `damping_kg_per_s` (kg/s) between the nodes `ends`
 /// (on their relative velocity) to their accelerations (m/s^2) in `accel`.
-#[inline]
+#[inline(always)]
 pub fn add_damper(
     ends: (usize, usize),
     damping_kg_per_s: f64,
