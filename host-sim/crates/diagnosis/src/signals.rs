@@ -164,30 +164,49 @@ impl ChainSignals {
     }
 }
 
+/// Lowest frequency the model has content below, Hz: the noise floor is
+/// read above it.
+pub const MODEL_CONTENT_TOP_HZ: f64 = 1100.0;
+
+/// The band a channel's noise floor is read in, Hz. An accelerometer's
+/// (`below_the_anti_alias`) runs from [`MODEL_CONTENT_TOP_HZ`], where the
+/// model has no content, up to where the acquisition's anti-alias filter
+/// may start (a fifth of the sample rate,
+/// [`crate::compare::FOREIGN_TOP_FRACTION`]: the measurement format does
+/// not promise a flat response above), when that leaves at least half an
+/// octave. Otherwise, and for the drive's signals (the currents carry the
+/// current loop's own content up to its bandwidth, kHz), the floor is read
+/// from 0.55 of the Nyquist frequency (from 1.1 kHz) to 0.95 of it, or
+/// over the top 15 % of the band for recordings sampled under 2800 Hz; an
+/// anti-alias filter acting there lowers it (`docs/diagnosis.md`).
+pub fn noise_band_hz(sample_rate_hz: f64, below_the_anti_alias: bool) -> (f64, f64) {
+    let nyquist = 0.5 * sample_rate_hz;
+    let flat_top = crate::compare::FOREIGN_TOP_FRACTION * sample_rate_hz;
+    if below_the_anti_alias && flat_top >= MODEL_CONTENT_TOP_HZ * 2f64.sqrt() {
+        (MODEL_CONTENT_TOP_HZ, flat_top.min(0.95 * nyquist))
+    } else if nyquist >= 1400.0 {
+        ((0.55 * nyquist).max(MODEL_CONTENT_TOP_HZ), 0.95 * nyquist)
+    } else {
+        (0.85 * nyquist, 0.95 * nyquist)
+    }
+}
+
 /// Whole decimation factor from `sample_rate_hz` to at least [`ANALYSIS_RATE_HZ`].
 pub fn decimation_factor(sample_rate_hz: f64) -> usize {
     ((sample_rate_hz / ANALYSIS_RATE_HZ).floor() as usize).max(1)
 }
 
 /// One-sided noise density (unit^2/Hz) of `signal`: the median Welch PSD
-/// level over the band where the model has no content (above 1.1 kHz, up to
-/// 95 % of Nyquist), or over the top 15 % of the band for recordings sampled
-/// too slowly for that.
-pub fn noise_density(signal: &[f64], sample_rate_hz: f64) -> Result<f64> {
-    let nyquist = 0.5 * sample_rate_hz;
+/// level over the band `band_hz` (Hz, [`noise_band_hz`]).
+pub fn noise_density(signal: &[f64], sample_rate_hz: f64, band_hz: (f64, f64)) -> Result<f64> {
     let segment = (sample_rate_hz / 4.0).round().max(64.0) as usize;
     if signal.len() < segment {
         return Ok(0.0);
     }
     let psd = welch_psd(signal, sample_rate_hz, segment, 0.5)?;
-    let lo = if nyquist >= 1400.0 { (0.55 * nyquist).max(1100.0) } else { 0.85 * nyquist };
-    let mut band: Vec<f64> = psd
-        .frequency_hz
-        .iter()
-        .zip(&psd.density)
-        .filter(|(f, _)| **f >= lo && **f <= 0.95 * nyquist)
-        .map(|(_, d)| *d)
-        .collect();
+    let (lo, hi) = band_hz;
+    let mut band: Vec<f64> =
+        psd.frequency_hz.iter().zip(&psd.density).filter(|(f, _)| **f >= lo && **f <= hi).map(|(_, d)| *d).collect();
     if band.is_empty() {
         return Ok(0.0);
     }
@@ -291,7 +310,8 @@ fn chain_signals_on(
             let compared = &values[compared_from.min(values.len())..];
             noise.push((
                 *channel,
-                noise_density(compared, fs).with_context(|| format!("`{stem}`: noise of {}", channel.name()))?,
+                noise_density(compared, fs, noise_band_hz(fs, channel.subsystem() == Subsystem::Mechanical))
+                    .with_context(|| format!("`{stem}`: noise of {}", channel.name()))?,
             ));
         }
     }
@@ -321,4 +341,37 @@ fn chain_signals_on(
         vec![(Phase::Decay, compared_from.div_ceil(factor).min(len)..len)]
     };
     Ok(ChainSignals { sample_rate_hz: rate, channels, phases, noise_density: noise, angle_rad })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use closed_loop::foreign::acquisition::butterworth_lowpass;
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+
+    /// White noise of a known density through the steepest anti-alias
+    /// filter an acquisition may have (8th-order Butterworth from a fifth
+    /// of the sample rate up): the floor read is the noise's own density
+    /// within 1 dB at every rate that leaves a band between the model's
+    /// content and the filter (from 7.8 kHz). Over the top of the band
+    /// instead (0.55-0.95 of Nyquist), the filter is down 44 dB at its
+    /// middle (0.375 of the rate: `(0.375 / 0.2)^16`).
+    #[test]
+    fn the_noise_floor_is_read_below_the_anti_alias_filter() {
+        for fs in [8192.0, 10_000.0, 12_800.0, 16_384.0, 25_600.0] {
+            let density: f64 = 1.0e-6;
+            let normal = rand_distr::Normal::new(0.0, (density * 0.5 * fs).sqrt()).unwrap();
+            let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+            let mut x: Vec<f64> = (0..(20.0 * fs) as usize).map(|_| normal.sample(&mut rng)).collect();
+            for section in butterworth_lowpass(8, 0.2 * fs, fs) {
+                section.filter(&mut x);
+            }
+            let (lo, hi) = noise_band_hz(fs, true);
+            let read = noise_density(&x, fs, (lo, hi)).unwrap();
+            let error_db = 10.0 * (read / density).log10();
+            assert!(error_db.abs() < 1.0, "{fs} Hz: floor {read:.3e} against {density:.1e} ({error_db:+.2} dB)");
+            assert!(lo >= MODEL_CONTENT_TOP_HZ && hi <= 0.95 * 0.5 * fs && hi > lo, "{fs} Hz: band {lo}-{hi} Hz");
+        }
+    }
 }
