@@ -66,6 +66,13 @@ pub fn candidates() -> Vec<Highpass> {
         .collect()
 }
 
+/// Fraction of the sample rate from which a rig's data acquisition's
+/// anti-alias filter may already act (the measurement format does not
+/// promise a flat response up to Nyquist): the compared bands
+/// ([`crate::compare::FOREIGN_TOP_FRACTION`]) and an accelerometer's noise
+/// floor ([`crate::signals::noise_band_hz`]) stay below it.
+pub const ANTI_ALIAS_START_FRACTION: f64 = 0.2;
+
 /// The comparison is made below this frequency, Hz (the rigid-body motion;
 /// the elastic modes of the reference chain start near 8 Hz).
 pub const COMPARISON_LOWPASS_HZ: f64 = 3.0;

@@ -30,9 +30,9 @@ pub const DECAY_TOP_MODE_FACTOR: f64 = 4.0;
 
 /// On a rig that is not the project's, band cells are compared up to this
 /// fraction of the recording's sample rate: its data acquisition's
-/// anti-alias filter may already act above (the measurement format does not
-/// promise a flat response up to Nyquist).
-pub const FOREIGN_TOP_FRACTION: f64 = 0.2;
+/// anti-alias filter may already act above
+/// ([`crate::acquisition::ANTI_ALIAS_START_FRACTION`]).
+pub const FOREIGN_TOP_FRACTION: f64 = crate::acquisition::ANTI_ALIAS_START_FRACTION;
 /// ... and up to this frequency, Hz: the torque from currents sampled by
 /// the data acquisition stands for the shaft's only below the current
 /// loop's bandwidth (a few hundred Hz on a commercial drive); above it the

@@ -171,9 +171,8 @@ pub const MODEL_CONTENT_TOP_HZ: f64 = 1100.0;
 /// The band a channel's noise floor is read in, Hz. An accelerometer's
 /// (`below_the_anti_alias`) runs from [`MODEL_CONTENT_TOP_HZ`], where the
 /// model has no content, up to where the acquisition's anti-alias filter
-/// may start (a fifth of the sample rate,
-/// [`crate::compare::FOREIGN_TOP_FRACTION`]: the measurement format does
-/// not promise a flat response above), when that leaves at least half an
+/// may start ([`crate::acquisition::ANTI_ALIAS_START_FRACTION`] of the
+/// sample rate), when that leaves at least half an
 /// octave. Otherwise, and for the drive's signals (the currents carry the
 /// current loop's own content up to its bandwidth, kHz), the floor is read
 /// from 0.55 of the Nyquist frequency (from 1.1 kHz) to 0.95 of it, or
@@ -181,7 +180,7 @@ pub const MODEL_CONTENT_TOP_HZ: f64 = 1100.0;
 /// anti-alias filter acting there lowers it (`docs/diagnosis.md`).
 pub fn noise_band_hz(sample_rate_hz: f64, below_the_anti_alias: bool) -> (f64, f64) {
     let nyquist = 0.5 * sample_rate_hz;
-    let flat_top = crate::compare::FOREIGN_TOP_FRACTION * sample_rate_hz;
+    let flat_top = crate::acquisition::ANTI_ALIAS_START_FRACTION * sample_rate_hz;
     if below_the_anti_alias && flat_top >= MODEL_CONTENT_TOP_HZ * 2f64.sqrt() {
         (MODEL_CONTENT_TOP_HZ, flat_top.min(0.95 * nyquist))
     } else if nyquist >= 1400.0 {
