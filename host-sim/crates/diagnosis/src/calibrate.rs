@@ -58,6 +58,17 @@ pub struct Calibration {
 /// model's sensitivity is probed (EA, guide damping, sheave damping).
 pub const MIN_PERTURBATION: [f64; 3] = [0.005, 0.03, 0.03];
 
+/// Where the perturbed models lie, in units of the calibration's
+/// uncertainty ([`Calibration::perturbed`]): its two ends, then its two
+/// middle points. The ends serve every counterpart; the middle points
+/// serve the torque-driven model of a travel under another drive, whose
+/// rope-mass modes (damped by nothing but the guides through the car and
+/// counterweight) ring with what the measured torque put into them over
+/// the whole travel: what they hold at its end turns with the rope's `EA`
+/// by a fraction of a per mil, not monotonically, so the ends of the
+/// interval alone do not show how far the model can move there.
+pub const PERTURBATION_STEPS: [f64; 4] = [1.0, -1.0, 0.5, -0.5];
+
 impl Calibration {
     /// Relative standard errors of EA, guide damping and sheave damping
     /// (spread of the per-recording values over the square root of their
@@ -83,9 +94,9 @@ impl Calibration {
         ]
     }
 
-    /// `model` with EA, guide and sheave damping moved by `sign` (+1 or -1)
-    /// times their relative uncertainty: how much of the data the
-    /// calibration cannot pin down.
+    /// `model` with EA, guide and sheave damping moved by `sign` (a step
+    /// of [`PERTURBATION_STEPS`]) times their relative uncertainty: how
+    /// much of the data the calibration cannot pin down.
     pub fn perturbed(&self, model: &RigConfig, sign: f64) -> RigConfig {
         let [ea, guide, sheave] = self.relative_uncertainty().map(|u| sign * u);
         let mut out = model.clone();
@@ -94,6 +105,11 @@ impl Calibration {
         out.mechanics.c_cw_kg_per_s *= 1.0 + guide;
         out.mechanics.c_sheave_nms_per_rad *= 1.0 + sheave;
         out
+    }
+
+    /// `model` perturbed at each of [`PERTURBATION_STEPS`], in that order.
+    pub fn perturbations(&self, model: &RigConfig) -> [RigConfig; 4] {
+        PERTURBATION_STEPS.map(|step| self.perturbed(model, step))
     }
 }
 

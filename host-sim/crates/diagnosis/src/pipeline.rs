@@ -125,7 +125,7 @@ fn nominal_comparison(
     let mut left_out = Vec::new();
     let (measured, travels) = measure(rig, dataset, &mut left_out);
     let (model, calibration) = calibrate(rig, dataset, &travels);
-    let perturbed_models = [calibration.perturbed(&model, 1.0), calibration.perturbed(&model, -1.0)];
+    let perturbed_models = calibration.perturbations(&model);
 
     progress("nominal model", 0, dataset.len());
     let runs = run_closed_loop(&model, dataset, measured);
@@ -134,7 +134,8 @@ fn nominal_comparison(
         .into_par_iter()
         .map(|run| {
             let (stem, recording) = &dataset[run.index];
-            let models = [&model, &perturbed_models[0], &perturbed_models[1]];
+            let [up, down, half_up, half_down] = &perturbed_models;
+            let models = [&model, up, down, half_up, half_down];
             (
                 run.index,
                 counterpart(

@@ -181,7 +181,7 @@ fn transducer_series(
 /// under another drive, the torque-driven mechanics ([`driven`]); the
 /// measured signals reduced to the channels the counterpart has.
 pub(crate) fn counterpart(
-    models: [&RigConfig; 3],
+    models: [&RigConfig; 5],
     drive: DriveModel,
     stem: &str,
     recording: &Recording,
@@ -287,16 +287,17 @@ pub(crate) fn counterpart(
 }
 
 /// The torque-driven model's perturbed runs (`run` on a model with
-/// settings): the two perturbed rigs of `models`, the settings'
-/// alternatives on the calibrated rig, and the start's alternatives when
-/// the recording begins in motion.
+/// settings): the four perturbed rigs of `models` (the uncertainty's ends
+/// and middle points, [`crate::calibrate::PERTURBATION_STEPS`]), the
+/// settings' alternatives on the calibrated rig, and the start's
+/// alternatives when the recording begins in motion.
 fn driven_perturbed(
-    models: [&RigConfig; 3],
+    models: [&RigConfig; 5],
     measured: &ChainSignals,
     run: impl Fn(&RigConfig, &driven::DrivenSettings) -> Result<ChainSignals>,
 ) -> Result<Vec<ChainSignals>> {
     let settings = driven::DrivenSettings::default();
-    let mut perturbed = vec![run(models[1], &settings)?, run(models[2], &settings)?];
+    let mut perturbed = models[1..].iter().map(|model| run(model, &settings)).collect::<Result<Vec<_>>>()?;
     for alternative in driven::DrivenSettings::alternatives() {
         perturbed.push(run(models[0], &alternative)?);
     }
@@ -309,11 +310,11 @@ fn driven_perturbed(
 }
 
 /// The simulated counterpart of a recording (the closed loop's run
-/// `closed`, or a free decay): the nominal run, the perturbed models'
-/// runs; under another rig's data acquisition, its accelerometers'
+/// `closed`, or a free decay): the nominal run, the runs of the perturbed
+/// models at the uncertainty's ends (`models[1]`, `models[2]`); under another rig's data acquisition, its accelerometers'
 /// high-pass found from the decay itself and applied to the model's.
 fn simulated_counterpart(
-    models: [&RigConfig; 3],
+    models: [&RigConfig; 5],
     drive: DriveModel,
     recording: &Recording,
     stem: &str,
