@@ -9,9 +9,10 @@
 //! rig, the electrical effects and every mechanical one on that draw, with
 //! its currents recorded by clamps and by the drive's transducers, the
 //! nominal rig of draw 109 (whose rope-mass modes ring through the
-//! travel), and the nominal rig of a rig that is not the reference rig (its masses, rope,
-//! sheave, an eight-pole-pair machine and its ripple orders, given as the
-//! model's configuration) on draw 7, whose effects are an ignored test; the
+//! travel), and the nominal rig of a rig that is not the reference rig
+//! (its masses, rope, sheave, an eight-pole-pair machine and its ripple
+//! orders, given as the model's configuration) on draw 7, whose effects
+//! are an ignored test; the
 //! sweep over draws, the nominal and parameter-only rigs, every effect of
 //! the library and the rail joints is an ignored test that prints the
 //! whole table, each draw with its acquisition's variant (the

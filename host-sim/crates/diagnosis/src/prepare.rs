@@ -311,8 +311,9 @@ fn driven_perturbed(
 
 /// The simulated counterpart of a recording (the closed loop's run
 /// `closed`, or a free decay): the nominal run, the runs of the perturbed
-/// models at the uncertainty's ends (`models[1]`, `models[2]`); under another rig's data acquisition, its accelerometers'
-/// high-pass found from the decay itself and applied to the model's.
+/// models at the uncertainty's ends (`models[1]`, `models[2]`); under
+/// another rig's data acquisition, its accelerometers' high-pass found
+/// from the decay itself and applied to the model's.
 fn simulated_counterpart(
     models: [&RigConfig; 5],
     drive: DriveModel,
