@@ -122,6 +122,8 @@ impl Recorded {
             sample_rate_hz: self.sample_rate_hz,
             transducer_lines: &[],
             transducer: None,
+            // Every iteration reads the recording anew: one run of a fit.
+            readings: None,
         }
     }
 }

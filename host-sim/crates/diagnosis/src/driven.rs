@@ -28,10 +28,12 @@
 
 use std::f64::consts::TAU;
 use std::ops::Range;
+use std::sync::Arc;
 
 use crate::error::{bail, Context, Result};
 
 use super::drive_law::SpeedController;
+use super::travel_readings::{BrakeSignals, TrackingReferences, TravelReadings};
 use dsp::{central_difference, highpass_zero_phase, lowpass_complement_zero_phase};
 use plant::angle::AngleSeries;
 use plant::effects::{EffectKind, Effects};
@@ -260,22 +262,38 @@ pub const BRAKE_LEVEL_SPAN_S: f64 = 0.25;
 /// holds the chain (up to the model's errors); a brake's torque where it
 /// holds the sheave.
 pub fn unexplained_torque_nm(params: &ChainParams, travel: &DrivenTravel) -> Result<Vec<f64>> {
-    let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
-    let (fs, r) = (travel.sample_rate_hz, params.sheave_radius_m);
-    let theta0 = travel.shaft_angle_rad[0];
-    let relative: Vec<f64> = travel.shaft_angle_rad[..n].iter().map(|a| a - theta0).collect();
-    let angle = lowpassed(&relative, fs, BRAKE_READING_LOWPASS_HZ).context("low-passing the shaft angle")?;
-    let torque = lowpassed(&travel.torque_nm[..n], fs, BRAKE_READING_LOWPASS_HZ).context("low-passing the torque")?;
-    let speed = central_difference(&angle, fs);
-    let acceleration = central_difference(&speed, fs);
+    let signals = match travel.readings {
+        Some(readings) => readings.brake_signals(|| brake_signals(travel))?,
+        None => Arc::new(brake_signals(travel)?),
+    };
+    let BrakeSignals { angle_rad: angle, torque_nm: torque, speed_radps: speed, acceleration_radps2: acceleration } =
+        &*signals;
+    let r = params.sheave_radius_m;
     let inertia = rigid_inertia_kg_m2(params);
     let damping = params.c_sheave_nms_per_rad + (params.c_car_kg_per_s + params.c_cw_kg_per_s) * r * r;
-    Ok((0..n)
+    Ok((0..angle.len())
         .map(|k| {
             let out_of_balance = params.out_of_balance_torque_nm(travel.lw_start_m + r * angle[k]);
             inertia * acceleration[k] + damping * speed[k] + out_of_balance - torque[k]
         })
         .collect())
+}
+
+/// The travel's shaft angle (from its first sample) and torque low-passed
+/// at [`BRAKE_READING_LOWPASS_HZ`], with the angle's speed and
+/// acceleration (central differences): what [`unexplained_torque_nm`]
+/// reads the brake from.
+fn brake_signals(travel: &DrivenTravel) -> Result<BrakeSignals> {
+    let n = travel.torque_nm.len().min(travel.shaft_angle_rad.len());
+    let fs = travel.sample_rate_hz;
+    let theta0 = travel.shaft_angle_rad[0];
+    let relative: Vec<f64> = travel.shaft_angle_rad[..n].iter().map(|a| a - theta0).collect();
+    let angle_rad = lowpassed(&relative, fs, BRAKE_READING_LOWPASS_HZ).context("low-passing the shaft angle")?;
+    let torque_nm =
+        lowpassed(&travel.torque_nm[..n], fs, BRAKE_READING_LOWPASS_HZ).context("low-passing the torque")?;
+    let speed_radps = central_difference(&angle_rad, fs);
+    let acceleration_radps2 = central_difference(&speed_radps, fs);
+    Ok(BrakeSignals { angle_rad, torque_nm, speed_radps, acceleration_radps2 })
 }
 
 /// The sample at which the rig's brake takes the sheave at the end of the
@@ -458,13 +476,19 @@ pub struct DrivenTravel<'a> {
     /// currents under a transducer error (`current_sensor_error`), when
     /// the recorded currents are the drive's own transducer signals.
     pub transducer: Option<&'a crate::transducer::TransducerSeries>,
+    /// What the runs read of this recording's torque and angle, kept across
+    /// them ([`TravelReadings`]); `None`: every run reads anew.
+    pub readings: Option<&'a TravelReadings>,
 }
 
 impl<'a> DrivenTravel<'a> {
     /// The same travel with the torque (N m) and the shaft angle (rad)
-    /// replaced where given.
+    /// replaced where given (then nothing is read from the recording's
+    /// kept readings).
     fn with<'b>(&'b self, torque_nm: Option<&'b [f64]>, shaft_angle_rad: Option<&'b [f64]>) -> DrivenTravel<'b> {
+        let replaced = torque_nm.is_some() || shaft_angle_rad.is_some();
         DrivenTravel {
+            readings: if replaced { None } else { self.readings },
             torque_nm: torque_nm.unwrap_or(self.torque_nm),
             shaft_angle_rad: shaft_angle_rad.unwrap_or(self.shaft_angle_rad),
             motion: self.motion.clone(),
@@ -775,7 +799,12 @@ fn torque_driven_accelerations_with(
     let (fs, r) = (travel.sample_rate_hz, rig.mechanics.sheave_radius_m);
     let params = travel_chain_params(rig, travel);
     let sequence = StopSequence { motion: travel.motion.clone(), brake: brake_engagement(&params, travel)? };
-    let (reference, tracked) = tracking_references(&travel.shaft_angle_rad[..n], sequence.brake, fs, r)?;
+    let references = match travel.readings {
+        Some(readings) => readings
+            .tracking(sequence.brake, r, || tracking_references(&travel.shaft_angle_rad[..n], sequence.brake, fs, r))?,
+        None => Arc::new(tracking_references(&travel.shaft_angle_rad[..n], sequence.brake, fs, r)?),
+    };
+    let (reference, tracked) = &*references;
     let chain = Chain::new(params, travel.lw_start_m);
     let line = Line::new(effects);
     let (layout, nodes) = (line.layout, line.layout.nodes);
@@ -863,9 +892,7 @@ fn torque_driven_accelerations_with(
                 step = line.coefficients(&chain, &lumped);
                 total_kg = total_mass_kg(&step.lumped.masses_kg[..nodes]);
             }
-            plant::rk4_step_in_time(y, h * sub, &mut work, |frac, y, dy| {
-                let (dx, dv) = dy.split_at_mut(nodes);
-                dx.copy_from_slice(&y[nodes..]);
+            plant::rk4_second_order_step_in_time(y, h * sub, &mut work, |frac, y, dv| {
                 deriv(y, k, start + frac * sub, feedback_nm, clamp_angle_rad, &series, &step, total_kg, dv);
             });
         }
@@ -894,13 +921,7 @@ fn meet_the_brake(line: &Line, chain: &Chain, y: &mut [f64], speed_mps: f64) {
 /// tracking loop follows, the angle continued past the brake's sample
 /// `brake` ([`continued_past`]) so that its low-pass does not anticipate
 /// the brake's stop.
-#[allow(clippy::type_complexity)]
-fn tracking_references(
-    shaft_angle_rad: &[f64],
-    brake: Option<usize>,
-    fs: f64,
-    r: f64,
-) -> Result<((Vec<f64>, Vec<f64>), (Vec<f64>, Vec<f64>))> {
+fn tracking_references(shaft_angle_rad: &[f64], brake: Option<usize>, fs: f64, r: f64) -> Result<TrackingReferences> {
     let reference = tracking_reference_m(shaft_angle_rad, fs, r)?;
     let tracked = match brake {
         Some(b) => tracking_reference_m(&continued_past(shaft_angle_rad, b, fs), fs, r)?,
@@ -1105,6 +1126,7 @@ mod tests {
             sample_rate_hz,
             transducer_lines: &[],
             transducer: None,
+            readings: None,
         }
     }
 
@@ -1178,6 +1200,39 @@ mod tests {
         assert!(d_default < 1e-3, "default step: {d_default:.2e} of the RMS from the half step");
         // What the split into several steps per sample is for.
         assert!(d_one > 10.0 * d_default, "one step per sample: {d_one:.2e}, default {d_default:.2e}");
+    }
+
+    /// A travel whose readings are kept (the brake's signals, the tracking
+    /// references, the torque's lines at the rig's ripple orders) gives,
+    /// on every run, the accelerations of the travel read anew, to the
+    /// bit: under another ripple phase too, and under an encoder error,
+    /// whose corrected angle reads its own.
+    #[test]
+    fn kept_readings_change_no_run() {
+        let rig = RigConfig::embedded_default().unwrap();
+        let (fs, chain) = (4096.0, Chain::new(ChainParams::from_rig(&rig, 70.5), 2.0));
+        let (mut torque, angle, speed) = constant_speed_inputs(&rig, &chain, fs, 450.0);
+        // The rig's ripple orders, each at its own phase, for the runs to read.
+        for (i, h) in rig.ripple.iter().enumerate() {
+            let order = f64::from(h.mechanical_order);
+            torque.iter_mut().zip(&angle).for_each(|(t, a)| *t += h.amplitude_nm * (order * a + i as f64).cos());
+        }
+        let n = torque.len();
+        let travel =
+            || DrivenTravel { constant_speed: 0..n / 2, ..travel_of(&chain, (&torque, &angle, &speed), 0..n, fs) };
+        let readings = TravelReadings::default();
+        let (fresh, kept) = (travel(), DrivenTravel { readings: Some(&readings), ..travel() });
+        let shifted = DrivenSettings { ripple_phase_shift_rad: 0.7, ..DrivenSettings::default() };
+        let mut encoder = Effects::none();
+        encoder.encoder_error = Some(plant::effects::EncoderError { eccentricity_rad: 1e-3, phase_rad: 0.4 });
+        for settings in [DrivenSettings::default(), shifted] {
+            for effects in [Effects::none(), encoder] {
+                let anew = torque_driven_accelerations(&rig, &fresh, &settings, &effects).unwrap();
+                for _ in 0..2 {
+                    assert_eq!(torque_driven_accelerations(&rig, &kept, &settings, &effects).unwrap(), anew);
+                }
+            }
+        }
     }
 
     /// With the rope in elements the line's top modes lie far above the

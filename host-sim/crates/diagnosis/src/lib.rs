@@ -74,6 +74,7 @@ pub mod simulate;
 pub mod spectra;
 pub mod target;
 pub mod transducer;
+pub mod travel_readings;
 pub mod travel_signals;
 pub mod verdict;
 

@@ -5,6 +5,7 @@
 //! the measured torque ([`driven`]).
 
 use rayon::prelude::*;
+use std::sync::Arc;
 
 use crate::drive_finding::DriveModel;
 use crate::error::Result;
@@ -16,6 +17,7 @@ use crate::simulate::{
     driven_accelerations, driven_counterpart, driven_highpass, driven_signals, driven_stop_brake,
     highpass_accelerations, model_step_s, simulate_counterpart, Counterpart, DriveRecord, DrivenInputs,
 };
+use crate::travel_readings::TravelReadings;
 use crate::{acquisition, drive_law, driven, electrical_lines, transducer, travel_signals};
 use plant::effects::Effects;
 use recording::{Recording, RecordingKind};
@@ -213,12 +215,14 @@ pub(crate) fn counterpart(
         _ => Vec::new(),
     };
     let transducer = driving.and_then(|t| transducer_series(models[0], recording, stem, &measured, t));
+    let readings = Arc::new(TravelReadings::default());
     let drive_record = DriveRecord {
         torque_nm: &torque,
         speed_estimate_radps: &speed,
         controller,
         transducer_lines: &transducer_lines,
         transducer: transducer.as_ref(),
+        readings: Some(&readings),
     };
     let none = Effects::none();
     // The nominal torque-driven run, raw: the accelerometers' high-pass
@@ -247,10 +251,11 @@ pub(crate) fn counterpart(
             transducer: transducer.clone(),
             highpass,
             stop_brake,
+            readings: readings.clone(),
         };
         // The nominal run shaped as the attribution shapes every effect's
         // (`Counterpart::simulate` -> `driven_counterpart`).
-        let how = Counterpart::Driven(std::sync::Arc::new(inputs));
+        let how = Counterpart::Driven(Arc::new(inputs));
         (driven_signals(&measured, raw, highpass)?, perturbed, how)
     } else {
         simulated_counterpart(models, drive, recording, stem, &measured, closed)?
@@ -261,7 +266,7 @@ pub(crate) fn counterpart(
             models[0],
             recording,
             &measured,
-            DriveRecord { torque_nm: &noisy, ..drive_record },
+            DriveRecord { torque_nm: &noisy, readings: None, ..drive_record },
             highpass,
             &driven::DrivenSettings::default(),
             &none,

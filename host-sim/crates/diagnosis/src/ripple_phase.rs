@@ -191,7 +191,11 @@ fn window_line(
     transducer: TransducerLine,
 ) -> Option<(Complex<f64>, Complex<f64>)> {
     let angle = &travel.shaft_angle_rad[window.clone()];
-    let mut line = angle_locked_line(&travel.torque_nm[window.clone()], angle, order)?;
+    let read = || angle_locked_line(&travel.torque_nm[window.clone()], angle, order);
+    let mut line = match travel.readings {
+        Some(readings) => readings.torque_line(order, window, read),
+        None => read(),
+    }?;
     let seconds = (angle.len() as f64 - 1.0).max(1.0) / travel.sample_rate_hz;
     let omega = order * (angle[angle.len() - 1] - angle[0]) / seconds;
     let mean_angle = angle.iter().sum::<f64>() / angle.len() as f64;
@@ -481,6 +485,7 @@ mod tests {
                 sample_rate_hz: self.sample_rate_hz,
                 transducer_lines: &[],
                 transducer: None,
+                readings: None,
             }
         }
     }

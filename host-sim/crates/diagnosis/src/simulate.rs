@@ -5,6 +5,7 @@
 use std::sync::Arc;
 
 use crate::error::{bail, Context, Result};
+use crate::travel_readings::TravelReadings;
 use crate::{acquisition, drive_law, driven, signals};
 
 use crate::identify::release_index;
@@ -256,6 +257,9 @@ pub struct DrivenInputs {
     /// The rig's brake at the end of the travel, read on the nominal
     /// model's chain ([`driven_stop_brake`]).
     pub stop_brake: driven::StopBrake,
+    /// What the runs read of the recorded torque and angle, kept across
+    /// them.
+    pub readings: Arc<TravelReadings>,
 }
 
 impl DrivenInputs {
@@ -267,6 +271,7 @@ impl DrivenInputs {
             controller: self.controller,
             transducer_lines: &self.transducer_lines,
             transducer: self.transducer.as_ref(),
+            readings: Some(&self.readings),
         }
     }
 }
@@ -284,6 +289,9 @@ pub struct DriveRecord<'a> {
     pub transducer_lines: &'a [driven::TransducerTorqueLine],
     /// The series that give the true torque under a transducer error.
     pub transducer: Option<&'a crate::transducer::TransducerSeries>,
+    /// What the runs read of the recorded torque and angle, kept across
+    /// them; `None` for a torque that is not the recording's.
+    pub readings: Option<&'a TravelReadings>,
 }
 
 impl Counterpart {
@@ -386,6 +394,7 @@ fn driven_travel<'a>(
         sample_rate_hz: measured.sample_rate_hz,
         transducer_lines: drive.transducer_lines,
         transducer: drive.transducer,
+        readings: drive.readings,
     })
 }
 

@@ -210,8 +210,15 @@ impl HannWindows {
     }
 }
 
+/// [`angle_locked_lines_of`] of one signal `x`.
+#[cfg(test)]
+fn angle_locked_lines(x: &[f64], theta: &[f64], orders: &[u32], window: &[f64], fs: f64) -> (Vec<Complex64>, f64) {
+    let (mut lines, scale) = angle_locked_lines_of(&[x], theta, orders, window, fs);
+    (lines.pop().unwrap_or_default(), scale)
+}
+
 /// Complex amplitudes (unit of `x`) of the mechanical `orders`' lines in
-/// `x` (its mean removed) along the shaft angle `theta` (rad) under a Hann
+/// each of `xs` (its mean removed) along the shaft angle `theta` (rad) under a Hann
 /// window `w` over the stage: `2 / sum(w) sum w (x - mean) e^(-i k (theta -
 /// theta_0))` (`w` of the length of `x`), one `sin_cos` per sample and the
 /// orders by powers of it ([`unit_power`]). A stage holds a fractional
@@ -222,19 +229,36 @@ impl HannWindows {
 /// fall as `1 / (d N)^3`. With them, the factor that takes the noise's
 /// one-sided density (unit^2/Hz) to a line's expected power (unit^2) at
 /// sample rate `fs` (Hz): `2 fs sum(w^2) / sum(w)^2` (`3 fs / n`).
-fn angle_locked_lines(x: &[f64], theta: &[f64], orders: &[u32], window: &[f64], fs: f64) -> (Vec<Complex64>, f64) {
-    let mean = x.iter().sum::<f64>() / x.len().max(1) as f64;
-    let mut sums = vec![Complex64::new(0.0, 0.0); orders.len()];
-    for ((v, t), w) in x.iter().zip(theta).zip(window) {
-        let (s, c) = (t - theta[0]).sin_cos();
-        for (sum, &order) in sums.iter_mut().zip(orders) {
+/// Each sample's rotation and its powers are worked out once for all the
+/// signals.
+fn angle_locked_lines_of(
+    xs: &[&[f64]],
+    theta: &[f64],
+    orders: &[u32],
+    window: &[f64],
+    fs: f64,
+) -> (Vec<Vec<Complex64>>, f64) {
+    let means: Vec<f64> = xs.iter().map(|x| x.iter().sum::<f64>() / x.len().max(1) as f64).collect();
+    let mut sums = vec![vec![Complex64::new(0.0, 0.0); orders.len()]; xs.len()];
+    let len = xs.iter().map(|x| x.len()).min().unwrap_or(0).min(theta.len()).min(window.len());
+    let mut powers = vec![Complex64::new(0.0, 0.0); orders.len()];
+    for k in 0..len {
+        let (s, c) = (theta[k] - theta[0]).sin_cos();
+        for (power, &order) in powers.iter_mut().zip(orders) {
             let (ck, sk) = unit_power(c, s, order);
-            *sum += Complex64::new(ck, -sk) * (w * (v - mean));
+            *power = Complex64::new(ck, -sk);
+        }
+        for ((x, mean), sums) in xs.iter().zip(&means).zip(sums.iter_mut()) {
+            let weight = window[k] * (x[k] - mean);
+            for (sum, power) in sums.iter_mut().zip(&powers) {
+                *sum += *power * weight;
+            }
         }
     }
     let (s1, s2) = window.iter().fold((0.0, 0.0), |(a, b), w| (a + w, b + w * w));
     let s1 = s1.max(1e-12);
-    (sums.into_iter().map(|a| a * (2.0 / s1)).collect(), 2.0 * fs * s2 / (s1 * s1))
+    let lines = sums.into_iter().map(|sums| sums.into_iter().map(|a| a * (2.0 / s1)).collect()).collect();
+    (lines, 2.0 * fs * s2 / (s1 * s1))
 }
 
 impl ChainSpectra {
@@ -249,6 +273,16 @@ impl ChainSpectra {
         let mut output = fft.make_output_vec();
         let mut windows = HannWindows::default();
         let mut channels = Vec::new();
+        let (mut lines_of, line_noise_scale) = match &segmentation.constant {
+            Some(r) if signals.angle_rad.len() >= r.end => {
+                let stage: Vec<&[f64]> = signals.channels.iter().map(|(_, values)| &values[r.clone()]).collect();
+                let window = windows.of(r.len()).0;
+                let theta = &signals.angle_rad[r.clone()];
+                angle_locked_lines_of(&stage, theta, &bands.line_orders, window, segmentation.sample_rate_hz)
+            }
+            _ => (Vec::new(), 0.0),
+        };
+        lines_of.reverse();
         for (channel, values) in &signals.channels {
             let mut scale = Vec::with_capacity(segmentation.segments.len());
             let mut data = Vec::with_capacity(segmentation.segments.len() * bins);
@@ -268,16 +302,7 @@ impl ChainSpectra {
                 scale.push(2.0 / (segmentation.sample_rate_hz * w2.max(1e-12)));
                 data.extend_from_slice(&output[..bins]);
             }
-            let (lines, line_noise_scale) = match &segmentation.constant {
-                Some(r) if signals.angle_rad.len() >= r.end => angle_locked_lines(
-                    &values[r.clone()],
-                    &signals.angle_rad[r.clone()],
-                    &bands.line_orders,
-                    windows.of(r.len()).0,
-                    segmentation.sample_rate_hz,
-                ),
-                _ => (Vec::new(), 0.0),
-            };
+            let lines = lines_of.pop().unwrap_or_default();
             channels.push((*channel, ChannelSpectra { bins, scale, data, lines, line_noise_scale }));
         }
         Self { segmentation: segmentation.clone(), channels }

@@ -140,10 +140,7 @@ pub fn simulate_free_decay_stepped(
         chain.acceleration(&state, &mut accel);
         record.push(accel[nodes - 1]);
         for _ in 0..substeps {
-            rk4.step(&mut state, h, |y, dy| {
-                dy[..nodes].copy_from_slice(&y[nodes..]);
-                chain.acceleration(y, &mut dy[nodes..]);
-            });
+            rk4.step_second_order(&mut state, h, |y, acc| chain.acceleration(y, acc));
         }
     }
     Ok(record)
