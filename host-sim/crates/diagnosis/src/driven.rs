@@ -892,7 +892,9 @@ fn torque_driven_accelerations_with(
                 step = line.coefficients(&chain, &lumped);
                 total_kg = total_mass_kg(&step.lumped.masses_kg[..nodes]);
             }
-            plant::rk4_second_order_step_in_time(y, h * sub, &mut work, |frac, y, dv| {
+            // The first step starts where the sample's accelerations were taken.
+            let first = (j == 0).then_some(&a[..]);
+            plant::rk4_second_order_step_from(y, h * sub, &mut work, first, |frac, y, dv| {
                 deriv(y, k, start + frac * sub, feedback_nm, clamp_angle_rad, &series, &step, total_kg, dv);
             });
         }

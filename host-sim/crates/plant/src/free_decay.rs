@@ -139,8 +139,10 @@ pub fn simulate_free_decay_stepped(
     for _ in 0..samples {
         chain.acceleration(&state, &mut accel);
         record.push(accel[nodes - 1]);
-        for _ in 0..substeps {
-            rk4.step_second_order(&mut state, h, |y, acc| chain.acceleration(y, acc));
+        for j in 0..substeps {
+            // The first step starts where the sample's accelerations were taken.
+            let first = (j == 0).then_some(&accel[..]);
+            rk4.step_second_order(&mut state, h, first, |y, acc| chain.acceleration(y, acc));
         }
     }
     Ok(record)

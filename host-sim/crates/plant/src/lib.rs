@@ -830,10 +830,19 @@ pub fn rk4_step_in_time(y: &mut [f64], h: f64, work: &mut [f64], mut f: impl FnM
 /// where the stage states lie instead of copied: the state after the step
 /// is [`rk4_step_in_time`]'s with `dy = (v, a)`, bit for bit, in the same
 /// `5 * y.len()` values of `work`.
-pub fn rk4_second_order_step_in_time(
+pub fn rk4_second_order_step_in_time(y: &mut [f64], h: f64, work: &mut [f64], f: impl FnMut(f64, &[f64], &mut [f64])) {
+    rk4_second_order_step_from(y, h, work, None, f);
+}
+
+/// [`rk4_second_order_step_in_time`] given, where `first` holds them, the
+/// accelerations at `y` itself (the step's first stage, `f(0, y)`, which a
+/// caller that records them has already worked out): the same step, one
+/// evaluation of `f` fewer.
+pub fn rk4_second_order_step_from(
     y: &mut [f64],
     h: f64,
     work: &mut [f64],
+    first: Option<&[f64]>,
     mut f: impl FnMut(f64, &[f64], &mut [f64]),
 ) {
     let len = y.len();
@@ -852,7 +861,13 @@ pub fn rk4_second_order_step_in_time(
     let (a2, rest) = rest.split_at_mut(n);
     let (a3, rest) = rest.split_at_mut(n);
     let a4 = &mut rest[..n];
-    f(0.0, y, a1);
+    let a1: &[f64] = match first {
+        Some(given) => &given[..n],
+        None => {
+            f(0.0, y, a1);
+            a1
+        }
+    };
     stage(y, y, a1, h / 2.0, s2);
     f(0.5, s2, a2);
     stage(y, s2, a2, h / 2.0, s3);
@@ -872,6 +887,7 @@ pub fn rk4_second_order_step_in_time(
 /// One stage state of [`rk4_second_order_step_in_time`]: `y` moved over
 /// `step` (s) at the velocities of `from` and the accelerations `acc`,
 /// into `out`.
+#[inline]
 fn stage(y: &[f64], from: &[f64], acc: &[f64], step: f64, out: &mut [f64]) {
     let n = acc.len();
     for i in 0..n {
@@ -913,13 +929,20 @@ impl Rk4 {
     }
 
     /// One step of the second-order system `x'' = a(x, v)` over `h`, in
-    /// place ([`rk4_second_order_step_in_time`]): `f(y, acc)` writes the
-    /// accelerations of the positions-then-velocities `y`.
-    pub fn step_second_order(&mut self, y: &mut [f64], h: f64, mut f: impl FnMut(&[f64], &mut [f64])) {
+    /// place ([`rk4_second_order_step_from`]): `f(y, acc)` writes the
+    /// accelerations of the positions-then-velocities `y`; `first`, where
+    /// given, holds those at `y` itself.
+    pub fn step_second_order(
+        &mut self,
+        y: &mut [f64],
+        h: f64,
+        first: Option<&[f64]>,
+        mut f: impl FnMut(&[f64], &mut [f64]),
+    ) {
         if self.work.len() < 5 * y.len() {
             self.work.resize(5 * y.len(), 0.0);
         }
-        rk4_second_order_step_in_time(y, h, &mut self.work, |_, y, acc| f(y, acc));
+        rk4_second_order_step_from(y, h, &mut self.work, first, |_, y, acc| f(y, acc));
     }
 }
 
@@ -974,8 +997,9 @@ mod rk4_tests {
         assert!((a[0] - 1.0).abs() < 1e-6 && a[1].abs() < 1e-6, "{a:?}");
     }
 
-    /// A damped, driven chain of three masses: the second-order form gives
-    /// the general step's state bit for bit over many steps.
+    /// A damped, driven chain of three masses: the second-order form, with
+    /// its first stage worked out or given, gives the general step's state
+    /// bit for bit over many steps.
     #[test]
     fn the_second_order_form_is_the_same_step() {
         let acc = |t: f64, y: &[f64], a: &mut [f64]| {
@@ -985,8 +1009,9 @@ mod rk4_tests {
             a[2] = -2.5 * (x[2] - x[1]) - 0.05 * v[2] * v[2].abs();
         };
         let h = 0.013;
-        let (mut general, mut second) = ([0.3, -0.1, 0.2, 0.0, 0.5, -0.25], [0.3, -0.1, 0.2, 0.0, 0.5, -0.25]);
-        let (mut w1, mut w2) = ([0.0; 30], [f64::NAN; 30]);
+        let start = [0.3, -0.1, 0.2, 0.0, 0.5, -0.25];
+        let (mut general, mut second, mut given) = (start, start, start);
+        let (mut w1, mut w2, mut w3) = ([0.0; 30], [f64::NAN; 30], [f64::NAN; 30]);
         for k in 0..500 {
             let t0 = k as f64 * h;
             rk4_step_in_time(&mut general, h, &mut w1, |frac, y, dy| {
@@ -994,8 +1019,12 @@ mod rk4_tests {
                 acc(t0 + frac * h, y, &mut dy[3..]);
             });
             rk4_second_order_step_in_time(&mut second, h, &mut w2, |frac, y, a| acc(t0 + frac * h, y, a));
+            let mut first = [0.0; 3];
+            acc(t0, &given, &mut first);
+            rk4_second_order_step_from(&mut given, h, &mut w3, Some(&first), |frac, y, a| acc(t0 + frac * h, y, a));
         }
         assert_eq!(general, second);
+        assert_eq!(general, given);
         assert!(general.iter().any(|v| v.abs() > 1e-3), "{general:?}");
     }
 

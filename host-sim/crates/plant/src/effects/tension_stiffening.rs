@@ -64,12 +64,16 @@ impl TensionStiffening {
             };
         }
         let s = ea0_n * self.reference_tension_n.powf(-self.alpha) / length_m;
+        let static_power = t_s.powf(beta);
+        let inverse_beta = 1.0 / beta;
         StiffeningSegment {
             static_tension_n: t_s,
             linear_n_per_m: 0.0,
-            static_power: t_s.powf(beta),
+            static_power,
             slope: beta * s,
-            inverse_beta: 1.0 / beta,
+            inverse_beta,
+            relative_per_m: beta * s / static_power,
+            series: (inverse_beta <= SERIES_MAX_POWER).then(|| binomial_series(inverse_beta)),
         }
     }
 
@@ -97,15 +101,67 @@ pub struct StiffeningSegment {
     pub slope: f64,
     /// `1 / beta`, dimensionless.
     pub inverse_beta: f64,
+    /// `beta s / T_s^beta`, 1/m: the relative change `u` of `T^beta` per
+    /// metre of stretch change.
+    pub relative_per_m: f64,
+    /// The coefficients `C(1/beta, k + 1)` of `((1 + u)^(1/beta) - 1) / u`
+    /// ([`SERIES_TERMS`] of them), where `1/beta` is at most
+    /// [`SERIES_MAX_POWER`].
+    pub series: Option<[f64; SERIES_TERMS]>,
+}
+
+/// Terms of [`StiffeningSegment::series`].
+pub const SERIES_TERMS: usize = 14;
+
+/// Largest `|u|` at which [`StiffeningSegment::tension_change_n`] sums the
+/// series: the terms it leaves out are below `1.4e-16` of the sum there
+/// for every power up to [`SERIES_MAX_POWER`] (`tests`).
+pub const SERIES_REACH: f64 = 0.125;
+
+/// Largest power `1 / beta` (an exponent `alpha` up to 0.75) for which a
+/// segment keeps the series.
+pub const SERIES_MAX_POWER: f64 = 4.0;
+
+/// `sum_k c_k u^k` by Estrin's scheme (pairs, then pairs of pairs in
+/// `u^2`, `u^4` and `u^8`): four dependent steps where Horner's takes
+/// thirteen.
+#[inline]
+fn series_sum(c: &[f64; SERIES_TERMS], u: f64) -> f64 {
+    let (u2, pair) = (u * u, |i: usize| c[i] + c[i + 1] * u);
+    let (u4, quad) = (u2 * u2, |i: usize| pair(i) + pair(i + 2) * u2);
+    let u8 = u4 * u4;
+    let low = quad(0) + quad(4) * u4;
+    let high = quad(8) + pair(12) * u4;
+    low + high * u8
+}
+
+/// The binomial coefficients `C(p, k + 1)`, `k = 0 ..` [`SERIES_TERMS`]:
+/// `((1 + u)^p - 1) / u = sum_k C(p, k + 1) u^k`.
+fn binomial_series(p: f64) -> [f64; SERIES_TERMS] {
+    let mut c = [0.0; SERIES_TERMS];
+    c[0] = p;
+    for k in 1..SERIES_TERMS {
+        c[k] = c[k - 1] * (p - k as f64) / (k + 1) as f64;
+    }
+    c
 }
 
 impl StiffeningSegment {
     /// Tension change (N) for a stretch `stretch_change_m` (m) beyond the
-    /// static one; `-T_s` once the segment is slack.
+    /// static one; `-T_s` once the segment is slack. Near the static
+    /// tension (`T^beta` within [`SERIES_REACH`] of `T_s^beta`) as `T_s u
+    /// sum_k C(1/beta, k + 1) u^k`, the change itself rather than the
+    /// difference of two near tensions; elsewhere by the power.
     #[inline]
     pub fn tension_change_n(&self, stretch_change_m: f64) -> f64 {
         if self.linear_n_per_m != 0.0 {
             return self.linear_n_per_m * stretch_change_m;
+        }
+        let u = self.relative_per_m * stretch_change_m;
+        if let Some(c) = &self.series {
+            if u.abs() <= SERIES_REACH {
+                return self.static_tension_n * u * series_sum(c, u);
+            }
         }
         let base = self.static_power + self.slope * stretch_change_m;
         if base <= 0.0 {
@@ -208,6 +264,48 @@ mod tests {
         for dt in [-300.0, -20.0, 0.0, 15.0, 400.0] {
             let back = e.tension_change_n(ea0, t_s, e.stretch_change_m(ea0, t_s, dt, l), l);
             assert!((back - dt).abs() < 1e-9 * t_s, "{dt} -> {back}");
+        }
+    }
+    /// The series near the static tension against the power law written
+    /// with `ln_1p` and `exp_m1` (`T_s ((1 + u)^p - 1)` without the
+    /// difference of near numbers), across the series' reach and the
+    /// exponents it serves, and the law's two forms meeting at its edge.
+    #[test]
+    fn the_series_near_the_static_tension_is_the_power_law() {
+        let (ea0, t_s, l) = (1.0e6, 450.0, 0.25);
+        for alpha in [0.05, 0.3, 0.45, 0.6, 0.75] {
+            let e = TensionStiffening { alpha, reference_tension_n: 323.73 };
+            let segment = e.segment(ea0, t_s, l);
+            assert!(segment.series.is_some(), "alpha {alpha}");
+            let p = segment.inverse_beta;
+            for i in -100..=100 {
+                let u = SERIES_REACH * i as f64 / 100.0;
+                let dx = u / segment.relative_per_m;
+                let exact = t_s * (p * u.ln_1p()).exp_m1();
+                let got = segment.tension_change_n(dx);
+                assert!((got - exact).abs() <= 1e-15 * exact.abs(), "alpha {alpha}, u {u}: {got} against {exact}");
+            }
+            let edge = SERIES_REACH / segment.relative_per_m;
+            let (inside, outside) = (segment.tension_change_n(edge), segment.tension_change_n(edge * (1.0 + 1e-15)));
+            assert!((outside - inside).abs() < 1e-12 * inside.abs(), "alpha {alpha}: {inside} | {outside}");
+        }
+        let stiff = TensionStiffening { alpha: 0.8, reference_tension_n: 323.73 };
+        assert!(stiff.segment(ea0, t_s, l).series.is_none());
+    }
+
+    /// The first term the series leaves out, at its reach, against the
+    /// sum, for every power up to the largest it serves.
+    #[test]
+    fn the_series_left_out_is_below_the_rounding() {
+        for i in 0..=300 {
+            let p = 1.0 + (SERIES_MAX_POWER - 1.0) * i as f64 / 300.0;
+            let c = binomial_series(p);
+            let next = c[SERIES_TERMS - 1] * (p - SERIES_TERMS as f64) / (SERIES_TERMS + 1) as f64;
+            // Every term left out is at most this one times u^j: a geometric tail.
+            let tail = next.abs() * SERIES_REACH.powi(SERIES_TERMS as i32) / (1.0 - SERIES_REACH);
+            let sum = |u: f64| (p * f64::ln_1p(u)).exp_m1() / u;
+            let least = sum(SERIES_REACH).min(sum(-SERIES_REACH));
+            assert!(tail < 1.4e-16 * least, "p {p}: {:e} of the sum", tail / least);
         }
     }
 }
