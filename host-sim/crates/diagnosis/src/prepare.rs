@@ -299,19 +299,17 @@ pub(crate) fn counterpart(
 fn driven_perturbed(
     models: [&RigConfig; 5],
     measured: &ChainSignals,
-    run: impl Fn(&RigConfig, &driven::DrivenSettings) -> Result<ChainSignals>,
+    run: impl Fn(&RigConfig, &driven::DrivenSettings) -> Result<ChainSignals> + Sync,
 ) -> Result<Vec<ChainSignals>> {
     let settings = driven::DrivenSettings::default();
-    let mut perturbed = models[1..].iter().map(|model| run(model, &settings)).collect::<Result<Vec<_>>>()?;
-    for alternative in driven::DrivenSettings::alternatives() {
-        perturbed.push(run(models[0], &alternative)?);
-    }
+    let mut runs: Vec<(&RigConfig, driven::DrivenSettings)> = models[1..].iter().map(|m| (*m, settings)).collect();
+    runs.extend(driven::DrivenSettings::alternatives().map(|alternative| (models[0], alternative)));
     if driven::begins_in_motion(&measured.angle_rad, measured.sample_rate_hz) {
-        for alternative in driven::DrivenSettings::start_alternatives() {
-            perturbed.push(run(models[0], &alternative)?);
-        }
+        runs.extend(driven::DrivenSettings::start_alternatives().map(|alternative| (models[0], alternative)));
     }
-    Ok(perturbed)
+    // In parallel with the other recordings' runs: a long recording's
+    // dozen runs need not wait for one thread at the end.
+    runs.par_iter().map(|(model, settings)| run(model, settings)).collect()
 }
 
 /// The simulated counterpart of a recording (the closed loop's run

@@ -32,6 +32,8 @@ use std::collections::BTreeMap;
 use std::fs::{self, File};
 use std::io::{self, BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 use super::write::TIME_STEP_RELATIVE_TOLERANCE;
 use super::{
@@ -635,7 +637,31 @@ fn read_dataset_with(
             return Err(ReadError::MissingCsv { toml_path: toml_path.clone(), csv_path });
         }
     }
-    stems.into_iter().map(|(stem, toml_path)| read(&toml_path, rope_total_length_m).map(|rec| (stem, rec))).collect()
+    let recordings = on_every_core(&stems, |(_, toml_path)| read(toml_path, rope_total_length_m));
+    // The first error in the stems' order, as a reading one after another gives.
+    stems.into_iter().zip(recordings).map(|((stem, _), rec)| rec.map(|rec| (stem, rec))).collect()
+}
+
+/// `work` on every item, the items shared among as many threads as the
+/// machine runs at once; the results in the items' order.
+fn on_every_core<T: Sync, R: Send>(items: &[T], work: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(items.len());
+    let next = AtomicUsize::new(0);
+    let done: Vec<Mutex<Option<R>>> = items.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(item) = items.get(i) else { break };
+                let result = work(item);
+                *done[i].lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = Some(result);
+            });
+        }
+    });
+    done.into_iter()
+        .map(|slot| slot.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner()))
+        .map(|result| result.expect("every item is worked on before the threads end"))
+        .collect()
 }
 
 /// One metadata field: its value and the line it is on.
@@ -1170,6 +1196,19 @@ fn read_header(lines: &mut LineReader, path: &Path, meta: &RecordingMeta) -> Res
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The items' results come back in the items' order, whichever thread
+    /// worked on them and however long each took.
+    #[test]
+    fn every_core_keeps_the_items_order() {
+        let items: Vec<u64> = (0..37).collect();
+        let got = on_every_core(&items, |&i| {
+            std::thread::sleep(std::time::Duration::from_micros((i * 7919) % 500));
+            i * i
+        });
+        assert_eq!(got, items.iter().map(|i| i * i).collect::<Vec<_>>());
+        assert!(on_every_core(&[] as &[u64], |&i| i).is_empty());
+    }
 
     #[test]
     fn line_column_counts_lines_and_characters() {
