@@ -1364,11 +1364,19 @@ fn add_pairs(
         count.planned += plans.models.len();
         lab.run_all(&plans.models, count)
     };
-    for plan in plans.pairs {
+    // The pairs fitted side by side, then kept in their order.
+    let fitted: Vec<Candidate> = plans
+        .pairs
+        .par_iter()
+        .map(|plan| {
+            let (a, b) = (&families[plan.first], &families[plan.second]);
+            let mut f = pair_family(a, b, plan.grid.clone(), &pair_runs, nominal_runs);
+            f.prepare(lab);
+            evaluate(lab, &f, nominal)
+        })
+        .collect();
+    for (plan, pair) in plans.pairs.iter().zip(fitted) {
         let (a, b) = (&families[plan.first], &families[plan.second]);
-        let mut f = pair_family(a, b, plan.grid, &pair_runs, nominal_runs);
-        f.prepare(lab);
-        let pair = evaluate(lab, &f, nominal);
         if keeps_pair(candidates, [a.kinds[0].name(), b.kinds[0].name()], &pair) {
             candidates.push(pair);
         }
