@@ -219,17 +219,15 @@ pub(crate) struct Compared {
 }
 
 /// One recording's comparison target from its prepared counterpart: the
-/// measured and simulated cells on the analysis bands, the tolerances from
-/// the perturbed runs; `bands_so_far` are the dataset's bands when an
-/// earlier recording set them. The reason in words when it cannot be
-/// compared.
+/// measured and simulated cells on the analysis bands (returned with it:
+/// [`compared`] takes only recordings whose bands are the dataset's), the
+/// tolerances from the perturbed runs.
 fn target_of(
     prepared: Prepared,
     recording: &Recording,
-    bands_so_far: Option<&Bands>,
     drive: DriveModel,
     model: &RigConfig,
-) -> std::result::Result<(Target, ChainSignals, ChainSpectra, Bands), String> {
+) -> (Target, ChainSignals, ChainSpectra, Bands) {
     let Prepared { stem, mut measured, mut nominal, mut perturbed, noise_response, how, .. } = prepared;
     let measured_for_perturbed = measured.clone();
     align_phases(&mut measured, &mut nominal);
@@ -239,13 +237,6 @@ fn target_of(
     let seg_measured = Segmentation::of(&measured);
     let seg_model = Segmentation::of(&nominal);
     let bands = Bands::new(measured.sample_rate_hz, seg_measured.segment_len, spectra::line_orders(model));
-    if bands_so_far.is_some_and(|b| b.edges_hz != bands.edges_hz) {
-        return Err(format!(
-            "its sample rate ({} Hz) gives other analysis bands than the dataset's first recording; \
-             expected one sample rate for the whole dataset",
-            recording.meta.sample_rate_hz
-        ));
-    }
     let measured_spectra = ChainSpectra::compute(&measured, &seg_measured, &bands);
     let nominal_spectra = ChainSpectra::compute(&nominal, &seg_model, &bands);
     let mut measured_cells = cell_powers(&[(&measured_spectra, 1.0)], &bands);
@@ -274,7 +265,7 @@ fn target_of(
         nominal: nominal_spectra,
         counterpart: how,
     };
-    Ok((target, measured, measured_spectra, bands))
+    (target, measured, measured_spectra, bands)
 }
 
 /// The comparison targets of every prepared recording; what cannot be
@@ -292,8 +283,9 @@ pub(crate) fn compared(
     let mut measured_spectra = Vec::new();
     let mut bands_all: Option<Bands> = None;
     let mut simulations = 0;
+    let mut ready = Vec::new();
     for (i, prepared) in prepared {
-        let (stem, recording) = &dataset[i];
+        let stem = &dataset[i].0;
         let mut prepared = match prepared {
             Ok(p) => p,
             Err(e) => {
@@ -317,21 +309,35 @@ pub(crate) fn compared(
             });
         }
         let lines = prepared.direct_axis.take();
-        match target_of(prepared, recording, bands_all.as_ref(), drive, model) {
-            Ok((target, measured, spectra, bands)) => {
-                match lines {
-                    Some(Ok(l)) => direct_axis.0.push(l),
-                    Some(Err(reason)) => direct_axis.1.push((stem.clone(), reason)),
-                    None => {}
-                }
-                targets.push(target);
-                measured_all.push(measured);
-                measured_spectra.push(spectra);
-                used.push(i);
-                bands_all = Some(bands);
-            }
-            Err(reason) => left_out.push(LeftOut { recording: stem.clone(), reason }),
+        ready.push((i, prepared, lines));
+    }
+    // Every recording's spectra (the measured, the nominal and the
+    // perturbed runs') side by side, then taken in the recordings' order.
+    let computed: Vec<_> = ready
+        .into_par_iter()
+        .map(|(i, prepared, lines)| (i, lines, target_of(prepared, &dataset[i].1, drive, model)))
+        .collect();
+    for (i, lines, (target, measured, spectra, bands)) in computed {
+        let (stem, recording) = &dataset[i];
+        if bands_all.as_ref().is_some_and(|b| b.edges_hz != bands.edges_hz) {
+            let reason = format!(
+                "its sample rate ({} Hz) gives other analysis bands than the dataset's first recording; \
+                 expected one sample rate for the whole dataset",
+                recording.meta.sample_rate_hz
+            );
+            left_out.push(LeftOut { recording: stem.clone(), reason });
+            continue;
         }
+        match lines {
+            Some(Ok(l)) => direct_axis.0.push(l),
+            Some(Err(reason)) => direct_axis.1.push((stem.clone(), reason)),
+            None => {}
+        }
+        targets.push(target);
+        measured_all.push(measured);
+        measured_spectra.push(spectra);
+        used.push(i);
+        bands_all = Some(bands);
     }
     let bands = bands_all?;
     Some(Compared {

@@ -23,6 +23,8 @@
 use super::signals::{Channel, Phase};
 use super::spectra::{Bands, CellKey, CellPowers};
 use dsp::signal_power_limit;
+use std::cell::RefCell;
+use std::collections::HashMap;
 
 /// Dynamic range of the comparison: a floor this far below the channel's
 /// strongest measured cell (-80 dB) is added to both sides of every cell,
@@ -227,11 +229,39 @@ fn cell(measured: f64, averages: f64, simulated: f64, noise: f64, floor: f64, to
     } else {
         // Below the model the interval's upper end, above it the lower.
         let quantile = if d < 0.0 { NOISE_TAIL } else { 1.0 - NOISE_TAIL };
-        let end = signal_power_limit(measured, noise, effective, quantile);
+        let end = line_power_limit(measured, noise, quantile);
         (10.0 * ((end + noise + floor) / (measured + floor)).log10()).abs()
     };
     (d, sigma, bound)
 }
+
+/// [`signal_power_limit`] of a line (one estimate) read at `measured`
+/// (unit^2) in noise `noise` (unit^2) at `quantile`: a function of the
+/// measured cell alone, which a fit asks for at every trial of the model,
+/// so each thread keeps the values it has worked out (the same values, to
+/// the bit; the memory is let go past [`LINE_LIMITS_KEPT`] of them).
+fn line_power_limit(measured: f64, noise: f64, quantile: f64) -> f64 {
+    thread_local! {
+        static KEPT: RefCell<HashMap<[u64; 3], f64>> = RefCell::new(HashMap::new());
+    }
+    let key = [measured.to_bits(), noise.to_bits(), quantile.to_bits()];
+    if let Some(limit) = KEPT.with(|kept| kept.borrow().get(&key).copied()) {
+        return limit;
+    }
+    let limit = signal_power_limit(measured, noise, 1.0, quantile);
+    KEPT.with(|kept| {
+        let mut kept = kept.borrow_mut();
+        if kept.len() >= LINE_LIMITS_KEPT {
+            kept.clear();
+        }
+        kept.insert(key, limit);
+    });
+    limit
+}
+
+/// Most line limits a thread keeps ([`line_power_limit`]): a dataset's
+/// line cells times their two quantiles, many times over.
+const LINE_LIMITS_KEPT: usize = 1 << 16;
 
 fn channel_floors(measured: &CellPowers) -> Vec<(Channel, f64)> {
     let mut out: Vec<(Channel, f64)> = Vec::new();
@@ -315,6 +345,20 @@ pub fn gap(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A line's limit read again is the one worked out, to the bit, and
+    /// each reading's own (the measured power, the noise and the
+    /// quantile all count).
+    #[test]
+    fn kept_line_limits_are_the_worked_out_ones() {
+        for round in 0..2 {
+            for (p, n) in [(1e-3, 1e-4), (1e-3, 2e-4), (2e-3, 1e-4), (5e-6, 1e-6)] {
+                for q in [NOISE_TAIL, 1.0 - NOISE_TAIL] {
+                    assert_eq!(line_power_limit(p, n, q), signal_power_limit(p, n, 1.0, q), "round {round}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn a_cell_of_pure_noise_scatters_by_the_chi_square_law() {
