@@ -13,8 +13,9 @@
 //!    nominal model: [`simulate`]
 //!    (closed loop) or, for travels under another drive, the mechanics
 //!    driven by the measured torque ([`driven`], the ripple's phases read
-//!    from that torque by [`ripple_phase`]); which drive the rig runs,
-//!    [`drive_finding`] decides on the closed loop's runs.
+//!    from that torque by [`ripple_phase`], what every run reads of the
+//!    recording kept across them by [`travel_readings`]); which drive the
+//!    rig runs, [`drive_finding`] decides on the closed loop's runs.
 //! 3. [`compare`]: the comparison targets ([`target`]) and the nominal
 //!    model's gap in cells of channel x travel phase x band ([`measure`]),
 //!    with the [`replay`] (measured shaft motion into the mechanics) beside
