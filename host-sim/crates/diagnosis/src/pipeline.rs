@@ -14,7 +14,7 @@ use crate::error::{bail, Result};
 use crate::identify_dataset::LeftOut;
 use crate::locate::{locate, Location};
 use crate::measure::{persistent_cell, CellGap, PersistentCell};
-use crate::prepare::{counterpart, measure, run_closed_loop, Prepared};
+use crate::prepare::{counterpart, measure, run_closed_loop, Models, Prepared};
 use crate::travel_signals::TravelTorque;
 use crate::verdict::{self, explained_by, verdict_of, GapOptions, GapReport, RecordingGap, Verdict};
 use plant::effects::Effects;
@@ -134,8 +134,7 @@ fn nominal_comparison(
         .into_par_iter()
         .map(|run| {
             let (stem, recording) = &dataset[run.index];
-            let [up, down, half_up, half_down] = &perturbed_models;
-            let models = [&model, up, down, half_up, half_down];
+            let models = Models::new(&model, &perturbed_models);
             (
                 run.index,
                 counterpart(

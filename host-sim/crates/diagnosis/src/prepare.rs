@@ -178,12 +178,39 @@ fn transducer_series(
     .ok()
 }
 
+/// The calibrated model and the models at the calibration's uncertainty
+/// that make a counterpart's tolerance.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Models<'a> {
+    /// The calibrated model.
+    pub nominal: &'a RigConfig,
+    /// At the uncertainty's two ends.
+    pub ends: [&'a RigConfig; 2],
+    /// At its two middle points.
+    pub middles: [&'a RigConfig; 2],
+}
+
+impl<'a> Models<'a> {
+    /// `nominal` with its `perturbed` models in the order of
+    /// [`crate::calibrate::PERTURBATION_STEPS`] (the ends, then the middle
+    /// points: [`crate::calibrate::Calibration::perturbations`]).
+    pub fn new(nominal: &'a RigConfig, perturbed: &'a [RigConfig; 4]) -> Self {
+        let [up, down, half_up, half_down] = perturbed;
+        Self { nominal, ends: [up, down], middles: [half_up, half_down] }
+    }
+
+    /// The four perturbed models: the ends, then the middle points.
+    pub fn perturbed(&self) -> [&'a RigConfig; 4] {
+        [self.ends[0], self.ends[1], self.middles[0], self.middles[1]]
+    }
+}
+
 /// The model's counterpart of a measured recording, with its two
 /// perturbations: the closed loop (the project's drive) or, for travels
 /// under another drive, the torque-driven mechanics ([`driven`]); the
 /// measured signals reduced to the channels the counterpart has.
 pub(crate) fn counterpart(
-    models: [&RigConfig; 5],
+    models: Models,
     drive: DriveModel,
     stem: &str,
     recording: &Recording,
@@ -202,19 +229,20 @@ pub(crate) fn counterpart(
         });
         measured.noise_density.retain(|(c, _)| measured.channels.iter().any(|(m, _)| m == c));
     }
-    let speed_loop = driven.then(|| rig_speed_controller(models[0], recording, &measured, &torque, &speed));
+    let speed_loop = driven.then(|| rig_speed_controller(models.nominal, recording, &measured, &torque, &speed));
     let controller = speed_loop.as_ref().and_then(|found| found.as_ref().ok().copied());
     // The travel's torque and angle, where the model is driven by them.
     let driving = travel.filter(|_| driven);
     let shaft_angle = driving.map(|t| t.angle_alignment.clone());
     let direct_axis = driving.map(|t| {
-        electrical_lines::travel_lines_of(recording, stem, t, models[0].motor.pole_pairs).map_err(|e| format!("{e:#}"))
+        electrical_lines::travel_lines_of(recording, stem, t, models.nominal.motor.pole_pairs)
+            .map_err(|e| format!("{e:#}"))
     });
     let transducer_lines = match &direct_axis {
-        Some(Ok(lines)) => electrical_lines::transducer_torque_lines(&models[0].motor, lines),
+        Some(Ok(lines)) => electrical_lines::transducer_torque_lines(&models.nominal.motor, lines),
         _ => Vec::new(),
     };
-    let transducer = driving.and_then(|t| transducer_series(models[0], recording, stem, &measured, t));
+    let transducer = driving.and_then(|t| transducer_series(models.nominal, recording, stem, &measured, t));
     let readings = Arc::new(TravelReadings::default());
     let drive_record = DriveRecord {
         torque_nm: &torque,
@@ -230,7 +258,7 @@ pub(crate) fn counterpart(
     // every run of the recording (this one included).
     let settings = driven::DrivenSettings::default();
     let nominal_driven = driven
-        .then(|| driven_accelerations(models[0], recording, &measured, drive_record, &settings, &none))
+        .then(|| driven_accelerations(models.nominal, recording, &measured, drive_record, &settings, &none))
         .transpose()?;
     let highpass = match &nominal_driven {
         Some((car, _)) => driven_highpass(&measured, car)?,
@@ -241,7 +269,7 @@ pub(crate) fn counterpart(
     };
     let (nominal, perturbed, how) = if let Some(raw) = nominal_driven {
         let perturbed = driven_perturbed(models, &measured, run_driven)?;
-        let stop_brake = driven_stop_brake(models[0], recording, &measured, drive_record)?;
+        let stop_brake = driven_stop_brake(models.nominal, recording, &measured, drive_record)?;
         let inputs = DrivenInputs {
             measured: measured.clone(),
             torque_nm: torque.clone(),
@@ -263,7 +291,7 @@ pub(crate) fn counterpart(
     let noise_response = if driven {
         let noisy = with_white_noise(&torque, torque_noise_density, measured.sample_rate_hz, stem);
         let run = driven_counterpart(
-            models[0],
+            models.nominal,
             recording,
             &measured,
             DriveRecord { torque_nm: &noisy, readings: None, ..drive_record },
@@ -292,20 +320,21 @@ pub(crate) fn counterpart(
 }
 
 /// The torque-driven model's perturbed runs (`run` on a model with
-/// settings): the four perturbed rigs of `models` (the uncertainty's ends
-/// and middle points, [`crate::calibrate::PERTURBATION_STEPS`]), the
-/// settings' alternatives on the calibrated rig, and the start's
-/// alternatives when the recording begins in motion.
+/// settings): the four perturbed rigs of `models` ([`Models::perturbed`]:
+/// the uncertainty's ends and middle points,
+/// [`crate::calibrate::PERTURBATION_STEPS`]), the settings' alternatives on
+/// the calibrated rig, and the start's alternatives when the recording
+/// begins in motion.
 fn driven_perturbed(
-    models: [&RigConfig; 5],
+    models: Models,
     measured: &ChainSignals,
     run: impl Fn(&RigConfig, &driven::DrivenSettings) -> Result<ChainSignals> + Sync,
 ) -> Result<Vec<ChainSignals>> {
     let settings = driven::DrivenSettings::default();
-    let mut runs: Vec<(&RigConfig, driven::DrivenSettings)> = models[1..].iter().map(|m| (*m, settings)).collect();
-    runs.extend(driven::DrivenSettings::alternatives().map(|alternative| (models[0], alternative)));
+    let mut runs: Vec<(&RigConfig, driven::DrivenSettings)> = models.perturbed().map(|m| (m, settings)).to_vec();
+    runs.extend(driven::DrivenSettings::alternatives().map(|alternative| (models.nominal, alternative)));
     if driven::begins_in_motion(&measured.angle_rad, measured.sample_rate_hz) {
-        runs.extend(driven::DrivenSettings::start_alternatives().map(|alternative| (models[0], alternative)));
+        runs.extend(driven::DrivenSettings::start_alternatives().map(|alternative| (models.nominal, alternative)));
     }
     // In parallel with the other recordings' runs: a long recording's
     // dozen runs need not wait for one thread at the end.
@@ -314,11 +343,11 @@ fn driven_perturbed(
 
 /// The simulated counterpart of a recording (the closed loop's run
 /// `closed`, or a free decay): the nominal run, the runs of the perturbed
-/// models at the uncertainty's ends (`models[1]`, `models[2]`); under
+/// models at the uncertainty's ends ([`Models::ends`]); under
 /// another rig's data acquisition, its accelerometers' high-pass found
 /// from the decay itself and applied to the model's.
 fn simulated_counterpart(
-    models: [&RigConfig; 5],
+    models: Models,
     drive: DriveModel,
     recording: &Recording,
     stem: &str,
@@ -327,7 +356,7 @@ fn simulated_counterpart(
 ) -> Result<(ChainSignals, Vec<ChainSignals>, Counterpart)> {
     let none = Effects::none();
     let run_closed = |model: &RigConfig| simulate_counterpart(model, &none, recording, stem, model_step_s(model));
-    let (mut nominal, mut perturbed) = (closed?, vec![run_closed(models[1])?, run_closed(models[2])?]);
+    let (mut nominal, mut perturbed) = (closed?, vec![run_closed(models.ends[0])?, run_closed(models.ends[1])?]);
     let mut highpass = acquisition::Highpass::NONE;
     if drive == DriveModel::Foreign {
         highpass = decay_highpass(measured, &nominal)?;

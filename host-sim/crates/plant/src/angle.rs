@@ -66,9 +66,31 @@ fn add_cos_series(coefficients: &mut [f64; DEGREE + 1], scale: f64, n: f64, phas
 }
 
 /// `n` choose `k` (small arguments), as a float.
-fn binomial(n: usize, k: usize) -> f64 {
-    (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
+const fn binomial(n: usize, k: usize) -> f64 {
+    let (mut acc, mut i) = (1.0, 0);
+    while i < k {
+        acc = acc * (n - i) as f64 / (i + 1) as f64;
+        i += 1;
+    }
+    acc
 }
+
+/// `binomial(j + m, m)` at `[m - 1][j]` for `m` = 1, 2, 3: the factors of
+/// [`AngleSeries`]'s shifted ripple coefficients, worked out when the crate
+/// is compiled rather than at every refresh.
+const SHIFT_BINOMIALS: [[f64; DEGREE + 1]; 3] = {
+    let mut table = [[0.0; DEGREE + 1]; 3];
+    let mut m = 1;
+    while m <= 3 {
+        let mut j = 0;
+        while j + m <= DEGREE {
+            table[m - 1][j] = binomial(j + m, m);
+            j += 1;
+        }
+        m += 1;
+    }
+    table
+};
 
 /// `sum_j coefficients[j] x^j` by Estrin's scheme: pairs, then pairs of
 /// pairs with `x^2`, `x^4`, `x^8`, so that the chain of dependent
@@ -175,9 +197,9 @@ impl AngleSeries {
             let n = h.mechanical_order;
             add_cos_series(&mut self.ripple_nm, h.amplitude_nm, n, n * theta_rad + h.phase_rad);
         }
-        for (m, shifted) in (1..).zip(self.ripple_shifted.iter_mut()) {
-            for (j, (slot, c)) in shifted.iter_mut().zip(&self.ripple_nm[m..]).enumerate() {
-                *slot = binomial(j + m, m) * c;
+        for (m, (shifted, factors)) in (1..).zip(self.ripple_shifted.iter_mut().zip(&SHIFT_BINOMIALS)) {
+            for ((slot, c), factor) in shifted.iter_mut().zip(&self.ripple_nm[m..]).zip(factors) {
+                *slot = factor * c;
             }
         }
         let electrical = pole_pairs * theta_rad;

@@ -172,6 +172,10 @@ struct DecayChain {
     /// Each rope spring's stiffness, N/m (spring `i` joins node `i - 1`,
     /// the fixed top for `i = 0`, and node `i`).
     springs: Vec<f64>,
+    /// The springs between the nodes, N/m (the rope's from its second on,
+    /// then the frame's): the kernel's springs of a rope without
+    /// stiffening ([`spring_line::linear_accelerations`]).
+    kernel_springs: Vec<f64>,
     /// Each spring's static tension, N.
     static_tensions: Vec<f64>,
     /// Under tension stiffening, each spring's law about its static tension.
@@ -239,6 +243,7 @@ impl DecayChain {
             masses[n] = body_mass;
         }
         let inv_mass = masses.iter().map(|m| 1.0 / m).collect();
+        let kernel_springs = springs[1..].iter().copied().chain(frame.is_some().then_some(k_frame)).collect();
         let mut damping = vec![0.0; nodes];
         damping[n - 1] = spec.damping_kg_per_s;
         Self {
@@ -246,6 +251,7 @@ impl DecayChain {
             nodes,
             k,
             springs,
+            kernel_springs,
             static_tensions,
             segments,
             segment_length,
@@ -325,8 +331,13 @@ impl DecayChain {
         let (position, velocity) = (&y[..nodes], &y[nodes..2 * nodes]);
         let inv_mass = &self.inv_mass;
         let top = NodeForce { node: 0, force_n: -self.rope_tension_n(0, position[0]) };
-        let tension = |i: usize, e: f64| if i + 1 < n { self.rope_tension_n(i + 1, e) } else { self.k_frame * e };
-        spring_line::accelerations(tension, &self.damping, inv_mass, position, velocity, &[top], out);
+        if self.stiffening.is_none() {
+            let springs = &self.kernel_springs;
+            spring_line::linear_accelerations(springs, &self.damping, inv_mass, position, velocity, &[top], out);
+        } else {
+            let tension = |i: usize, e: f64| if i + 1 < n { self.rope_tension_n(i + 1, e) } else { self.k_frame * e };
+            spring_line::accelerations(tension, &self.damping, inv_mass, position, velocity, &[top], out);
+        }
         if let Some(g) = &self.guides {
             spring_line::add_guide_forces(g, &[n - 1], velocity, inv_mass, out);
         }
@@ -339,6 +350,7 @@ impl DecayChain {
     /// (joining node `i - 1`, the fixed top for `i = 0`, and node `i`) at
     /// the extension `e` (m, the lower node's displacement less the
     /// upper's).
+    #[inline]
     fn rope_tension_n(&self, i: usize, e: f64) -> f64 {
         if self.stiffening.is_none() {
             self.springs[i] * e
