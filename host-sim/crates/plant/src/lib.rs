@@ -790,16 +790,22 @@ pub fn rk4_step_in(y: &mut [f64], h: f64, work: &mut [f64], mut f: impl FnMut(&[
     rk4_step_in_time(y, h, work, |_, y, dy| f(y, dy));
 }
 
-/// [`rk4_step_in`] for `y' = f(t, y)`: `f(frac, y, dy)` is also given the
-/// stage's time as a fraction of the step (0, 1/2, 1/2, 1).
-pub fn rk4_step_in_time(y: &mut [f64], h: f64, work: &mut [f64], mut f: impl FnMut(f64, &[f64], &mut [f64])) {
-    let len = y.len();
+/// The RK4's work space holds its four stages and the shifted state for a
+/// state of `len` values: at least `5 * len` (a caller's bug otherwise).
+fn check_work_space(work: &[f64], len: usize) {
     assert!(
         work.len() >= 5 * len,
         "RK4 work space of {} values for a state of {len}: at least {}",
         work.len(),
         5 * len
     );
+}
+
+/// [`rk4_step_in`] for `y' = f(t, y)`: `f(frac, y, dy)` is also given the
+/// stage's time as a fraction of the step (0, 1/2, 1/2, 1).
+pub fn rk4_step_in_time(y: &mut [f64], h: f64, work: &mut [f64], mut f: impl FnMut(f64, &[f64], &mut [f64])) {
+    let len = y.len();
+    check_work_space(work, len);
     let (k1, rest) = work.split_at_mut(len);
     let (k2, rest) = rest.split_at_mut(len);
     let (k3, rest) = rest.split_at_mut(len);
@@ -848,12 +854,7 @@ pub fn rk4_second_order_step_from(
     let len = y.len();
     let n = len / 2;
     assert!(len == 2 * n, "a second-order state holds positions and velocities: {len} values");
-    assert!(
-        work.len() >= 5 * len,
-        "RK4 work space of {} values for a state of {len}: at least {}",
-        work.len(),
-        5 * len
-    );
+    check_work_space(work, len);
     let (s2, rest) = work.split_at_mut(len);
     let (s3, rest) = rest.split_at_mut(len);
     let (s4, rest) = rest.split_at_mut(len);
