@@ -273,7 +273,7 @@ impl ChainSpectra {
         let mut output = fft.make_output_vec();
         let mut windows = HannWindows::default();
         let mut channels = Vec::new();
-        let (mut lines_of, line_noise_scale) = match &segmentation.constant {
+        let (lines_of, line_noise_scale) = match &segmentation.constant {
             Some(r) if signals.angle_rad.len() >= r.end => {
                 let stage: Vec<&[f64]> = signals.channels.iter().map(|(_, values)| &values[r.clone()]).collect();
                 let window = windows.of(r.len()).0;
@@ -282,7 +282,7 @@ impl ChainSpectra {
             }
             _ => (Vec::new(), 0.0),
         };
-        lines_of.reverse();
+        let mut lines_of = lines_of.into_iter();
         for (channel, values) in &signals.channels {
             let mut scale = Vec::with_capacity(segmentation.segments.len());
             let mut data = Vec::with_capacity(segmentation.segments.len() * bins);
@@ -302,7 +302,7 @@ impl ChainSpectra {
                 scale.push(2.0 / (segmentation.sample_rate_hz * w2.max(1e-12)));
                 data.extend_from_slice(&output[..bins]);
             }
-            let lines = lines_of.pop().unwrap_or_default();
+            let lines = lines_of.next().unwrap_or_default();
             channels.push((*channel, ChannelSpectra { bins, scale, data, lines, line_noise_scale }));
         }
         Self { segmentation: segmentation.clone(), channels }

@@ -835,14 +835,9 @@ pub fn rk4_step_in_time(y: &mut [f64], h: f64, work: &mut [f64], mut f: impl FnM
 /// positions' stage derivatives are the stage velocities themselves, kept
 /// where the stage states lie instead of copied: the state after the step
 /// is [`rk4_step_in_time`]'s with `dy = (v, a)`, bit for bit, in the same
-/// `5 * y.len()` values of `work`.
-pub fn rk4_second_order_step_in_time(y: &mut [f64], h: f64, work: &mut [f64], f: impl FnMut(f64, &[f64], &mut [f64])) {
-    rk4_second_order_step_from(y, h, work, None, f);
-}
-
-/// [`rk4_second_order_step_in_time`] given, where `first` holds them, the
-/// accelerations at `y` itself (the step's first stage, `f(0, y)`, which a
-/// caller that records them has already worked out): the same step, one
+/// `5 * y.len()` values of `work`. Where `first` holds them, the
+/// accelerations at `y` itself (the first stage, `f(0, y)`, which a caller
+/// that records them has already worked out) are taken from it: one
 /// evaluation of `f` fewer.
 pub fn rk4_second_order_step_from(
     y: &mut [f64],
@@ -885,7 +880,7 @@ pub fn rk4_second_order_step_from(
     }
 }
 
-/// One stage state of [`rk4_second_order_step_in_time`]: `y` moved over
+/// One stage state of [`rk4_second_order_step_from`]: `y` moved over
 /// `step` (s) at the velocities of `from` and the accelerations `acc`,
 /// into `out`.
 #[inline]
@@ -913,20 +908,22 @@ impl Rk4 {
         Self::default()
     }
 
+    /// The work space for a state of `len` values, grown to it if shorter.
+    fn space(&mut self, len: usize) -> &mut [f64] {
+        if self.work.len() < 5 * len {
+            self.work.resize(5 * len, 0.0);
+        }
+        &mut self.work
+    }
+
     /// One step of `y' = f(y)` over `h`, in place ([`rk4_step_in`]).
     pub fn step(&mut self, y: &mut [f64], h: f64, f: impl FnMut(&[f64], &mut [f64])) {
-        if self.work.len() < 5 * y.len() {
-            self.work.resize(5 * y.len(), 0.0);
-        }
-        rk4_step_in(y, h, &mut self.work, f);
+        rk4_step_in(y, h, self.space(y.len()), f);
     }
 
     /// One step of `y' = f(t, y)` over `h`, in place ([`rk4_step_in_time`]).
     pub fn step_in_time(&mut self, y: &mut [f64], h: f64, f: impl FnMut(f64, &[f64], &mut [f64])) {
-        if self.work.len() < 5 * y.len() {
-            self.work.resize(5 * y.len(), 0.0);
-        }
-        rk4_step_in_time(y, h, &mut self.work, f);
+        rk4_step_in_time(y, h, self.space(y.len()), f);
     }
 
     /// One step of the second-order system `x'' = a(x, v)` over `h`, in
@@ -940,10 +937,7 @@ impl Rk4 {
         first: Option<&[f64]>,
         mut f: impl FnMut(&[f64], &mut [f64]),
     ) {
-        if self.work.len() < 5 * y.len() {
-            self.work.resize(5 * y.len(), 0.0);
-        }
-        rk4_second_order_step_from(y, h, &mut self.work, first, |_, y, acc| f(y, acc));
+        rk4_second_order_step_from(y, h, self.space(y.len()), first, |_, y, acc| f(y, acc));
     }
 }
 
@@ -1019,7 +1013,7 @@ mod rk4_tests {
                 dy[..3].copy_from_slice(&y[3..]);
                 acc(t0 + frac * h, y, &mut dy[3..]);
             });
-            rk4_second_order_step_in_time(&mut second, h, &mut w2, |frac, y, a| acc(t0 + frac * h, y, a));
+            rk4_second_order_step_from(&mut second, h, &mut w2, None, |frac, y, a| acc(t0 + frac * h, y, a));
             let mut first = [0.0; 3];
             acc(t0, &given, &mut first);
             rk4_second_order_step_from(&mut given, h, &mut w3, Some(&first), |frac, y, a| acc(t0 + frac * h, y, a));
